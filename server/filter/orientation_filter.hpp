@@ -1,0 +1,82 @@
+// orientation_filter.hpp — the one interface every orientation filter implements.
+//
+// A filter is Params + State (+ derived coefficients), no I/O, no clock (house style 2, 3):
+// the time step comes from the samples' own timestamps. One instance estimates one
+// sensor's q_earth_sensor in ENU (x east, y north, z up); callers that want NED convert
+// with q_enu_ned() (quaternion.hpp).
+//
+// Thread-safety: an instance is not thread-safe; the pipeline pins each instance to
+// one worker. Cost: documented per filter (tens of ns to µs per update).
+#pragma once
+
+#include <string_view>
+
+#include "core/imu_sample.hpp"
+#include "filter/quaternion.hpp"
+
+namespace mocap::filter {
+
+class OrientationFilter {
+public:
+    virtual ~OrientationFilter() = default;
+
+    /// Feeds one sample. The first sample after construction or reset() only sets the
+    /// time base (filters that self-initialise also take their initial attitude from it).
+    /// A timestamp that does not advance, or jumps by more than the filter's max gap,
+    /// restarts the time base without propagating (counted in gaps()).
+    virtual void update(const ImuSample& sample) = 0;
+
+    /// Current estimate q_earth_sensor (ENU), unit norm.
+    [[nodiscard]] virtual Quat orientation() const = 0;
+
+    /// Current gyroscope bias estimate, rad/s, sensor frame (zero if not estimated).
+    [[nodiscard]] virtual Vec3 gyro_bias_rad_s() const { return Vec3::Zero(); }
+
+    /// Returns the filter to its freshly constructed state (Params kept).
+    virtual void reset() = 0;
+
+    /// Short stable name used on command lines and in config ("csmo", "pf", ...).
+    [[nodiscard]] virtual std::string_view name() const = 0;
+
+    /// Number of time-base restarts (non-advancing or too-large timestamp steps).
+    [[nodiscard]] virtual std::uint64_t gaps() const { return 0; }
+};
+
+/// Turns successive sample timestamps into time steps. Part of each filter's State.
+class SampleClock {
+public:
+    /// max_step_s: a larger step is treated as a gap (no propagation).
+    explicit SampleClock(double max_step_s = 0.5) : max_step_s_(max_step_s) {}
+
+    /// Returns dt in seconds, or 0 on the first sample and on a gap.
+    double step_s(std::int64_t t_us) {
+        if (!started_) {
+            started_ = true;
+            last_us_ = t_us;
+            return 0.0;
+        }
+        const std::int64_t d_us = t_us - last_us_;
+        last_us_ = t_us;
+        const double dt = static_cast<double>(d_us) * 1e-6;
+        if (d_us <= 0 || dt > max_step_s_) {
+            ++gaps_;
+            return 0.0;
+        }
+        return dt;
+    }
+    void reset() {
+        started_ = false;
+        last_us_ = 0;
+        gaps_ = 0;
+    }
+    [[nodiscard]] bool started() const { return started_; }
+    [[nodiscard]] std::uint64_t gaps() const { return gaps_; }
+
+private:
+    double max_step_s_;
+    bool started_ = false;
+    std::int64_t last_us_ = 0;
+    std::uint64_t gaps_ = 0;
+};
+
+}  // namespace mocap::filter

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# mocapd setup: installs what is missing (Debian packages only), builds, and runs.
+#
+#   ./setup.sh run    install, build, start mocapd on its default config fed by a
+#                     simulated walking subject, and print live poses
+#   ./setup.sh test   install, build, and run the whole test suite (CI calls this)
+#   ./setup.sh deps   only install missing Debian packages
+#   ./setup.sh build  only configure and build (build/)
+#
+# Needs root (or sudo) only when packages are missing.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+BUILD="${MOCAP_BUILD_DIR:-$ROOT/build}"
+JOBS="${MOCAP_JOBS:-$(nproc)}"
+
+# Everything the build, the tests and the firmware cross-build need.
+PACKAGES=(
+  build-essential cmake pkg-config git python3
+  libeigen3-dev libboost-dev libspdlog-dev libprotobuf-dev protobuf-compiler
+  libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
+  gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi
+  clang-14 libclang-rt-14-dev
+  assimp-utils qemu-system-x86 busybox-static cpio kmod
+)
+
+log() { printf '\033[1m[setup]\033[0m %s\n' "$*" >&2; }
+
+deps() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
+  done
+  if ((${#missing[@]} == 0)); then
+    log "all Debian packages present"
+    return
+  fi
+  log "installing: ${missing[*]}"
+  local sudo=()
+  if [[ $(id -u) -ne 0 ]]; then sudo=(sudo); fi
+  "${sudo[@]}" apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+build() {
+  log "configuring $BUILD"
+  cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >/dev/null
+  log "building with $JOBS jobs"
+  cmake --build "$BUILD" -j "$JOBS"
+}
+
+run() {
+  exec "$ROOT/tests/run_demo.sh" "$BUILD"
+}
+
+test_all() {
+  (cd "$BUILD" && ctest --output-on-failure -j "$JOBS" --timeout 900)
+}
+
+cmd="${1:-}"
+case "$cmd" in
+  deps) deps ;;
+  build) deps; build ;;
+  run) deps; build; run ;;
+  test) deps; build; test_all ;;
+  *) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
+esac
