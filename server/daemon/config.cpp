@@ -1,0 +1,310 @@
+#include "daemon/config.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <toml++/toml.h>
+
+namespace mocap::daemon {
+namespace {
+
+// Thrown only inside this file and caught by parse_config: carries the key path and
+// line of the offending value, so the user sees exactly where to look.
+struct ConfigError {
+    std::string key;
+    std::size_t line;
+    std::string message;
+};
+
+std::size_t line_of(const toml::node& n) { return n.source().begin.line; }
+
+// Reads one table: every key taken is remembered, and finish() rejects the rest.
+class TableReader {
+public:
+    TableReader(const toml::table& t, std::string path) : table_(t), path_(std::move(path)) {}
+
+    const toml::node* take(std::string_view key) {
+        taken_.insert(std::string(key));
+        return table_.get(key);
+    }
+
+    std::string key_path(std::string_view key) const {
+        return path_.empty() ? std::string(key) : path_ + "." + std::string(key);
+    }
+
+    [[noreturn]] void fail(std::string_view key, const toml::node* n, std::string msg) const {
+        throw ConfigError{key_path(key), n ? line_of(*n) : line_of(table_), std::move(msg)};
+    }
+
+    void read(std::string_view key, std::string& out) {
+        if (const auto* n = take(key)) {
+            if (!n->is_string()) fail(key, n, "expected a string");
+            out = n->value<std::string>().value();
+        }
+    }
+
+    void read(std::string_view key, double& out, double lo, double hi) {
+        if (const auto* n = take(key)) {
+            if (!n->is_number()) fail(key, n, "expected a number");
+            const double v = n->value<double>().value();
+            if (!std::isfinite(v) || v < lo || v > hi) {
+                std::ostringstream s;
+                s << "must be between " << lo << " and " << hi;
+                fail(key, n, s.str());
+            }
+            out = v;
+        }
+    }
+
+    template <typename U>
+    void read(std::string_view key, U& out, std::int64_t lo, std::int64_t hi) {
+        if (const auto* n = take(key)) {
+            if (!n->is_integer()) fail(key, n, "expected an integer");
+            const std::int64_t v = n->value<std::int64_t>().value();
+            if (v < lo || v > hi) {
+                fail(key, n, "must be between " + std::to_string(lo) + " and " + std::to_string(hi));
+            }
+            out = static_cast<U>(v);
+        }
+    }
+
+    void read(std::string_view key, Endpoint& out) {
+        if (const auto* n = take(key)) {
+            if (!n->is_string()) fail(key, n, "expected a string \"host:port\"");
+            std::string err;
+            auto ep = parse_endpoint(n->value<std::string>().value(), &err);
+            if (!ep) fail(key, n, err);
+            out = *ep;
+        }
+    }
+
+    const toml::table* sub_table(std::string_view key) {
+        const auto* n = take(key);
+        if (!n) return nullptr;
+        if (!n->is_table()) fail(key, n, "expected a table");
+        return n->as_table();
+    }
+
+    const toml::array* array(std::string_view key) {
+        const auto* n = take(key);
+        if (!n) return nullptr;
+        if (!n->is_array()) fail(key, n, "expected an array");
+        return n->as_array();
+    }
+
+    void finish() const {
+        for (const auto& [k, v] : table_) {
+            if (!taken_.count(std::string(k.str()))) fail(k.str(), &v, "unknown key");
+        }
+    }
+
+private:
+    const toml::table& table_;
+    std::string path_;
+    std::set<std::string> taken_;
+};
+
+void read_log(TableReader& r, DaemonConfig& c) {
+    r.read("level", c.log_level);
+    static const std::set<std::string> levels{"trace", "debug", "info", "warn", "error", "off"};
+    if (!levels.count(c.log_level)) {
+        r.fail("level", r.take("level"), "must be one of trace, debug, info, warn, error, off");
+    }
+    r.read("stats_interval_s", c.stats_interval_s, 0.0, 86400.0);
+}
+
+void read_ingest(TableReader& r, DaemonConfig& c) {
+    r.read("sink_listen", c.sink_listen);
+    r.read("max_sinks", c.max_sinks, 1, 4096);
+    r.read("sink_idle_timeout_s", c.sink_idle_timeout_s, 0.1, 3600.0);
+    if (const auto* arr = r.array("socketcan")) {
+        for (const auto& item : *arr) {
+            if (!item.is_table()) r.fail("socketcan", &item, "expected [[ingest.socketcan]] tables");
+            TableReader t(*item.as_table(), r.key_path("socketcan"));
+            SocketCanConfig s;
+            t.read("interface", s.interface);
+            t.read("subject", s.subject, 1, 65535);
+            if (s.interface.empty() || s.interface.size() >= 16) {
+                t.fail("interface", t.take("interface"), "must name a network interface (1..15 chars)");
+            }
+            t.finish();
+            c.socketcan.push_back(std::move(s));
+        }
+    }
+}
+
+void read_pipeline(TableReader& r, DaemonConfig& c) {
+    r.read("workers", c.workers, 0, 256);
+    r.read("ring_capacity", c.ring_capacity, 16, 1 << 20);
+    if ((c.ring_capacity & (c.ring_capacity - 1)) != 0) {
+        r.fail("ring_capacity", r.take("ring_capacity"), "must be a power of two");
+    }
+    r.read("max_subjects", c.max_subjects, 1, 4096);
+    r.read("assembly_deadline_ms", c.assembly_deadline_ms, 0.1, 10000.0);
+}
+
+std::string scalar_to_string(const toml::node& n) {
+    if (n.is_integer()) return std::to_string(n.value<std::int64_t>().value());
+    if (n.is_floating_point()) {
+        std::ostringstream s;
+        s.precision(17);
+        s << n.value<double>().value();
+        return s.str();
+    }
+    if (n.is_boolean()) return n.value<bool>().value() ? "true" : "false";
+    if (n.is_string()) return n.value<std::string>().value();
+    return {};
+}
+
+void read_filter(TableReader& r, DaemonConfig& c) {
+    r.read("name", c.filter_name);
+    if (const auto* p = r.sub_table("params")) {
+        for (const auto& [k, v] : *p) {
+            if (!(v.is_number() || v.is_boolean() || v.is_string())) {
+                throw ConfigError{"filter.params." + std::string(k.str()), line_of(v),
+                                  "expected a number, boolean or string"};
+            }
+            c.filter_params.emplace_back(std::string(k.str()), scalar_to_string(v));
+        }
+    }
+}
+
+void read_segment(TableReader& t, SegmentConfig& s) {
+    t.read("name", s.name);
+    if (s.name.empty()) t.fail("name", t.take("name"), "every segment needs a non-empty name");
+    t.read("parent", s.parent);
+    if (const auto* arr = t.array("offset_m")) {
+        if (arr->size() != 3) t.fail("offset_m", arr, "expected [x, y, z] in metres");
+        for (std::size_t i = 0; i < 3; ++i) {
+            const auto* e = arr->get(i);
+            if (!e->is_number()) t.fail("offset_m", e, "expected numbers");
+            s.offset_m[i] = e->value<double>().value();
+            if (std::abs(s.offset_m[i]) > 10.0) t.fail("offset_m", e, "offsets beyond 10 m");
+        }
+    }
+    t.read("node", s.node, 1, 63);
+    if (s.node == 0) t.fail("node", t.take("node"), "every segment needs a CAN node id (1..63)");
+    t.read("filter", s.filter);
+    t.finish();
+}
+
+void read_skeleton(TableReader& r, DaemonConfig& c) {
+    r.read("calibration_file", c.calibration_file);
+    r.read("smoothing_alpha", c.smoothing_alpha, 0.001, 1.0);
+    if (const auto* arr = r.array("segment")) {
+        std::set<std::string> names;
+        std::set<int> nodes;
+        for (const auto& item : *arr) {
+            if (!item.is_table()) r.fail("segment", &item, "expected [[skeleton.segment]] tables");
+            TableReader t(*item.as_table(), r.key_path("segment"));
+            SegmentConfig s;
+            read_segment(t, s);
+            if (!names.insert(s.name).second) t.fail("name", t.take("name"), "duplicate segment name");
+            if (!nodes.insert(s.node).second) t.fail("node", t.take("node"), "node id used twice");
+            if (!s.parent.empty() && !names.count(s.parent)) {
+                t.fail("parent", t.take("parent"), "parent must be a segment listed earlier");
+            }
+            if (s.parent.empty() && !c.segments.empty()) {
+                t.fail("parent", t.take("parent"), "only the first segment may be the root");
+            }
+            c.segments.push_back(std::move(s));
+        }
+        if (c.segments.size() > 32) r.fail("segment", arr, "at most 32 segments");
+    }
+}
+
+void read_serve(TableReader& r, DaemonConfig& c) {
+    r.read("pose_listen", c.pose_listen);
+    r.read("max_clients", c.max_clients, 1, 100000);
+    r.read("client_queue_frames", c.client_queue_frames, 1, 65536);
+    r.read("handshake_timeout_s", c.handshake_timeout_s, 0.05, 3600.0);
+    r.read("max_message_bytes", c.max_message_bytes, 64, 16 << 20);
+}
+
+void read_control(TableReader& r, DaemonConfig& c) {
+    r.read("listen", c.control_listen);
+    r.read("token", c.control_token);
+}
+
+}  // namespace
+
+std::string Endpoint::str() const {
+    return (host.find(':') != std::string::npos ? "[" + host + "]" : host) + ":" + std::to_string(port);
+}
+
+std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error) {
+    Endpoint ep;
+    std::string_view port_part;
+    if (!text.empty() && text.front() == '[') {
+        const auto close = text.find(']');
+        if (close == std::string_view::npos || close + 1 >= text.size() || text[close + 1] != ':') {
+            *error = "expected \"[v6-address]:port\"";
+            return std::nullopt;
+        }
+        ep.host = std::string(text.substr(1, close - 1));
+        port_part = text.substr(close + 2);
+    } else {
+        const auto colon = text.rfind(':');
+        if (colon == std::string_view::npos || colon == 0) {
+            *error = "expected \"host:port\"";
+            return std::nullopt;
+        }
+        ep.host = std::string(text.substr(0, colon));
+        port_part = text.substr(colon + 1);
+    }
+    unsigned port = 0;
+    const auto [end, ec] = std::from_chars(port_part.data(), port_part.data() + port_part.size(), port);
+    if (ec != std::errc{} || end != port_part.data() + port_part.size() || port == 0 || port > 65535) {
+        *error = "port must be 1..65535";
+        return std::nullopt;
+    }
+    ep.port = static_cast<std::uint16_t>(port);
+    return ep;
+}
+
+std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name,
+                                         std::string* error) {
+    DaemonConfig c;
+    try {
+        const toml::table root = toml::parse(toml_text, source_name);
+        TableReader top(root, "");
+        using Section = void (*)(TableReader&, DaemonConfig&);
+        const std::pair<const char*, Section> sections[] = {
+            {"log", read_log},           {"ingest", read_ingest}, {"pipeline", read_pipeline},
+            {"filter", read_filter},     {"skeleton", read_skeleton}, {"serve", read_serve},
+            {"control", read_control},
+        };
+        for (const auto& [name, fn] : sections) {
+            if (const auto* t = top.sub_table(name)) {
+                TableReader r(*t, name);
+                fn(r, c);
+                r.finish();
+            }
+        }
+        top.finish();
+    } catch (const toml::parse_error& e) {
+        *error = std::string(source_name) + ":" + std::to_string(e.source().begin.line) +
+                 ": syntax: " + std::string(e.description());
+        return std::nullopt;
+    } catch (const ConfigError& e) {
+        *error = std::string(source_name) + ":" + std::to_string(e.line) + ": " + e.key + ": " +
+                 e.message;
+        return std::nullopt;
+    }
+    return c;
+}
+
+std::optional<DaemonConfig> load_config_file(const std::string& path, std::string* error) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        *error = path + ": cannot open for reading";
+        return std::nullopt;
+    }
+    std::ostringstream s;
+    s << in.rdbuf();
+    return parse_config(s.str(), path, error);
+}
+
+}  // namespace mocap::daemon

@@ -1,0 +1,85 @@
+// config.hpp — mocapd's configuration: the TOML file's values, validated.
+//
+// The loader accepts exactly the keys documented in config/mocapd.toml (an unknown key
+// is an error, so typos are caught) and reports the first problem as
+// "<file>:<line>: <key>: <what is wrong>". Thread-safety: plain values; the daemon loads
+// a new DaemonConfig on SIGHUP and applies the [reload] fields.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace mocap::daemon {
+
+/// "host:port" split and checked (port 1..65535; host may be an IPv4/IPv6 literal or name).
+struct Endpoint {
+    std::string host;
+    std::uint16_t port = 0;
+    [[nodiscard]] std::string str() const;
+};
+
+struct SocketCanConfig {
+    std::string interface;       ///< e.g. "can0", "vcan0"
+    std::uint32_t subject = 1;   ///< subject id the bus belongs to
+};
+
+struct SegmentConfig {
+    std::string name;
+    std::string parent;                      ///< "" = root
+    std::array<double, 3> offset_m{};        ///< joint position in the parent's frame, metres
+    std::uint8_t node = 0;                   ///< CAN node id (1..63)
+    std::string filter;                      ///< "" = [filter].name
+};
+
+struct DaemonConfig {
+    // [log]
+    std::string log_level = "info";
+    double stats_interval_s = 10.0;
+    // [ingest]
+    Endpoint sink_listen{"0.0.0.0", 7000};
+    std::uint32_t max_sinks = 64;
+    double sink_idle_timeout_s = 10.0;
+    std::vector<SocketCanConfig> socketcan;
+    // [pipeline]
+    std::uint32_t workers = 0;  ///< 0 = hardware cores
+    std::uint32_t ring_capacity = 4096;
+    std::uint32_t max_subjects = 64;
+    double assembly_deadline_ms = 20.0;
+    // [filter]
+    std::string filter_name = "mocap";
+    std::vector<std::pair<std::string, std::string>> filter_params;
+    // [skeleton]
+    std::string calibration_file = "mocapd-calibration.txt";
+    double smoothing_alpha = 1.0;
+    std::vector<SegmentConfig> segments;  ///< empty = built-in 15-segment body
+    // [serve]
+    Endpoint pose_listen{"0.0.0.0", 7001};
+    std::uint32_t max_clients = 1024;
+    std::uint32_t client_queue_frames = 64;
+    double handshake_timeout_s = 5.0;
+    std::uint32_t max_message_bytes = 65536;
+    // [control]
+    Endpoint control_listen{"127.0.0.1", 7003};
+    std::string control_token;
+};
+
+/// The text of config/mocapd.toml, compiled in.
+std::string_view embedded_default_config();
+
+/// Parses and validates TOML text. On error returns std::nullopt and sets *error to
+/// "<source_name>:<line>: <key>: <message>". Never throws.
+std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name,
+                                         std::string* error);
+
+/// Reads a file and parses it (errors as above; an unreadable file names the path).
+std::optional<DaemonConfig> load_config_file(const std::string& path, std::string* error);
+
+/// Parses "host:port" or "[v6]:port".
+std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error);
+
+}  // namespace mocap::daemon

@@ -1,0 +1,125 @@
+#include "daemon/config.hpp"
+
+#include <gtest/gtest.h>
+
+namespace mocap::daemon {
+namespace {
+
+std::optional<DaemonConfig> parse(const std::string& text, std::string* err) {
+    return parse_config(text, "test.toml", err);
+}
+
+TEST(Config, EmbeddedDefaultIsValidAndMatchesStructDefaults) {
+    std::string err;
+    const auto c = parse_config(embedded_default_config(), "mocapd.toml", &err);
+    ASSERT_TRUE(c) << err;
+    const DaemonConfig d;
+    EXPECT_EQ(c->sink_listen.port, 7000);
+    EXPECT_EQ(c->pose_listen.port, 7001);
+    EXPECT_EQ(c->control_listen.host, "127.0.0.1");
+    EXPECT_EQ(c->log_level, d.log_level);
+    EXPECT_EQ(c->ring_capacity, d.ring_capacity);
+    EXPECT_EQ(c->max_clients, d.max_clients);
+    EXPECT_EQ(c->client_queue_frames, d.client_queue_frames);
+    EXPECT_DOUBLE_EQ(c->assembly_deadline_ms, d.assembly_deadline_ms);
+    EXPECT_EQ(c->filter_name, d.filter_name);
+    EXPECT_TRUE(c->segments.empty());
+    EXPECT_TRUE(c->control_token.empty());
+}
+
+TEST(Config, EmptyFileGivesDefaults) {
+    std::string err;
+    const auto c = parse("", &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_EQ(c->pose_listen.str(), "0.0.0.0:7001");
+}
+
+TEST(Config, UnknownKeyNamesKeyAndLine) {
+    std::string err;
+    EXPECT_FALSE(parse("[serve]\nmax_clients = 10\nmax_clinets = 3\n", &err));
+    EXPECT_EQ(err, "test.toml:3: serve.max_clinets: unknown key");
+    EXPECT_FALSE(parse("[servr]\n", &err));
+    EXPECT_EQ(err, "test.toml:1: servr: unknown key");
+}
+
+TEST(Config, WrongTypeAndRangeNameKeyAndLine) {
+    std::string err;
+    EXPECT_FALSE(parse("\n[pipeline]\nworkers = \"two\"\n", &err));
+    EXPECT_EQ(err, "test.toml:3: pipeline.workers: expected an integer");
+    EXPECT_FALSE(parse("[pipeline]\nring_capacity = 1000\n", &err));
+    EXPECT_EQ(err, "test.toml:2: pipeline.ring_capacity: must be a power of two");
+    EXPECT_FALSE(parse("[serve]\npose_listen = \"localhost\"\n", &err));
+    EXPECT_EQ(err, "test.toml:2: serve.pose_listen: expected \"host:port\"");
+    EXPECT_FALSE(parse("[serve]\npose_listen = \"h:70000\"\n", &err));
+    EXPECT_EQ(err, "test.toml:2: serve.pose_listen: port must be 1..65535");
+    EXPECT_FALSE(parse("[log]\nlevel = \"loud\"\n", &err));
+    EXPECT_EQ(err, "test.toml:2: log.level: must be one of trace, debug, info, warn, error, off");
+}
+
+TEST(Config, SyntaxErrorNamesLine) {
+    std::string err;
+    EXPECT_FALSE(parse("[log]\nlevel = \n", &err));
+    EXPECT_NE(err.find("test.toml:2: syntax:"), std::string::npos) << err;
+}
+
+TEST(Config, SegmentsAndSocketCan) {
+    std::string err;
+    const auto c = parse(R"([[ingest.socketcan]]
+interface = "vcan0"
+subject = 3
+
+[filter]
+name = "madgwick"
+params = { beta = 0.05, init = "fast" }
+
+[[skeleton.segment]]
+name = "pelvis"
+node = 1
+
+[[skeleton.segment]]
+name = "thigh"
+parent = "pelvis"
+offset_m = [0.0, -0.1, -0.08]
+node = 2
+filter = "pf"
+)",
+                         &err);
+    ASSERT_TRUE(c) << err;
+    ASSERT_EQ(c->socketcan.size(), 1u);
+    EXPECT_EQ(c->socketcan[0].interface, "vcan0");
+    EXPECT_EQ(c->socketcan[0].subject, 3u);
+    ASSERT_EQ(c->filter_params.size(), 2u);
+    EXPECT_EQ(c->filter_params[0].first, "beta");
+    EXPECT_EQ(c->filter_params[0].second, "0.050000000000000003");
+    ASSERT_EQ(c->segments.size(), 2u);
+    EXPECT_EQ(c->segments[1].parent, "pelvis");
+    EXPECT_DOUBLE_EQ(c->segments[1].offset_m[2], -0.08);
+    EXPECT_EQ(c->segments[1].filter, "pf");
+}
+
+TEST(Config, SegmentErrors) {
+    std::string err;
+    EXPECT_FALSE(parse("[[skeleton.segment]]\nname = \"a\"\nnode = 1\n[[skeleton.segment]]\n"
+                       "name = \"b\"\nparent = \"zz\"\nnode = 2\n",
+                       &err));
+    EXPECT_EQ(err, "test.toml:6: skeleton.segment.parent: parent must be a segment listed earlier");
+    EXPECT_FALSE(parse("[[skeleton.segment]]\nname = \"a\"\nnode = 1\n[[skeleton.segment]]\n"
+                       "name = \"b\"\nparent = \"a\"\nnode = 1\n",
+                       &err));
+    EXPECT_EQ(err, "test.toml:7: skeleton.segment.node: node id used twice");
+    EXPECT_FALSE(parse("[[skeleton.segment]]\nname = \"a\"\nnode = 99\n", &err));
+    EXPECT_EQ(err, "test.toml:3: skeleton.segment.node: must be between 1 and 63");
+}
+
+TEST(Config, EndpointParsing) {
+    std::string err;
+    auto v6 = parse_endpoint("[::1]:7001", &err);
+    ASSERT_TRUE(v6);
+    EXPECT_EQ(v6->host, "::1");
+    EXPECT_EQ(v6->str(), "[::1]:7001");
+    EXPECT_FALSE(parse_endpoint("1.2.3.4:", &err));
+    EXPECT_FALSE(parse_endpoint(":80", &err));
+}
+
+}  // namespace
+}  // namespace mocap::daemon
