@@ -1,0 +1,199 @@
+#include "filter/markley_average.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+#include <vector>
+
+namespace mocap::filter {
+namespace {
+
+Quat random_quat(std::mt19937& rng) {
+    std::normal_distribution<double> n(0.0, 1.0);
+    return Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
+}
+
+Vec3 random_vec(std::mt19937& rng, double sigma) {
+    std::normal_distribution<double> n(0.0, sigma);
+    return {n(rng), n(rng), n(rng)};
+}
+
+double qdist(const Quat& a, const Quat& b) { return angle_rad(a * b.conjugate()); }
+
+Quat neg(const Quat& q) { return Quat(-q.w(), -q.x(), -q.y(), -q.z()); }
+
+TEST(MarkleyAverage, XiMatrixIsTheConjugateProductAndOrthonormal) {
+    std::mt19937 rng(3);
+    for (int i = 0; i < 50; ++i) {
+        const Quat q = random_quat(rng), p = random_quat(rng);
+        const Mat43 xi = xi_matrix(q);
+        EXPECT_LT((xi.transpose() * to_wxyz(p) - (q.conjugate() * p).vec()).norm(), 1e-12);
+        EXPECT_LT((xi.transpose() * xi - Mat3::Identity()).norm(), 1e-12);
+        EXPECT_LT((xi.transpose() * to_wxyz(q)).norm(), 1e-12);
+    }
+}
+
+TEST(MarkleyAverage, IdenticalQuaternionsAverageToThemselves) {
+    std::mt19937 rng(1);
+    for (int i = 0; i < 20; ++i) {
+        const Quat q = random_quat(rng);
+        const std::vector<Quat> qs(7, q);
+        EXPECT_LT(qdist(average_quaternions(qs), q), 1e-9);
+    }
+}
+
+TEST(MarkleyAverage, SignOfInputsDoesNotMatter) {
+    std::mt19937 rng(2);
+    const Quat center = random_quat(rng);
+    std::vector<Quat> qs, flipped;
+    std::vector<double> w;
+    for (int i = 0; i < 9; ++i) {
+        const Quat q = center * quat_from_rotvec(random_vec(rng, 0.3));
+        qs.push_back(q);
+        flipped.push_back(i % 2 ? neg(q) : q);
+        w.push_back(0.5 + i);
+    }
+    const Quat a = average_quaternions(qs, w);
+    const Quat b = average_quaternions(flipped, w);
+    EXPECT_LT(qdist(a, b), 1e-12);
+    EXPECT_GE(a.w(), 0.0);
+    // A normalised sum would be wrecked by the flips; the eigenvector is not.
+    EXPECT_LT(qdist(a, center), 0.3);
+}
+
+TEST(MarkleyAverage, SymmetricSpreadAveragesToCenter) {
+    std::mt19937 rng(4);
+    for (int t = 0; t < 10; ++t) {
+        const Quat center = random_quat(rng);
+        std::vector<Quat> qs;
+        for (int i = 0; i < 5; ++i) {
+            const Vec3 d = random_vec(rng, 0.4);
+            qs.push_back(center * quat_from_rotvec(d));
+            qs.push_back(center * quat_from_rotvec(-d));
+        }
+        EXPECT_LT(qdist(average_quaternions(qs), center), 1e-9);
+    }
+}
+
+TEST(MarkleyAverage, TwoQuaternionClosedFormEqualsEigenSolution) {
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> u(0.05, 3.0);
+    for (int i = 0; i < 200; ++i) {
+        const Quat q1 = random_quat(rng);
+        Quat q2 = random_quat(rng);
+        if (i % 3 == 0) q2 = neg(q2);
+        const double w1 = u(rng), w2 = u(rng);
+        const std::vector<Quat> qs{q1, q2};
+        const std::vector<double> w{w1, w2};
+        const Quat eig = average_quaternions(qs, w);
+        const Quat cf = average_two(q1, w1, q2, w2);
+        EXPECT_LT(qdist(eig, cf), 1e-7) << i;
+    }
+    // Equal weights: the midpoint of the shortest arc.
+    const Quat a = quat_from_rotvec(Vec3(0, 0, 0.2));
+    const Quat b = quat_from_rotvec(Vec3(0, 0, 1.0));
+    EXPECT_LT(qdist(average_two(a, 1.0, neg(b), 1.0), quat_from_rotvec(Vec3(0, 0, 0.6))), 1e-12);
+}
+
+TEST(MarkleyAverage, MatrixWeightsScaledIdentityReduceToScalarWeights) {
+    std::mt19937 rng(6);
+    std::uniform_real_distribution<double> u(0.1, 5.0);
+    for (int t = 0; t < 20; ++t) {
+        std::vector<Quat> qs;
+        std::vector<double> w;
+        std::vector<Mat3> info;
+        const Quat center = random_quat(rng);
+        for (int i = 0; i < 6; ++i) {
+            qs.push_back(center * quat_from_rotvec(random_vec(rng, 0.5)));
+            w.push_back(u(rng));
+            info.push_back(w.back() * Mat3::Identity());
+        }
+        EXPECT_LT(qdist(average_quaternions(qs, w), average_quaternions(qs, info)), 1e-9);
+    }
+}
+
+TEST(MarkleyAverage, MatrixWeightsTrustEachInputAlongItsGoodAxis) {
+    // Input a is precise about x and vague about z, b the opposite: the average takes
+    // each axis from the input that is sure about it.
+    const Quat truth = Quat::Identity();
+    const Quat a = quat_from_rotvec(Vec3(0.0, 0.0, 0.2));   // error on z only
+    const Quat b = quat_from_rotvec(Vec3(0.2, 0.0, 0.0));   // error on x only
+    const Mat3 ia = Vec3(1e4, 1.0, 1e-4).asDiagonal();     // sure about x, not z
+    const Mat3 ib = Vec3(1e-4, 1.0, 1e4).asDiagonal();     // sure about z, not x
+    const std::vector<Quat> qs{a, b};
+    const std::vector<Mat3> info{ia, ib};
+    EXPECT_LT(qdist(average_quaternions(qs, info), truth), 1e-3);
+    // With equal scalar weights the result is half-way between.
+    EXPECT_GT(qdist(average_quaternions(qs), truth), 0.09);
+}
+
+TEST(MarkleyAverage, CovarianceExactAndApproximationAgreeForSmallSpread) {
+    std::mt19937 rng(7);
+    const Quat center = random_quat(rng);
+    std::vector<Quat> qs;
+    std::vector<Mat3> info;
+    for (int i = 0; i < 8; ++i) {
+        qs.push_back(center * quat_from_rotvec(random_vec(rng, 1e-3)));
+        const Vec3 s(0.01 + 0.01 * i, 0.02, 0.05);  // rad
+        info.push_back(s.cwiseInverse().cwiseAbs2().asDiagonal());
+    }
+    const Mat3 p38 = average_covariance(qs, info);
+    const Mat3 p39 = average_covariance_approx(info);
+    EXPECT_LT((p38 - p39).norm() / p39.norm(), 1e-3);
+    // Identical inputs: exact equality.
+    const std::vector<Quat> same(8, center);
+    EXPECT_LT((average_covariance(same, info) - p39).norm() / p39.norm(), 1e-9);
+}
+
+TEST(MarkleyAverage, CovarianceMatchesMonteCarloSpreadOfTheAverage) {
+    // Averages of N noisy copies with R = σ²I: the average's error covariance is σ²/N I.
+    std::mt19937 rng(8);
+    const double sigma = 0.02;
+    const int n = 10, trials = 2000;
+    const Quat truth = random_quat(rng);
+    Mat3 emp = Mat3::Zero();
+    for (int t = 0; t < trials; ++t) {
+        std::vector<Quat> qs;
+        for (int i = 0; i < n; ++i) qs.push_back(truth * quat_from_rotvec(random_vec(rng, sigma)));
+        const Vec3 e = rotvec_from_quat(truth.conjugate() * average_quaternions(qs));
+        emp += e * e.transpose() / trials;
+    }
+    const std::vector<Mat3> info(n, Mat3::Identity() / (sigma * sigma));
+    const Mat3 p = average_covariance_approx(info);
+    EXPECT_NEAR(emp.trace() / p.trace(), 1.0, 0.1);
+}
+
+TEST(MarkleyAverage, AccumulatorPowerIterationMatchesEigenSolver) {
+    std::mt19937 rng(9);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    for (int t = 0; t < 50; ++t) {
+        const Quat center = random_quat(rng);
+        // From tight clouds (fast path) to almost uniform ones (fallback path).
+        const double spread = t < 25 ? 0.05 : 2.0;
+        QuatAccumulator acc;
+        for (int i = 0; i < 256; ++i) {
+            Quat q = center * quat_from_rotvec(random_vec(rng, spread));
+            if (i % 2) q = neg(q);
+            acc.add(q.w(), q.x(), q.y(), q.z(), u(rng));
+        }
+        const Quat ref = max_eigenvector(acc.matrix()).q;
+        EXPECT_LT(qdist(acc.mean(center), ref), 1e-8) << t;
+        // A hint orthogonal to the answer still ends at the largest eigenvalue.
+        const Quat orth = center * Quat(0, 1, 0, 0);
+        EXPECT_LT(qdist(acc.mean(orth), ref), 1e-8) << t;
+    }
+}
+
+TEST(MarkleyAverage, PowerIterationHandlesNegativeSemidefiniteMatrixForm) {
+    std::mt19937 rng(10);
+    const Quat center = random_quat(rng);
+    QuatAccumulator acc;
+    for (int i = 0; i < 5; ++i)
+        acc.add(center * quat_from_rotvec(random_vec(rng, 0.1)), Mat3(Vec3(1, 2, 3).asDiagonal()));
+    const MaxEigen ref = max_eigenvector(acc.matrix());
+    EXPECT_LE(ref.eigenvalue, 1e-12);
+    EXPECT_LT(qdist(acc.mean(center), ref.q), 1e-8);
+}
+
+}  // namespace
+}  // namespace mocap::filter
