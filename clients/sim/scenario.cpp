@@ -1,0 +1,308 @@
+#include "sim/scenario.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+
+#include "sim/sim_rng.hpp"
+
+namespace mocap::sim {
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kDegToRad = kPi / 180.0;
+constexpr double kGaussToUt = 100.0;
+
+// Independent random streams of one seed (SimRng's `stream`).
+enum Stream : std::uint64_t { kMotion = 1, kNoise = 2, kBias = 3, kDisturbance = 4, kStart = 5 };
+
+/// Earth field of the given strength and dip (inclination below the horizon), pointing to
+/// magnetic north (+y in ENU) so that magnetic and true north coincide.
+Vec3 field_enu_ut(double norm_ut, double dip_rad) {
+    return {0.0, norm_ut * std::cos(dip_rad), -norm_ut * std::sin(dip_rad)};
+}
+
+// ---------------------------------------------------------------- fourati
+
+// The paper's rotation, as the body rate of a bounded ZYX Euler trajectory in the paper's
+// NED frame: roll 40° sin(2π 0.1 t), pitch 30° sin(2π 0.07 t), yaw 90° sin(2π 0.03 t),
+// all zero at t = 0 (q(0) = identity). Integrating the rate reproduces the trajectory; the
+// truth is the integral. See docs/accuracy.md, "fourati".
+Vec3 fourati_rate_rad_s(double t_s) {
+    const double a_r = 40.0 * kDegToRad, f_r = 2.0 * kPi * 0.10;
+    const double a_p = 30.0 * kDegToRad, f_p = 2.0 * kPi * 0.07;
+    const double a_y = 90.0 * kDegToRad, f_y = 2.0 * kPi * 0.03;
+    const double roll = a_r * std::sin(f_r * t_s), roll_dot = a_r * f_r * std::cos(f_r * t_s);
+    const double pitch = a_p * std::sin(f_p * t_s), pitch_dot = a_p * f_p * std::cos(f_p * t_s);
+    const double yaw_dot = a_y * f_y * std::cos(f_y * t_s);
+    // ZYX kinematics: body rate = E(roll, pitch) · [roll_dot, pitch_dot, yaw_dot].
+    const double sr = std::sin(roll), cr = std::cos(roll);
+    const double sp = std::sin(pitch), cp = std::cos(pitch);
+    return {roll_dot - yaw_dot * sp, pitch_dot * cr + yaw_dot * sr * cp, -pitch_dot * sr + yaw_dot * cr * cp};
+}
+
+// ---------------------------------------------------------------- realistic / magnetic
+
+constexpr double kRampS = 0.6;        // raised-cosine fade in/out of each movement
+constexpr double kRestoreGain = 0.6;  // 1/s, pulls the sensor's z axis back toward up
+constexpr double kDisturbanceHeadingRad = 39.0 * kDegToRad;
+constexpr double kDisturbanceRampS = 1.5;
+
+struct Sinusoid {
+    double amp_rad_s = 0.0;
+    double freq_hz = 0.0;
+    double phase_rad = 0.0;
+};
+
+struct Movement {
+    double t0_s = 0.0;
+    double t1_s = 0.0;
+    std::array<std::array<Sinusoid, 3>, 3> axes{};  // [axis][component]
+};
+
+struct Burst {
+    double t0_s = 0.0;
+    double duration_s = 0.0;
+    double amp_m_s2 = 0.0;
+    Vec3 dir = Vec3::UnitX();
+};
+
+struct MotionPlan {
+    std::vector<Movement> movements;
+    std::vector<Burst> bursts;
+};
+
+Vec3 random_unit(SimRng& rng) {
+    // Normal components give a uniformly distributed direction.
+    for (;;) {
+        const Vec3 v(rng.normal(), rng.normal(), rng.normal());
+        if (v.norm() > 1e-6) return v.normalized();
+    }
+}
+
+/// Rest at the start (5–7 s), then movements of 8–16 s separated by rests of 2–4 s, a
+/// final rest of at least 2 s. Each movement has 3 sinusoids per axis (0.15–1.2 Hz,
+/// 0.2–0.8 rad/s: a limb's swing, peaks ~2 rad/s) and bursts of linear acceleration
+/// (0.3–0.8 s, 2–6 m/s², one full sine so the velocity returns to zero) every 1.5–4 s.
+MotionPlan plan_motion(SimRng& rng, double duration_s) {
+    MotionPlan plan;
+    double t = rng.uniform(5.0, 7.0);
+    for (;;) {
+        const double end_limit = duration_s - 2.0;
+        const double len = std::min(rng.uniform(8.0, 16.0), end_limit - t);
+        if (len < 4.0) break;
+        Movement m;
+        m.t0_s = t;
+        m.t1_s = t + len;
+        for (auto& axis : m.axes) {
+            for (auto& s : axis) {
+                s.amp_rad_s = rng.uniform(0.2, 0.8);
+                s.freq_hz = rng.uniform(0.15, 1.2);
+                s.phase_rad = rng.uniform(0.0, 2.0 * kPi);
+            }
+        }
+        double tb = m.t0_s + kRampS + rng.uniform(0.5, 2.0);
+        for (;;) {
+            Burst b;
+            b.duration_s = rng.uniform(0.3, 0.8);
+            b.amp_m_s2 = rng.uniform(2.0, 6.0);
+            b.dir = random_unit(rng);
+            b.t0_s = tb;
+            if (tb + b.duration_s > m.t1_s - kRampS) break;
+            plan.bursts.push_back(b);
+            tb += b.duration_s + rng.uniform(1.5, 4.0);
+        }
+        plan.movements.push_back(m);
+        t = m.t1_s + rng.uniform(2.0, 4.0);
+    }
+    return plan;
+}
+
+/// 0 outside [t0, t1], 1 inside, raised-cosine ramps of ramp_s at both ends.
+double smooth_window(double t, double t0, double t1, double ramp_s) {
+    if (t <= t0 || t >= t1) return 0.0;
+    const double u = std::min(t - t0, t1 - t);
+    if (u >= ramp_s) return 1.0;
+    return 0.5 - 0.5 * std::cos(kPi * u / ramp_s);
+}
+
+Vec3 plan_rate_rad_s(const MotionPlan& plan, double t_s, const Quat& q_earth_sensor) {
+    for (const Movement& m : plan.movements) {
+        const double e = smooth_window(t_s, m.t0_s, m.t1_s, kRampS);
+        if (e <= 0.0) continue;
+        Vec3 w = Vec3::Zero();
+        for (int i = 0; i < 3; ++i) {
+            for (const Sinusoid& s : m.axes[static_cast<std::size_t>(i)]) {
+                w[i] += s.amp_rad_s * std::sin(2.0 * kPi * s.freq_hz * t_s + s.phase_rad);
+            }
+        }
+        // A limb returns toward its neutral pose: with u_b = earth up seen in the sensor
+        // frame, ω = k (z × u_b) turns the sensor's z axis toward up without bounding
+        // heading. It keeps long recordings away from permanent gimbal-lock poses.
+        const Vec3 up_sensor = filter::rotate(filter::conj(q_earth_sensor), Vec3::UnitZ());
+        w += kRestoreGain * Vec3::UnitZ().cross(up_sensor);
+        return e * w;
+    }
+    return Vec3::Zero();
+}
+
+/// Moving at sample t if the sample's interval (t - dt, t] overlaps a movement, so that
+/// every row whose gyro reading carries motion is flagged.
+bool plan_moving(const MotionPlan& plan, double t_s, double dt_s) {
+    return std::any_of(plan.movements.begin(), plan.movements.end(), [&](const Movement& m) {
+        return t_s > m.t0_s && t_s - dt_s < m.t1_s;
+    });
+}
+
+Vec3 plan_lin_acc_m_s2(const MotionPlan& plan, double t_s) {
+    Vec3 a = Vec3::Zero();
+    for (const Burst& b : plan.bursts) {
+        const double u = (t_s - b.t0_s) / b.duration_s;
+        if (u > 0.0 && u < 1.0) a += b.amp_m_s2 * std::sin(2.0 * kPi * u) * b.dir;
+    }
+    return a;
+}
+
+/// Field added near a steel object: at full strength the horizontal field turns by 39°
+/// (direction drawn from the seed) and grows by 10%, and the vertical field weakens by
+/// 4 µT (norm 50 -> ~47.6 µT, dip 60° -> ~54.6°), over a window of 16 s (1.5 s ramps)
+/// centred in the recording.
+struct Disturbance {
+    Vec3 delta_ut = Vec3::Zero();
+    double t0_s = 0.0;
+    double t1_s = 0.0;
+    [[nodiscard]] Vec3 at(double t_s) const {
+        return smooth_window(t_s, t0_s, t1_s, kDisturbanceRampS) * delta_ut;
+    }
+};
+
+Disturbance make_disturbance(SimRng& rng, const ScenarioSpec& spec) {
+    const Vec3& m0 = spec.mag_field_ut;
+    const Vec3 h(m0.x(), m0.y(), 0.0);
+    const double turn = rng.sign() * kDisturbanceHeadingRad;
+    const Vec3 h_disturbed = 1.1 * (Eigen::AngleAxisd(turn, Vec3::UnitZ()) * h);
+    Disturbance d;
+    d.delta_ut = (h_disturbed - h) + Vec3(0.0, 0.0, 4.0);
+    d.t0_s = 0.5 * spec.duration_s - 8.0;
+    d.t1_s = 0.5 * spec.duration_s + 8.0;
+    return d;
+}
+
+Vec3 noise_vec(SimRng& rng, double sigma) {
+    const Vec3 n(rng.normal(), rng.normal(), rng.normal());
+    return sigma * n;
+}
+
+}  // namespace
+
+std::optional<ScenarioKind> parse_scenario_kind(std::string_view name) {
+    if (name == "fourati") return ScenarioKind::fourati;
+    if (name == "realistic") return ScenarioKind::realistic;
+    if (name == "magnetic") return ScenarioKind::magnetic;
+    return std::nullopt;
+}
+
+std::string_view scenario_name(ScenarioKind kind) {
+    switch (kind) {
+        case ScenarioKind::fourati: return "fourati";
+        case ScenarioKind::realistic: return "realistic";
+        case ScenarioKind::magnetic: return "magnetic";
+    }
+    return "unknown";
+}
+
+ScenarioSpec scenario_spec(ScenarioKind kind) {
+    ScenarioSpec s;
+    if (kind == ScenarioKind::fourati) {
+        // Table II of the paper: σ = 0.4 in its units (rad/s, m/s², G); 0.5 G at 60°.
+        s.rate_hz = 100.0;
+        s.duration_s = 60.0;
+        s.gyro_noise_rad_s = 0.4;
+        s.accel_noise_m_s2 = 0.4;
+        s.mag_noise_ut = 0.4 * kGaussToUt;
+        s.gyro_bias_max_rad_s = 0.0;
+        s.mag_field_ut = field_enu_ut(0.5 * kGaussToUt, 60.0 * kDegToRad);
+        return s;
+    }
+    // MPU9250-like at 100 Hz: gyro 0.3 °/s rms (0.03 °/s/√Hz incl. vibration), accel
+    // 0.03 m/s² rms (300 µg/√Hz), AK8963 mag 0.5 µT rms; bias up to 2 °/s per axis.
+    s.rate_hz = 100.0;
+    s.duration_s = 90.0;
+    s.gyro_noise_rad_s = 0.3 * kDegToRad;
+    s.accel_noise_m_s2 = 0.03;
+    s.mag_noise_ut = 0.5;
+    s.gyro_bias_max_rad_s = 2.0 * kDegToRad;
+    s.mag_field_ut = field_enu_ut(50.0, 60.0 * kDegToRad);
+    return s;
+}
+
+Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOptions& options) {
+    Scenario sc;
+    sc.kind = kind;
+    sc.seed = seed;
+    sc.spec = scenario_spec(kind);
+    const ScenarioSpec& spec = sc.spec;
+    const bool fourati = kind == ScenarioKind::fourati;
+
+    SimRng motion_rng(seed, kMotion);
+    SimRng noise_rng(seed, kNoise);
+    SimRng bias_rng(seed, kBias);
+    SimRng disturbance_rng(seed, kDisturbance);
+    SimRng start_rng(seed, kStart);
+
+    const MotionPlan plan = fourati ? MotionPlan{} : plan_motion(motion_rng, spec.duration_s);
+    Disturbance disturbance;
+    if (kind == ScenarioKind::magnetic) disturbance = make_disturbance(disturbance_rng, spec);
+
+    if (options.gyro_bias && spec.gyro_bias_max_rad_s > 0.0) {
+        for (int i = 0; i < 3; ++i) {
+            sc.gyro_bias_rad_s[i] = bias_rng.sign() * bias_rng.uniform(0.25, 1.0) * spec.gyro_bias_max_rad_s;
+        }
+    }
+
+    // fourati: the paper's q(0) = identity in NED, i.e. the sensor axes on north/east/down;
+    // in ENU that is q_enu_ned. Otherwise: any heading, a tilt of up to ~20°.
+    Quat q = filter::q_enu_ned();
+    if (!fourati) {
+        const double yaw = start_rng.uniform(-kPi, kPi);
+        const Vec3 tilt(start_rng.uniform(-0.35, 0.35), start_rng.uniform(-0.35, 0.35), 0.0);
+        q = (Quat(Eigen::AngleAxisd(yaw, Vec3::UnitZ())) * filter::quat_from_rotvec(tilt)).normalized();
+    }
+
+    const double dt = 1.0 / spec.rate_hz;
+    const auto n = static_cast<std::size_t>(std::llround(spec.duration_s * spec.rate_hz)) + 1;
+    sc.rows.reserve(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        const double t = static_cast<double>(k) * dt;
+        // The rate over (t - dt, t], evaluated at the midpoint (state from the interval start).
+        const double t_mid = t - 0.5 * dt;
+        const Vec3 w = fourati ? fourati_rate_rad_s(t_mid) : plan_rate_rad_s(plan, t_mid, q);
+        if (k > 0) q = (q * filter::quat_from_rotvec(w * dt)).normalized();
+
+        ScenarioRow row;
+        row.q_earth_sensor = filter::canonical(q);
+        row.moving = fourati || plan_moving(plan, t, dt);
+        row.gyro_true_rad_s = w;
+        row.lin_acc_earth_m_s2 = fourati ? Vec3::Zero() : plan_lin_acc_m_s2(plan, t);
+        row.mag_earth_ut = spec.mag_field_ut + disturbance.at(t);
+
+        const Quat q_sensor_earth = filter::conj(q);
+        const double ns = options.noise_scale;
+        const Vec3 gyro = w + sc.gyro_bias_rad_s + noise_vec(noise_rng, ns * spec.gyro_noise_rad_s);
+        const Vec3 accel = filter::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
+                           noise_vec(noise_rng, ns * spec.accel_noise_m_s2);
+        const Vec3 mag = filter::rotate(q_sensor_earth, row.mag_earth_ut) +
+                         noise_vec(noise_rng, ns * spec.mag_noise_ut);
+
+        row.sample.t_us = std::llround(t * 1e6);
+        row.sample.gyro_rad_s = filter::to_array(gyro);
+        row.sample.accel_m_s2 = filter::to_array(accel);
+        row.sample.mag_ut = filter::to_array(mag);
+        sc.rows.push_back(row);
+    }
+    return sc;
+}
+
+}  // namespace mocap::sim

@@ -1,0 +1,208 @@
+// Scenario generator: determinism, physical consistency, the paper's noise statistics.
+#include "sim/scenario.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+namespace mocap::sim {
+namespace {
+
+using filter::Quat;
+using filter::Vec3;
+
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+constexpr ScenarioKind kAllKinds[] = {ScenarioKind::fourati, ScenarioKind::realistic,
+                                      ScenarioKind::magnetic};
+
+bool same_rows(const Scenario& a, const Scenario& b) {
+    if (a.rows.size() != b.rows.size()) return false;
+    for (std::size_t i = 0; i < a.rows.size(); ++i) {
+        const ScenarioRow& x = a.rows[i];
+        const ScenarioRow& y = b.rows[i];
+        if (x.sample.t_us != y.sample.t_us || x.sample.gyro_rad_s != y.sample.gyro_rad_s ||
+            x.sample.accel_m_s2 != y.sample.accel_m_s2 || x.sample.mag_ut != y.sample.mag_ut ||
+            x.q_earth_sensor.coeffs() != y.q_earth_sensor.coeffs() || x.moving != y.moving) {
+            return false;
+        }
+    }
+    return true;
+}
+
+TEST(Scenario, NamesRoundTrip) {
+    for (ScenarioKind k : kAllKinds) EXPECT_EQ(parse_scenario_kind(scenario_name(k)), k);
+    EXPECT_FALSE(parse_scenario_kind("Fourati").has_value());
+    EXPECT_FALSE(parse_scenario_kind("").has_value());
+}
+
+TEST(Scenario, SameSeedSameRowsOtherSeedOtherRows) {
+    for (ScenarioKind k : kAllKinds) {
+        const Scenario a = make_scenario(k, 7);
+        const Scenario b = make_scenario(k, 7);
+        const Scenario c = make_scenario(k, 8);
+        EXPECT_TRUE(same_rows(a, b)) << scenario_name(k);
+        EXPECT_FALSE(same_rows(a, c)) << scenario_name(k);
+    }
+}
+
+TEST(Scenario, LengthRateAndTimestamps) {
+    const Scenario f = make_scenario(ScenarioKind::fourati, 1);
+    ASSERT_EQ(f.rows.size(), 6001u);  // 0 .. 60 s at 100 Hz
+    EXPECT_EQ(f.rows.front().sample.t_us, 0);
+    EXPECT_EQ(f.rows.back().sample.t_us, 60'000'000);
+    for (std::size_t i = 1; i < f.rows.size(); ++i) {
+        ASSERT_EQ(f.rows[i].sample.t_us - f.rows[i - 1].sample.t_us, 10'000);
+    }
+    const Scenario r = make_scenario(ScenarioKind::realistic, 1);
+    EXPECT_EQ(r.rows.size(), 9001u);
+}
+
+// The paper starts from q(0) = identity in NED: the sensor axes on north, east, down.
+TEST(Scenario, FouratiStartsAlignedWithNed) {
+    const Scenario f = make_scenario(ScenarioKind::fourati, 3);
+    const Quat q_ned_sensor = filter::q_enu_ned() * f.rows.front().q_earth_sensor;
+    EXPECT_LT(filter::angle_rad(q_ned_sensor), 1e-12);
+    // Bounded Euler trajectory in NED: roll ±40°, pitch ±30°, yaw ±90° (within 1°).
+    double max_roll = 0, max_pitch = 0, max_yaw = 0;
+    for (const ScenarioRow& row : f.rows) {
+        const auto e = filter::to_euler_zyx(filter::q_enu_ned() * row.q_earth_sensor);
+        max_roll = std::max(max_roll, std::abs(e.roll_rad) * kRadToDeg);
+        max_pitch = std::max(max_pitch, std::abs(e.pitch_rad) * kRadToDeg);
+        max_yaw = std::max(max_yaw, std::abs(e.yaw_rad) * kRadToDeg);
+    }
+    EXPECT_NEAR(max_roll, 40.0, 1.0);
+    EXPECT_NEAR(max_pitch, 30.0, 1.0);
+    EXPECT_NEAR(max_yaw, 90.0, 1.0);
+}
+
+// Integrating the noiseless, unbiased gyro with q_k = q_{k-1} ⊗ exp(ω_k dt/2) reproduces
+// the truth to rounding (the documented discretisation).
+TEST(Scenario, NoiselessGyroIntegratesToTruth) {
+    for (ScenarioKind k : kAllKinds) {
+        const Scenario s = make_scenario(k, 11, {.noise_scale = 0.0, .gyro_bias = false});
+        Quat q = s.rows.front().q_earth_sensor;
+        double worst = 0.0;
+        for (std::size_t i = 1; i < s.rows.size(); ++i) {
+            const double dt = 1e-6 * static_cast<double>(s.rows[i].sample.t_us - s.rows[i - 1].sample.t_us);
+            q = (q * filter::quat_from_rotvec(filter::to_vec3(s.rows[i].sample.gyro_rad_s) * dt)).normalized();
+            worst = std::max(worst, filter::angle_rad(q * filter::conj(s.rows[i].q_earth_sensor)));
+        }
+        EXPECT_LT(worst * kRadToDeg, 1e-6) << scenario_name(k);
+    }
+}
+
+// Accelerometer = R(q)ᵀ (a_lin + g_up), magnetometer = R(q)ᵀ m_earth, exactly when noiseless;
+// at rest a level-or-not sensor reads gravity's magnitude, +9.81 along earth up.
+TEST(Scenario, AccelAndMagFollowTruth) {
+    for (ScenarioKind k : kAllKinds) {
+        const Scenario s = make_scenario(k, 5, {.noise_scale = 0.0});
+        std::size_t rest = 0;
+        for (const ScenarioRow& row : s.rows) {
+            const Quat q_se = filter::conj(row.q_earth_sensor);
+            const Vec3 f = filter::to_vec3(row.sample.accel_m_s2);
+            const Vec3 m = filter::to_vec3(row.sample.mag_ut);
+            ASSERT_LT((f - filter::rotate(q_se, row.lin_acc_earth_m_s2 + s.spec.gravity_up_m_s2)).norm(), 1e-9);
+            ASSERT_LT((m - filter::rotate(q_se, row.mag_earth_ut)).norm(), 1e-9);
+            if (!row.moving) {
+                ++rest;
+                ASSERT_LT(row.lin_acc_earth_m_s2.norm(), 1e-12);
+                ASSERT_LT((filter::to_vec3(row.sample.gyro_rad_s) - s.gyro_bias_rad_s).norm(), 1e-12);
+                // Specific force points up: rotated back to earth it is +9.81 on z.
+                ASSERT_NEAR(filter::rotate(row.q_earth_sensor, f).z(), 9.81, 1e-9);
+            }
+        }
+        if (k != ScenarioKind::fourati) {
+            EXPECT_GT(rest, 500u) << scenario_name(k);
+        }
+    }
+}
+
+TEST(Scenario, AccelAtRestMatchesGravityWithinNoise) {
+    const Scenario s = make_scenario(ScenarioKind::realistic, 2);
+    double sum_sq = 0.0;
+    std::size_t n = 0;
+    for (const ScenarioRow& row : s.rows) {
+        if (row.moving) continue;
+        const Vec3 expected = filter::rotate(filter::conj(row.q_earth_sensor), s.spec.gravity_up_m_s2);
+        sum_sq += (filter::to_vec3(row.sample.accel_m_s2) - expected).squaredNorm();
+        n += 3;
+    }
+    ASSERT_GT(n, 1000u);
+    EXPECT_NEAR(std::sqrt(sum_sq / static_cast<double>(n)), s.spec.accel_noise_m_s2, 0.1 * s.spec.accel_noise_m_s2);
+}
+
+// Table II: σ = 0.4 on every axis of every sensor (rad/s, m/s², G = 40 µT), zero mean.
+TEST(Scenario, FouratiNoiseIsTableTwo) {
+    const Scenario s = make_scenario(ScenarioKind::fourati, 9);
+    EXPECT_DOUBLE_EQ(s.spec.gyro_noise_rad_s, 0.4);
+    EXPECT_DOUBLE_EQ(s.spec.accel_noise_m_s2, 0.4);
+    EXPECT_DOUBLE_EQ(s.spec.mag_noise_ut, 40.0);
+    EXPECT_NEAR(s.spec.mag_field_ut.norm(), 50.0, 1e-12);
+    const double dip = std::atan2(-s.spec.mag_field_ut.z(), s.spec.mag_field_ut.head<2>().norm());
+    EXPECT_NEAR(dip * kRadToDeg, 60.0, 1e-9);
+    Vec3 sum[3] = {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
+    Vec3 sum_sq[3] = {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
+    for (const ScenarioRow& row : s.rows) {
+        const Quat q_se = filter::conj(row.q_earth_sensor);
+        const Vec3 e[3] = {
+            filter::to_vec3(row.sample.gyro_rad_s) - row.gyro_true_rad_s,
+            filter::to_vec3(row.sample.accel_m_s2) - filter::rotate(q_se, s.spec.gravity_up_m_s2),
+            (filter::to_vec3(row.sample.mag_ut) - filter::rotate(q_se, row.mag_earth_ut)) / 100.0,  // G
+        };
+        for (int i = 0; i < 3; ++i) {
+            sum[i] += e[i];
+            sum_sq[i] += e[i].cwiseProduct(e[i]);
+        }
+    }
+    const double n = static_cast<double>(s.rows.size());
+    for (int i = 0; i < 3; ++i) {
+        for (int a = 0; a < 3; ++a) {
+            const double mean = sum[i][a] / n;
+            const double sigma = std::sqrt(sum_sq[i][a] / n - mean * mean);
+            // 6001 samples: σ estimate within ~2.7% (3 standard errors), mean within 3σ/√n.
+            EXPECT_NEAR(sigma, 0.4, 0.4 * 0.03) << "sensor " << i << " axis " << a;
+            EXPECT_NEAR(mean, 0.0, 3.0 * 0.4 / std::sqrt(n)) << "sensor " << i << " axis " << a;
+        }
+    }
+}
+
+TEST(Scenario, RealisticHasBiasRestsBurstsAndDisturbanceOnlyInMagnetic) {
+    const Scenario r = make_scenario(ScenarioKind::realistic, 4);
+    const Scenario m = make_scenario(ScenarioKind::magnetic, 4);
+    for (int a = 0; a < 3; ++a) {
+        const double b_deg_s = std::abs(r.gyro_bias_rad_s[a]) * kRadToDeg;
+        EXPECT_GE(b_deg_s, 0.5 - 1e-12);
+        EXPECT_LE(b_deg_s, 2.0 + 1e-12);
+    }
+    // Rest at the start (>= 5 s), moving most of the time, linear acceleration bursts > 2 m/s².
+    for (const ScenarioRow& row : r.rows) {
+        if (row.sample.t_us >= 5'000'000) break;
+        ASSERT_FALSE(row.moving);
+    }
+    double moving = 0, max_acc = 0;
+    for (const ScenarioRow& row : r.rows) {
+        moving += row.moving ? 1.0 : 0.0;
+        max_acc = std::max(max_acc, row.lin_acc_earth_m_s2.norm());
+    }
+    EXPECT_GT(moving / static_cast<double>(r.rows.size()), 0.5);
+    EXPECT_GT(max_acc, 2.0);
+    // Same motion and bias; the field differs only inside the disturbance window.
+    ASSERT_EQ(r.rows.size(), m.rows.size());
+    double max_turn_deg = 0.0;
+    for (std::size_t i = 0; i < r.rows.size(); ++i) {
+        ASSERT_EQ(r.rows[i].q_earth_sensor.coeffs(), m.rows[i].q_earth_sensor.coeffs());
+        EXPECT_LT((r.rows[i].mag_earth_ut - r.spec.mag_field_ut).norm(), 1e-12);
+        const Vec3 h = m.rows[i].mag_earth_ut;
+        const double turn = std::atan2(h.x(), h.y());  // angle of the horizontal field from north
+        max_turn_deg = std::max(max_turn_deg, std::abs(turn) * kRadToDeg);
+        const double t_s = 1e-6 * static_cast<double>(m.rows[i].sample.t_us);
+        if (t_s < 36.9 || t_s > 53.1) {
+            ASSERT_LT((h - m.spec.mag_field_ut).norm(), 1e-12) << t_s;
+        }
+    }
+    EXPECT_NEAR(max_turn_deg, 39.0, 1e-6);
+}
+
+}  // namespace
+}  // namespace mocap::sim
