@@ -27,18 +27,18 @@ uint32_t mw_can_frame_bits(uint8_t dlc);
 uint32_t mw_frames_per_sample(mw_mode mode);
 
 typedef struct mw_busload_params {
-    uint32_t nodes;           /**< sensor nodes on the bus, 0..MW_NODE_ID_MAX */
-    uint32_t rate_hz;         /**< SYNC rate, MW_RATE_HZ_MIN..MW_RATE_HZ_MAX */
+    uint32_t nodes;   /**< sensor nodes on the bus, 0..MW_NODE_ID_MAX */
+    uint32_t rate_hz; /**< SYNC rate, MW_RATE_HZ_MIN..MW_RATE_HZ_MAX */
     mw_mode mode;
     uint32_t bitrate_bps;     /**< e.g. 500000 or 1000000; > 0 */
     uint32_t status_period_s; /**< STATUS period per node, 0 = no periodic STATUS */
 } mw_busload_params;
 
 typedef struct mw_busload {
-    uint32_t frames_per_s;    /**< SYNC + samples + STATUS (rounded up) */
-    uint32_t bits_per_s;      /**< worst-case stuffing, rounded up */
-    uint32_t load_permille;   /**< bits_per_s * 1000 / bitrate_bps, rounded up */
-    bool fits;                /**< bits_per_s <= bitrate_bps: every sample's frames fit in its period */
+    uint32_t frames_per_s;  /**< SYNC + samples + STATUS (rounded up) */
+    uint32_t bits_per_s;    /**< worst-case stuffing, rounded up */
+    uint32_t load_permille; /**< bits_per_s * 1000 / bitrate_bps, rounded up */
+    bool fits; /**< bits_per_s <= bitrate_bps: every sample's frames fit in its period */
 } mw_busload;
 
 /** Fills *out. MW_ERR_ARGUMENT for NULL or a parameter outside its range. */

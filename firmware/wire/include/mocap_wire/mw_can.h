@@ -13,8 +13,8 @@
  *   3 GYRO    0x0C0 + node   8    node    int16 x,y,z counts + low 16 bits of the SYNC counter
  *   4 MAG     0x100 + node   8    node    int16 x,y,z counts + low 16 bits of the SYNC counter
  *   5 ATT     0x140 + node   8    node    quaternion (smallest three, Q15) + low 14 counter bits
- *   6 STATUS  0x180 + node   8    node    state, mode, ranges, error flags, counters (node 0 = sink)
- *   7..31     reserved (a decoder returns MW_ERR_ID)
+ *   6 STATUS  0x180 + node   8    node    state, mode, ranges, error flags, counters (node 0 =
+ * sink) 7..31     reserved (a decoder returns MW_ERR_ID)
  *
  * Lower ID wins arbitration, so SYNC (0x000) has the highest priority, then CONFIG, then the
  * samples. Node ids are 1..63 (MW_NODE_ID_MAX); node id 0 is the sink / broadcast address.
@@ -39,17 +39,17 @@
 extern "C" {
 #endif
 
-#define MW_CAN_ID_MAX 0x7FFu    /**< largest 11-bit identifier */
-#define MW_CAN_DLC_MAX 8u       /**< classic CAN */
-#define MW_CAN_NODE_BITS 6u     /**< low ID bits holding the node id */
+#define MW_CAN_ID_MAX 0x7FFu /**< largest 11-bit identifier */
+#define MW_CAN_DLC_MAX 8u    /**< classic CAN */
+#define MW_CAN_NODE_BITS 6u  /**< low ID bits holding the node id */
 #define MW_CAN_NODE_MASK 0x3Fu
-#define MW_NODE_ID_SINK 0u      /**< the sink; also the CONFIG broadcast address */
+#define MW_NODE_ID_SINK 0u /**< the sink; also the CONFIG broadcast address */
 #define MW_NODE_ID_BROADCAST 0u
-#define MW_NODE_ID_MIN 1u       /**< smallest sensor-node id */
-#define MW_NODE_ID_MAX 63u      /**< largest sensor-node id */
+#define MW_NODE_ID_MIN 1u  /**< smallest sensor-node id */
+#define MW_NODE_ID_MAX 63u /**< largest sensor-node id */
 
-#define MW_RATE_HZ_MIN 1u       /**< smallest sample rate a CONFIG may carry */
-#define MW_RATE_HZ_MAX 1000u    /**< largest sample rate a CONFIG may carry (MPU9250 ODR limit) */
+#define MW_RATE_HZ_MIN 1u    /**< smallest sample rate a CONFIG may carry */
+#define MW_RATE_HZ_MAX 1000u /**< largest sample rate a CONFIG may carry (MPU9250 ODR limit) */
 
 #define MW_RAW_COUNTER_BITS 16u /**< SYNC counter bits carried by ACCEL/GYRO/MAG frames */
 #define MW_ATT_COUNTER_BITS 14u /**< SYNC counter bits carried by ATT frames */
@@ -73,31 +73,32 @@ typedef enum mw_function {
 } mw_function;
 
 /** 11-bit ID of a function for a node: (function << 6) | node. No range check (a macro). */
-#define MW_CAN_ID(function, node) \
-    ((uint16_t)((((unsigned)(function)) << MW_CAN_NODE_BITS) | (((unsigned)(node)) & MW_CAN_NODE_MASK)))
+#define MW_CAN_ID(function, node)                              \
+    ((uint16_t)((((unsigned)(function)) << MW_CAN_NODE_BITS) | \
+                (((unsigned)(node)) & MW_CAN_NODE_MASK)))
 #define MW_CAN_ID_SYNC 0x000u
 
 /** What a node sends per sample. */
 typedef enum mw_mode {
-    MW_MODE_RAW = 0,          /**< ACCEL + GYRO + MAG per sample (3 frames) */
-    MW_MODE_ATTITUDE = 1,     /**< ATT per sample (1 frame), on-node filter */
-    MW_MODE_RAW_ATTITUDE = 2  /**< both (4 frames) */
+    MW_MODE_RAW = 0,         /**< ACCEL + GYRO + MAG per sample (3 frames) */
+    MW_MODE_ATTITUDE = 1,    /**< ATT per sample (1 frame), on-node filter */
+    MW_MODE_RAW_ATTITUDE = 2 /**< both (4 frames) */
 } mw_mode;
 #define MW_MODE_COUNT 3u
 
 /** Node state reported in STATUS. */
 typedef enum mw_node_state {
-    MW_NODE_BOOT = 0,     /**< initialising the sensor */
-    MW_NODE_WAITING = 1,  /**< sensor ready, no SYNC seen recently */
-    MW_NODE_RUNNING = 2,  /**< sampling on SYNC */
-    MW_NODE_FAULT = 3     /**< cannot sample (see error flags) */
+    MW_NODE_BOOT = 0,    /**< initialising the sensor */
+    MW_NODE_WAITING = 1, /**< sensor ready, no SYNC seen recently */
+    MW_NODE_RUNNING = 2, /**< sampling on SYNC */
+    MW_NODE_FAULT = 3    /**< cannot sample (see error flags) */
 } mw_node_state;
 #define MW_NODE_STATE_COUNT 4u
 
 /** STATUS error flags (bit set = condition present / happened since the previous STATUS). */
 #define MW_ERRF_IMU 0x01u             /**< MPU9250 not responding or WHO_AM_I mismatch */
 #define MW_ERRF_MAG 0x02u             /**< AK8963 not responding or overflowed */
-#define MW_ERRF_CAN_TX_OVERFLOW 0x04u /**< a frame was dropped because the CAN TX queue was full */
+#define MW_ERRF_CAN_TX_OVERFLOW 0x04u /**< a frame was dropped: the CAN TX queue was full */
 #define MW_ERRF_SYNC_TIMEOUT 0x08u    /**< no SYNC for longer than 3 sample periods */
 #define MW_ERRF_CONFIG_REJECTED 0x10u /**< the last CONFIG was invalid and ignored */
 #define MW_ERRF_SATURATED 0x20u       /**< an accelerometer or gyroscope axis hit full scale */
@@ -106,9 +107,9 @@ typedef enum mw_node_state {
 
 /** One classic CAN frame as it travels on the bus and inside the TCP packet. */
 typedef struct mw_can_frame {
-    uint16_t id;        /**< 11-bit identifier, 0..0x7FF */
-    uint8_t dlc;        /**< 0..8 */
-    uint8_t data[8];    /**< data[0..dlc-1] valid; encoders zero the rest */
+    uint16_t id;     /**< 11-bit identifier, 0..0x7FF */
+    uint8_t dlc;     /**< 0..8 */
+    uint8_t data[8]; /**< data[0..dlc-1] valid; encoders zero the rest */
 } mw_can_frame;
 
 /** SYNC (sink -> all). The counter increments by one per sample instant and wraps at 2^32. */
@@ -118,20 +119,20 @@ typedef struct mw_sync {
 
 /** CONFIG (sink -> one node, or all nodes when node_id is 0). */
 typedef struct mw_config {
-    uint8_t node_id;            /**< 0 = broadcast, else 1..63 */
-    uint16_t rate_hz;           /**< SYNC rate the node should expect, MW_RATE_HZ_MIN..MAX */
+    uint8_t node_id;  /**< 0 = broadcast, else 1..63 */
+    uint16_t rate_hz; /**< SYNC rate the node should expect, MW_RATE_HZ_MIN..MAX */
     mw_accel_range accel_range;
     mw_gyro_range gyro_range;
     mw_mode mode;
-    uint8_t status_period_s;    /**< seconds between STATUS frames, 0 = only on change */
+    uint8_t status_period_s; /**< seconds between STATUS frames, 0 = only on change */
 } mw_config;
 
 /** ACCEL, GYRO or MAG sample: int16 counts in the MPU9250 accel/gyro axes (see mw_scale.h). */
 typedef struct mw_raw {
-    mw_function kind;           /**< MW_FN_ACCEL, MW_FN_GYRO or MW_FN_MAG */
-    uint8_t node_id;            /**< 1..63 */
-    int16_t xyz[3];             /**< counts; MAG: all MW_MAG_INVALID = no valid reading */
-    uint16_t counter_low;       /**< low 16 bits of the SYNC counter this sample belongs to */
+    mw_function kind;     /**< MW_FN_ACCEL, MW_FN_GYRO or MW_FN_MAG */
+    uint8_t node_id;      /**< 1..63 */
+    int16_t xyz[3];       /**< counts; MAG: all MW_MAG_INVALID = no valid reading */
+    uint16_t counter_low; /**< low 16 bits of the SYNC counter this sample belongs to */
 } mw_raw;
 
 /**
@@ -140,14 +141,14 @@ typedef struct mw_raw {
  * positive) and the other three are int16 Q15; the decoder reconstructs it. Resolution 3e-5.
  */
 typedef struct mw_attitude {
-    uint8_t node_id;            /**< 1..63 */
-    float q[4];                 /**< w, x, y, z; encoder normalises it; decoder returns unit norm */
-    uint16_t counter_low;       /**< low 14 bits of the SYNC counter (the encoder masks it) */
+    uint8_t node_id;      /**< 1..63 */
+    float q[4];           /**< w, x, y, z; encoder normalises it; decoder returns unit norm */
+    uint16_t counter_low; /**< low 14 bits of the SYNC counter (the encoder masks it) */
 } mw_attitude;
 
 /** STATUS (node -> sink; node_id 0 is the sink's own status, tunnelled to the host). */
 typedef struct mw_status {
-    uint8_t node_id;            /**< 0 = sink, else 1..63 */
+    uint8_t node_id; /**< 0 = sink, else 1..63 */
     mw_node_state state;
     mw_mode mode;
     bool mag_present;           /**< AK8963 found at start-up */
@@ -156,8 +157,8 @@ typedef struct mw_status {
     uint8_t error_flags;        /**< MW_ERRF_* */
     uint8_t protocol_version;   /**< MW_CAN_PROTOCOL_VERSION of the sender's firmware */
     uint16_t uptime_s;          /**< seconds since reset, wraps at 65536 */
-    uint8_t tx_overflows;       /**< frames dropped (CAN TX full; sink: CAN RX full), wraps at 256 */
-    uint8_t sync_missed;        /**< SYNCs expected but not received (sink: 0), wraps at 256 */
+    uint8_t tx_overflows; /**< frames dropped (CAN TX full; sink: CAN RX full), wraps at 256 */
+    uint8_t sync_missed;  /**< SYNCs expected but not received (sink: 0), wraps at 256 */
 } mw_status;
 
 /** Any decoded message: `function` selects the member of `u`. */
@@ -166,7 +167,7 @@ typedef struct mw_message {
     union {
         mw_sync sync;
         mw_config config;
-        mw_raw raw;           /**< function is ACCEL, GYRO or MAG; raw.kind == function */
+        mw_raw raw; /**< function is ACCEL, GYRO or MAG; raw.kind == function */
         mw_attitude attitude;
         mw_status status;
     } u;
@@ -178,7 +179,9 @@ static inline mw_function mw_can_id_function(uint16_t id) {
 }
 
 /** Node field of an ID (low 6 bits). No validation. */
-static inline uint8_t mw_can_id_node(uint16_t id) { return (uint8_t)(id & MW_CAN_NODE_MASK); }
+static inline uint8_t mw_can_id_node(uint16_t id) {
+    return (uint8_t)(id & MW_CAN_NODE_MASK);
+}
 
 int mw_sync_encode(const mw_sync* msg, mw_can_frame* out);
 int mw_sync_decode(const mw_can_frame* frame, mw_sync* out);
@@ -210,8 +213,9 @@ int mw_can_decode(const mw_can_frame* frame, mw_message* out);
 /**
  * Rebuilds a full 32-bit SYNC counter from its low `bits` bits (1..32): returns the counter
  * whose low bits equal `low` and which is nearest to `reference` (for example the last SYNC
- * counter received), so it is correct across wrap-around as long as the true counter is within
- * +-2^(bits-1) of the reference. O(1).
+ * counter received), so it is correct across wrap-around of both the low bits and the 32-bit
+ * counter as long as the true counter lies in [reference - 2^(bits-1), reference + 2^(bits-1) - 1].
+ * bits == 32 returns low; bits == 0 returns reference. O(1).
  */
 uint32_t mw_counter_extend(uint32_t reference, uint32_t low, unsigned bits);
 

@@ -40,12 +40,13 @@ extern "C" {
 #define MW_PACKET_MAGIC3 0x50u /* 'P' */
 #define MW_PACKET_HEADER_SIZE 22u
 #define MW_PACKET_CRC_SIZE 4u
-#define MW_PACKET_RECORD_MIN 5u    /**< record with dlc 0 */
-#define MW_PACKET_RECORD_MAX 13u   /**< record with dlc 8 */
+#define MW_PACKET_RECORD_MIN 5u  /**< record with dlc 0 */
+#define MW_PACKET_RECORD_MAX 13u /**< record with dlc 8 */
 /** Most frames one packet may carry (63 nodes x 4 frames + SYNC + STATUS fit with room). */
 #define MW_PACKET_MAX_FRAMES 512u
 /** Largest packet on the wire: 22 + 512 * 13 + 4 = 6682 bytes. */
-#define MW_PACKET_MAX_SIZE (MW_PACKET_HEADER_SIZE + MW_PACKET_MAX_FRAMES * MW_PACKET_RECORD_MAX + MW_PACKET_CRC_SIZE)
+#define MW_PACKET_MAX_SIZE \
+    (MW_PACKET_HEADER_SIZE + MW_PACKET_MAX_FRAMES * MW_PACKET_RECORD_MAX + MW_PACKET_CRC_SIZE)
 
 /** Header fields a sink chooses (magic, version, count and length are implied). */
 typedef struct mw_packet_header {
@@ -75,8 +76,8 @@ size_t mw_packet_size(const mw_stamped_frame* frames, size_t count);
  * MW_ERR_ARGUMENT (NULL), MW_ERR_LENGTH (count > MW_PACKET_MAX_FRAMES), MW_ERR_RECORD (a frame
  * with id > 0x7FF or dlc > 8), MW_ERR_SPACE (capacity too small). O(bytes).
  */
-int32_t mw_packet_encode(const mw_packet_header* header, const mw_stamped_frame* frames, size_t count,
-                         uint8_t* out, size_t capacity);
+int32_t mw_packet_encode(const mw_packet_header* header, const mw_stamped_frame* frames,
+                         size_t count, uint8_t* out, size_t capacity);
 
 /**
  * Incremental packet writer for the sink. The builder borrows `buf` from begin() until finish()
@@ -89,7 +90,8 @@ typedef struct mw_packet_builder {
     uint16_t frame_count; /* records added so far */
 } mw_packet_builder;
 
-/** Starts a packet in buf. MW_ERR_SPACE if capacity < MW_PACKET_HEADER_SIZE + MW_PACKET_CRC_SIZE. */
+/** Starts a packet in buf. MW_ERR_SPACE if capacity < MW_PACKET_HEADER_SIZE + MW_PACKET_CRC_SIZE.
+ */
 int mw_packet_builder_begin(mw_packet_builder* builder, uint8_t* buf, size_t capacity,
                             const mw_packet_header* header);
 
@@ -100,14 +102,15 @@ int mw_packet_builder_begin(mw_packet_builder* builder, uint8_t* buf, size_t cap
  */
 int mw_packet_builder_add(mw_packet_builder* builder, const mw_stamped_frame* frame);
 
-/** Writes count, length and CRC; returns the packet length in bytes (> 0) or MW_ERR_ARGUMENT. O(bytes). */
+/** Writes count, length and CRC; returns the packet length in bytes (> 0) or MW_ERR_ARGUMENT.
+ * O(bytes). */
 int32_t mw_packet_builder_finish(mw_packet_builder* builder);
 
 /** Result of one mw_stream_decoder_feed() call. */
 typedef enum mw_stream_result {
-    MW_STREAM_NEED_MORE = 0,  /**< all input consumed, no complete packet buffered */
-    MW_STREAM_PACKET = 1,     /**< *out holds a valid packet */
-    MW_STREAM_MALFORMED = -1  /**< a candidate packet was rejected (see last_error); keep feeding */
+    MW_STREAM_NEED_MORE = 0, /**< all input consumed, no complete packet buffered */
+    MW_STREAM_PACKET = 1,    /**< *out holds a valid packet */
+    MW_STREAM_MALFORMED = -1 /**< a candidate packet was rejected (see last_error); keep feeding */
 } mw_stream_result;
 
 /** Counters only go up (they wrap at 2^64). */
@@ -126,8 +129,8 @@ typedef struct mw_stream_counters {
  */
 typedef struct mw_stream_decoder {
     mw_stream_counters counters;
-    int last_error;                /**< mw_error of the last MW_STREAM_MALFORMED (MW_OK before) */
-    size_t len;                    /* private: bytes buffered */
+    int last_error;                  /**< mw_error of the last MW_STREAM_MALFORMED (MW_OK before) */
+    size_t len;                      /* private: bytes buffered */
     uint8_t buf[MW_PACKET_MAX_SIZE]; /* private */
 } mw_stream_decoder;
 

@@ -94,7 +94,8 @@ int mw_mag_from_ut(const float mag_ut[3], int16_t counts[3]);
  * factory sensitivity adjustment applied (ASAX..ASAZ from fuse ROM):
  *   adjusted_i = round(raw_i * (asa_i + 128) / 256), then x = adj_y, y = adj_x, z = -adj_z,
  * saturated at +-MW_MAG_COUNTS_MAX. Integer only. Returns MW_OK or MW_ERR_ARGUMENT (NULL).
- * If any raw axis is MW_MAG_INVALID, all outputs are set to MW_MAG_INVALID and MW_ERR_RANGE is returned.
+ * If any raw axis is MW_MAG_INVALID, all outputs are set to MW_MAG_INVALID and MW_ERR_RANGE is
+ * returned.
  */
 int mw_mag_from_ak8963(const int16_t ak_raw[3], const uint8_t asa[3], int16_t counts[3]);
 
