@@ -19,7 +19,7 @@ PACKAGES=(
   build-essential cmake pkg-config git python3
   libeigen3-dev libboost-dev libspdlog-dev libprotobuf-dev protobuf-compiler
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
-  gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi
+  gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib
   clang-14 libclang-rt-14-dev
   assimp-utils qemu-system-x86 busybox-static cpio kmod
 )
