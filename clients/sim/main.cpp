@@ -1,0 +1,17 @@
+// mocap-sim: benchmark recordings and simulated sink nodes. One subcommand per file pair
+// (csv_command, ...); main only dispatches.
+#include <CLI/CLI.hpp>
+
+#include "sim/csv_command.hpp"
+
+int main(int argc, char** argv) {
+    CLI::App app{"mocap-sim: simulated IMU data for mocapd and its benchmarks"};
+    app.require_subcommand(1);
+
+    mocap::sim::CsvCommandOptions csv;
+    CLI::App* csv_cmd = mocap::sim::add_csv_command(app, csv);
+
+    CLI11_PARSE(app, argc, argv);
+    if (csv_cmd->parsed()) return mocap::sim::run_csv_command(csv);
+    return 2;
+}
