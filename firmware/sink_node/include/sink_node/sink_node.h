@@ -1,0 +1,176 @@
+/* Sink-node core: the portable part of the sink firmware (C99, no heap, no OS). The same core
+ * runs on the STM32F407 sink and inside `mocap-sim stream` on Linux.
+ *
+ * What it does:
+ * - SYNC: sends a SYNC frame (mocap_wire/mw_can.h) at config.rate_hz; SYNC n is due at
+ *   start + n * 1e6 / rate_hz microseconds (no drift). The counter increments by one per
+ *   SYNC and wraps at 2^32. If the loop stalls past several due times, the missed instants
+ *   are skipped (counted in syncs_skipped), never sent in a burst.
+ * - CONFIG: broadcasts config.node_config (node id 0) at start and every
+ *   config.config_period_s, so nodes that reboot pick it up.
+ * - Batching: every CAN frame received between SYNC n and SYNC n+1 goes into one sink->host
+ *   packet (mocap_wire/mw_packet.h) whose timestamp_us is the time SYNC n was sent and whose
+ *   first record is SYNC n itself (offset 0), followed by the frames in arrival order with
+ *   offset_us = arrival - timestamp (saturated at 65535). The packet is closed when SYNC n+1
+ *   is sent, or earlier when it holds config.max_batch_frames frames (the rest of the instant
+ *   then follows in a continuation packet with the same timestamp and no SYNC record). A
+ *   packet goes out even if some nodes sent nothing (node loss is the host's to see).
+ *   Every status_period_s the sink's own STATUS (node id 0) is appended to the batch.
+ * - Uplink: packets are written whole through the HAL. The packet sequence is per connection
+ *   (0 for the first packet after a connect); a packet the uplink refused as busy still uses
+ *   its sequence number, so the host sees the gap. While the uplink is down, packets are
+ *   dropped and counted. After a drop or a failed attempt the next attempt waits
+ *   backoff_min_us, doubling per failed attempt up to backoff_max_us; a successful connect
+ *   resets it. An attempt still CONNECTING after connect_timeout_us is closed and failed.
+ *
+ * HAL (libcanard style): a struct of function pointers plus one user pointer, filled by the
+ * caller and copied at init. The core calls it only from sink_node_init() and
+ * sink_node_poll(), from one thread; it never calls back into the core.
+ *
+ * Ownership: the caller allocates `sink_node` (about 4 KiB with the default
+ * SINK_NODE_MAX_BATCH_FRAMES) and keeps it alive; nothing is allocated.
+ * Threading: not thread-safe; one thread owns a sink_node (several independent instances
+ * may run on one thread, as the simulator does).
+ * Cost: sink_node_poll() is O(frames received + one packet encode when a batch closes).
+ */
+#ifndef MOCAP_SINK_NODE_SINK_NODE_H
+#define MOCAP_SINK_NODE_SINK_NODE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "mocap_wire/mw_can.h"
+#include "mocap_wire/mw_packet.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Most frames one packet built by the sink holds (compile-time; config can lower it). */
+#ifndef SINK_NODE_MAX_BATCH_FRAMES
+#define SINK_NODE_MAX_BATCH_FRAMES 256u
+#endif
+#define SINK_NODE_PACKET_CAPACITY \
+    (MW_PACKET_HEADER_SIZE + SINK_NODE_MAX_BATCH_FRAMES * MW_PACKET_RECORD_MAX + MW_PACKET_CRC_SIZE)
+/* CAN frames (SYNC, CONFIG) the core holds while the controller's mailboxes are busy. */
+#define SINK_NODE_CAN_TX_QUEUE_LEN 8u
+
+typedef enum sink_uplink_state {
+    SINK_UPLINK_DOWN = 0,       /* no connection and no attempt in progress */
+    SINK_UPLINK_CONNECTING = 1, /* an attempt started by uplink_connect is in progress */
+    SINK_UPLINK_UP = 2          /* connected; uplink_write may be called */
+} sink_uplink_state;
+
+typedef struct sink_node_hal {
+    void *user; /* passed to every call */
+    /* Offers one frame to the CAN controller: 0 = accepted, nonzero = mailboxes busy (the core
+     * keeps it queued and offers it again on the next poll). */
+    int (*can_transmit)(void *user, const mw_can_frame *frame);
+    /* Takes one received frame: 1 = *frame filled, 0 = nothing pending. The core stamps it
+     * with time_us() when it takes it. */
+    int (*can_receive)(void *user, mw_can_frame *frame);
+    /* Monotonic microseconds since an arbitrary origin. */
+    uint64_t (*time_us)(void *user);
+    /* Starts a connection attempt (it may complete before returning): 0 = started or
+     * connected, negative = failed at once. Called only when uplink_state() is DOWN. */
+    int (*uplink_connect)(void *user);
+    /* Current connection state; the HAL reports a connection the peer dropped as DOWN. */
+    sink_uplink_state (*uplink_state)(void *user);
+    /* Writes one whole packet or nothing: 0 = taken, 1 = busy (the packet is dropped and
+     * counted), negative = the connection failed (the core calls uplink_close). */
+    int (*uplink_write)(void *user, const uint8_t *data, size_t len);
+    /* Closes the connection or abandons the attempt; uplink_state() is DOWN afterwards. */
+    void (*uplink_close)(void *user);
+} sink_node_hal;
+
+typedef struct sink_node_config {
+    uint8_t sink_id;            /* written into every packet header */
+    uint16_t rate_hz;           /* SYNC rate, MW_RATE_HZ_MIN..MW_RATE_HZ_MAX */
+    uint32_t first_counter;     /* counter of the first SYNC (tests start near the wrap) */
+    uint16_t max_batch_frames;  /* packet size limit in frames, 2..SINK_NODE_MAX_BATCH_FRAMES */
+    uint32_t backoff_min_us;    /* first reconnect delay */
+    uint32_t backoff_max_us;    /* largest reconnect delay */
+    uint32_t connect_timeout_us;/* a CONNECTING attempt older than this has failed */
+    uint8_t status_period_s;    /* sink STATUS into the stream every N s, 0 = never */
+    uint8_t config_period_s;    /* CONFIG broadcast every N s, 0 = only at start */
+    mw_config node_config;      /* what the nodes are told (node_id is forced to 0) */
+} sink_node_config;
+
+/* Counters only go up (wrap at 2^32). */
+typedef struct sink_node_counters {
+    uint32_t frames_in;         /* CAN frames received */
+    uint32_t frames_dropped;    /* received frames in packets that were not delivered */
+    uint32_t packets_out;       /* packets the uplink took */
+    uint32_t packets_dropped;   /* packets built while down, or refused as busy */
+    uint32_t packets_busy;      /* of which refused as busy */
+    uint32_t batch_splits;      /* packets closed early by max_batch_frames */
+    uint32_t bytes_out;         /* bytes the uplink took */
+    uint32_t syncs_sent;        /* SYNC frames queued for the bus */
+    uint32_t syncs_skipped;     /* SYNC instants skipped because the loop was late */
+    uint32_t can_tx_overflows;  /* SYNC/CONFIG frames dropped, CAN TX queue full */
+    uint32_t connect_attempts;  /* uplink_connect calls */
+    uint32_t connect_failures;  /* attempts that failed or timed out */
+    uint32_t connects;          /* attempts that reached UP */
+    uint32_t reconnects;        /* connects after the first one */
+    uint32_t disconnects;       /* UP -> DOWN transitions (peer drop or write error) */
+} sink_node_counters;
+
+typedef struct sink_node {
+    sink_node_hal hal;
+    sink_node_config config;
+    sink_node_counters counters;
+    /* SYNC schedule */
+    uint64_t start_us;
+    uint64_t sync_index;        /* index of the next SYNC since start */
+    uint32_t next_counter;      /* counter of the next SYNC */
+    uint64_t next_config_us;
+    uint64_t next_status_us;
+    /* uplink */
+    sink_uplink_state link;     /* state seen at the last poll */
+    uint64_t next_connect_us;
+    uint64_t connect_started_us;
+    uint32_t backoff_us;        /* delay before the next attempt */
+    uint32_t sequence;          /* of the next packet on this connection */
+    /* batch */
+    uint8_t batch_open;
+    uint64_t batch_timestamp_us;
+    uint32_t batch_node_frames; /* received frames in the open batch (not SYNC/STATUS) */
+    mw_packet_builder builder;
+    uint8_t packet[SINK_NODE_PACKET_CAPACITY];
+    /* CAN TX */
+    mw_can_frame can_tx[SINK_NODE_CAN_TX_QUEUE_LEN];
+    uint8_t can_tx_head;
+    uint8_t can_tx_count;
+    uint8_t can_tx_overflow_event; /* for the next sink STATUS */
+} sink_node;
+
+/* Defaults: 100 Hz, 128 frames per packet, back-off 100 ms .. 5 s, connect timeout 10 s,
+ * STATUS every 1 s, CONFIG every 5 s, nodes at +-16 g, +-2000 dps, raw mode, STATUS 1 s. */
+void sink_node_default_config(sink_node_config *config);
+
+/* Validates the config, copies the HAL, starts the schedule (the first SYNC is due at once)
+ * and the first connection attempt (at the first poll). Returns MW_OK, or MW_ERR_ARGUMENT
+ * (NULL / missing HAL function) or MW_ERR_RANGE (a config field out of range). */
+int sink_node_init(sink_node *sink, const sink_node_hal *hal, const sink_node_config *config);
+
+/* Does everything due now: uplink attempts/time-outs, drains CAN RX into the batch, sends a
+ * due SYNC (closing the batch first), CONFIG and STATUS, and offers queued CAN frames. */
+void sink_node_poll(sink_node *sink);
+
+/* Time at which the next poll has scheduled work (next SYNC, next connect attempt, or a
+ * pending CAN frame: now). A caller without CAN interrupts may sleep until then, but frames
+ * arriving meanwhile are stamped late. */
+uint64_t sink_node_next_deadline_us(const sink_node *sink);
+
+/* Counter of the next SYNC to be sent. */
+uint32_t sink_node_next_counter(const sink_node *sink);
+
+/* Queues a CONFIG for the nodes (node_id 0 = all) and makes it the periodic broadcast when
+ * it is addressed to all. Returns MW_OK or the encoder's error (invalid fields). */
+int sink_node_send_config(sink_node *sink, const mw_config *config);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
