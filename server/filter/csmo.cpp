@@ -1,0 +1,97 @@
+#include "filter/csmo.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace mocap::filter {
+
+namespace {
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+Quat initial_estimate(const CsmoParams& p) {
+    const Quat q(p.q0w, p.q0x, p.q0y, p.q0z);
+    const double n = q.norm();
+    // An all-zero or non-finite q0 is a configuration error; identity is the safe reading.
+    return (n > 0.0 && std::isfinite(n)) ? Quat(q.coeffs() / n) : Quat::Identity();
+}
+
+}  // namespace
+
+Csmo::Csmo(const CsmoParams& params)
+    : params_(params),
+      k_switch_(params.k1, params.k2, params.k3),
+      k_linear_(params.k4, params.k5, params.k6),
+      clock_(params.max_step_s) {
+    lma_.lambda = params.lm_lambda;
+    lma_.alpha = params.lm_alpha;
+    lma_.max_iterations = std::max(1, params.lm_iterations);
+    // Warm-started inside a filter, a tight tolerance only costs iterations.
+    lma_.tolerance_rad = 1e-6;
+    reset();
+}
+
+void Csmo::reset() {
+    state_ = CsmoState{};
+    state_.q_earth_sensor = initial_estimate(params_);
+    state_.q_measured = state_.q_earth_sensor;
+    clock_.reset();
+}
+
+void Csmo::set_orientation(const Quat& q_earth_sensor) {
+    state_.q_earth_sensor = canonical(q_earth_sensor.normalized());
+}
+
+bool Csmo::measure(const ImuSample& sample, const Quat& start, Quat& q_m) const {
+    if (!sample.has_mag()) return false;
+    const Vec3 a = to_vec3(sample.accel_m_s2), m = to_vec3(sample.mag_ut);
+    const double dip = std::isfinite(params_.dip_deg) ? params_.dip_deg * kDegToRad
+                                                      : measured_dip_rad(a, m);
+    if (!std::isfinite(dip)) return false;
+    const AttitudeSolution s = solve_lma(a, m, field_direction_enu(dip), start, lma_);
+    if (!s.ok()) return false;
+    q_m = s.q_earth_sensor;
+    return true;
+}
+
+void Csmo::update(const ImuSample& sample) {
+    const double dt = clock_.step_s(sample.t_us);
+    if (!state_.initialised) {
+        state_.initialised = true;
+        if (params_.init_from_measurement && sample.has_mag()) {
+            // TRIAD only uses the reference field's horizontal direction: any dip will do.
+            const AttitudeSolution s = solve_triad(to_vec3(sample.accel_m_s2),
+                                                   to_vec3(sample.mag_ut),
+                                                   field_direction_enu(0.0), lma_);
+            if (s.ok()) state_.q_earth_sensor = state_.q_measured = s.q_earth_sensor;
+        }
+        return;
+    }
+    if (dt <= 0.0) return;  // gap: restart the time base only
+
+    const Vec3 gyro = to_vec3(sample.gyro_rad_s);
+    if (!gyro.allFinite()) {
+        ++state_.rejected_measurements;
+        return;
+    }
+    Quat q = state_.q_earth_sensor * quat_from_rotvec(gyro * dt);
+
+    Quat q_m;
+    if (measure(sample, q, q_m)) {
+        Quat q_e = q.conjugate() * q_m;
+        if (q_e.w() < 0.0) q_e.coeffs() = -q_e.coeffs();
+        const Vec3 e = q_e.vec();
+        const double s = dt * params_.gain_rate_hz;
+        const Vec3 sat = (e / params_.rho).cwiseMax(-1.0).cwiseMin(1.0);
+        const Vec3 c = s * (k_switch_.cwiseProduct(sat) + k_linear_.cwiseProduct(e));
+        q = q * Quat(1.0, c.x(), c.y(), c.z());
+        state_.q_measured = q_m;
+        state_.q_error_vec = e;
+    } else {
+        ++state_.rejected_measurements;
+    }
+    state_.q_earth_sensor = q.normalized();
+}
+
+}  // namespace mocap::filter
