@@ -225,7 +225,7 @@ static void send_status(sink_node *sink, uint64_t now)
     status.accel_range = sink->config.node_config.accel_range;
     status.gyro_range = sink->config.node_config.gyro_range;
     status.error_flags = sink->can_tx_overflow_event ? MW_ERRF_CAN_TX_OVERFLOW : 0u;
-    if (sink->counters.syncs_sent == 0u && sink->counters.frames_in == 0u) {
+    if (!sink->reset_reported) {
         status.error_flags |= MW_ERRF_RESET;
     }
     status.protocol_version = MW_CAN_PROTOCOL_VERSION;
@@ -234,6 +234,7 @@ static void send_status(sink_node *sink, uint64_t now)
     status.sync_missed = 0;
     if (mw_status_encode(&status, &frame) == MW_OK) {
         sink->can_tx_overflow_event = 0;
+        sink->reset_reported = 1;
         add_to_batch(sink, &frame, now, 0);
     }
 }
@@ -294,6 +295,7 @@ int sink_node_init(sink_node *sink, const sink_node_hal *hal, const sink_node_co
     sink->can_tx_head = 0;
     sink->can_tx_count = 0;
     sink->can_tx_overflow_event = 0;
+    sink->reset_reported = 0;
     return MW_OK;
 }
 

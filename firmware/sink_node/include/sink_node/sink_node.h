@@ -142,6 +142,7 @@ typedef struct sink_node {
     uint8_t can_tx_head;
     uint8_t can_tx_count;
     uint8_t can_tx_overflow_event; /* for the next sink STATUS */
+    uint8_t reset_reported;        /* the first STATUS (MW_ERRF_RESET) has been built */
 } sink_node;
 
 /* Defaults: 100 Hz, 128 frames per packet, back-off 100 ms .. 5 s, connect timeout 10 s,
