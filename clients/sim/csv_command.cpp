@@ -16,6 +16,12 @@ CLI::App* add_csv_command(CLI::App& app, CsvCommandOptions& options) {
     cmd->add_option("--frame", options.frame, "Earth frame of the reference columns: enu | ned")
         ->check(CLI::IsMember({"enu", "ned"}))
         ->capture_default_str();
+    cmd->add_option("--noise-scale", options.noise_scale, "Multiply every sensor noise sigma (study knob)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    cmd->add_option("--mag-noise-scale", options.mag_noise_scale, "Multiply the magnetometer noise sigma (study knob)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
     cmd->add_option("--out", options.out_path, "Output CSV file")->required();
     return cmd;
 }
@@ -43,7 +49,10 @@ int run_csv_command(const CsvCommandOptions& options) {
         std::cerr << "mocap-sim csv: unknown scenario '" << options.scenario << "'\n";
         return 2;
     }
-    const Scenario scenario = make_scenario(*kind, options.seed);
+    ScenarioOptions scenario_options;
+    scenario_options.noise_scale = options.noise_scale;
+    scenario_options.mag_noise_scale = options.mag_noise_scale;
+    const Scenario scenario = make_scenario(*kind, options.seed, scenario_options);
     std::ofstream out(options.out_path, std::ios::binary | std::ios::trunc);
     if (!out) {
         std::cerr << "mocap-sim csv: cannot open '" << options.out_path << "' for writing\n";

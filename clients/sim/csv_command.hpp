@@ -1,10 +1,12 @@
 // csv_command.hpp — `mocap-sim csv`: writes one sensor's benchmark recording with its truth.
 //
-//   mocap-sim csv --scenario fourati|realistic|magnetic [--seed N] [--frame enu|ned] --out FILE.csv
+//   mocap-sim csv --scenario fourati|realistic|magnetic [--seed N] [--frame enu|ned]
+//                 [--noise-scale X] [--mag-noise-scale X] --out FILE.csv
 //
 // Columns t,gx,gy,gz,ax,ay,az,mx,my,mz,qw,qx,qy,qz,movement (recording_csv.hpp); the
 // reference is q_earth_sensor in ENU, or in NED with --frame ned (for mocap-filter --frame
-// ned, which then reports Euler errors in the paper's frame).
+// ned, which then reports Euler errors in the paper's frame). The noise scales are study
+// knobs (ScenarioOptions); the benchmark uses the defaults (1).
 #pragma once
 
 #include <cstdint>
@@ -21,6 +23,8 @@ struct CsvCommandOptions {
     std::string scenario;
     std::uint64_t seed = 1;
     std::string frame = "enu";
+    double noise_scale = 1.0;
+    double mag_noise_scale = 1.0;
     std::string out_path;
 };
 

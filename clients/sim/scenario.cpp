@@ -294,7 +294,7 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
         const Vec3 accel = filter::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
                            noise_vec(noise_rng, ns * spec.accel_noise_m_s2);
         const Vec3 mag = filter::rotate(q_sensor_earth, row.mag_earth_ut) +
-                         noise_vec(noise_rng, ns * spec.mag_noise_ut);
+                         noise_vec(noise_rng, ns * options.mag_noise_scale * spec.mag_noise_ut);
 
         row.sample.t_us = std::llround(t * 1e6);
         row.sample.gyro_rad_s = filter::to_array(gyro);

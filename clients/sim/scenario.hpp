@@ -59,7 +59,9 @@ ScenarioSpec scenario_spec(ScenarioKind kind);
 
 /// Knobs for tests and studies; the defaults are the benchmark.
 struct ScenarioOptions {
-    double noise_scale = 1.0;  ///< multiplies every noise σ (0 = noiseless sensors)
+    double noise_scale = 1.0;      ///< multiplies every noise σ (0 = noiseless sensors)
+    double mag_noise_scale = 1.0;  ///< multiplies the magnetometer σ once more (studies of
+                                   ///< how much heading the field noise costs)
     bool gyro_bias = true;     ///< false: no gyro bias even where the scenario has one
 };
 
