@@ -22,6 +22,8 @@ typedef struct {
 
 #define NVIC_ISER(n) MMIO32(0xE000E100u + 4u * (n))
 #define NVIC_IPR_BYTE(irq) (*(volatile uint8_t *)(uintptr_t)(0xE000E400u + (irq)))
+#define SCB_ICSR MMIO32(0xE000ED04u)
+#define SCB_ICSR_PENDSTSET (1u << 26)
 #define SCB_VTOR MMIO32(0xE000ED08u)
 #define SCB_AIRCR MMIO32(0xE000ED0Cu)
 #define SCB_CPACR MMIO32(0xE000ED88u)

@@ -218,25 +218,31 @@ static void on_config(sensor_node *node, const mw_config *config)
 static void handle_frame(sensor_node *node, const mw_can_frame *frame)
 {
     const mw_function fn = mw_can_id_function(frame->id);
-    if (fn != MW_FN_SYNC && fn != MW_FN_CONFIG) {
-        return; /* other nodes' traffic */
-    }
-    mw_message msg;
-    if (mw_can_decode(frame, &msg) != MW_OK) {
-        ++node->counters.malformed_frames;
-        if (fn == MW_FN_CONFIG && (mw_can_id_node(frame->id) == node->config.node_id ||
-                                   mw_can_id_node(frame->id) == MW_NODE_ID_BROADCAST)) {
+    mw_sync sync;
+    mw_config config;
+    /* The per-message decoders rather than mw_can_decode(): the node never receives an
+     * attitude frame, and this keeps its float decoder out of the Cortex-M3 image. */
+    if (fn == MW_FN_SYNC) {
+        if (mw_sync_decode(frame, &sync) != MW_OK) {
+            ++node->counters.malformed_frames;
+            return;
+        }
+        on_sync(node, &sync);
+    } else if (fn == MW_FN_CONFIG) {
+        const uint8_t to = mw_can_id_node(frame->id);
+        if (to != MW_NODE_ID_BROADCAST && to != node->config.node_id) {
+            return; /* another node's CONFIG */
+        }
+        if (mw_config_decode(frame, &config) != MW_OK) {
+            ++node->counters.malformed_frames;
             ++node->counters.configs_rejected;
             node->event_flags |= MW_ERRF_CONFIG_REJECTED;
             node->status_due = 1;
+            return;
         }
-        return;
+        on_config(node, &config);
     }
-    if (msg.function == MW_FN_SYNC) {
-        on_sync(node, &msg.u.sync);
-    } else {
-        on_config(node, &msg.u.config);
-    }
+    /* Everything else is other nodes' traffic. */
 }
 
 void sensor_node_poll(sensor_node *node)
