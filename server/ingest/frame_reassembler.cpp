@@ -71,7 +71,9 @@ std::uint64_t FrameReassembler::extend(std::uint32_t low, unsigned bits) {
         // 64-bit sync values a subject's assembler sees never go backwards.
         have_reference_ = true;
         last_sync32_ = low;
-        last_sync64_ = last_sync64_ == 0 ? low : last_sync64_ + 1;
+        // The first stream starts at 2^32 + counter, so the low 32 bits still read as the
+        // sink's counter and 0 is free to mean "before any stream".
+        last_sync64_ = last_sync64_ == 0 ? (std::uint64_t{1} << 32) + low : last_sync64_ + 1;
         return last_sync64_;
     }
     const std::uint32_t full = mw_counter_extend(last_sync32_, low, bits);

@@ -1,0 +1,100 @@
+// sink_listener.hpp — TCP listener for sink nodes (default port 7000).
+//
+// Every connection runs its own incremental mw_stream_decoder; every packet's CAN frames go
+// to the FrameReassembler of the packet's sink id, which is the subject id (1..max_subjects).
+// A sink that reconnects (or whose packets arrive on a new connection) takes its subject
+// over: the old connection is closed and the reassembler starts a new counter stream, so
+// nothing restarts. Malformed bytes are counted; the decoder resynchronises by itself, and
+// a connection that sends only garbage (max_garbage_bytes without one valid packet) or
+// nothing for idle_timeout is closed with one log line.
+//
+// Threading: every method and handler runs on the io_context passed in, which must be run
+// by ONE thread (the ingest thread: SampleSink is called from it, in packet order).
+// counters() may be read from any thread. Cost per packet: O(bytes) decoding plus the
+// reassembler; buffers are allocated per connection at accept, never per packet.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <unordered_set>
+
+#include "core/asio.hpp"
+#include "core/clock.hpp"
+#include "core/counters.hpp"
+#include "ingest/frame_reassembler.hpp"
+#include "mocap_wire/mw_packet.h"
+
+namespace mocap::ingest {
+
+struct SinkListenerConfig {
+    std::string host = "0.0.0.0";
+    std::uint16_t port = 7000;               ///< 0 = any free port (see port())
+    std::uint32_t max_sinks = 64;            ///< connections at once; more are refused
+    std::uint32_t max_subjects = 64;         ///< sink ids 1..max_subjects are accepted
+    double idle_timeout_s = 10.0;            ///< no bytes for this long closes the connection
+    std::size_t max_garbage_bytes = 1 << 20; ///< discarded bytes without a valid packet -> close
+    FrameReassembler::Params reassembly{};
+};
+
+class SinkConnection;
+
+class SinkListener {
+public:
+    /// `clock` stamps received_us; `sink` receives every reassembled sample. Both must
+    /// outlive the listener.
+    SinkListener(asio::io_context& io, SinkListenerConfig config, const Clock& clock,
+                 SampleSink sink);
+    ~SinkListener();
+
+    SinkListener(const SinkListener&) = delete;
+    SinkListener& operator=(const SinkListener&) = delete;
+
+    /// Binds and starts accepting. Returns false and sets *error if the address cannot be
+    /// bound. Call from the io thread or before it runs.
+    bool start(std::string* error);
+    /// Closes the acceptor and every connection (io thread).
+    void stop();
+    /// The bound port (useful with port 0).
+    [[nodiscard]] std::uint16_t port() const { return port_; }
+    /// Connections open now (io thread).
+    [[nodiscard]] std::size_t connections() const { return connections_.size(); }
+
+    /// Component "ingest_tcp": connections_accepted, connections_refused, connections_closed,
+    /// idle_timeouts, garbage_closes, bytes, packets, malformed_packets, crc_failures,
+    /// bytes_discarded, sequence_gaps, unknown_sink_packets, sink_takeovers; plus the
+    /// reassembly counters of every sink.
+    [[nodiscard]] const CounterGroup& counters() const { return group_; }
+
+private:
+    friend class SinkConnection;
+    struct Counters {
+        Counter accepted, refused, closed, idle_timeouts, garbage_closes, bytes, packets,
+            malformed, crc_failures, discarded, sequence_gaps, unknown_sink, takeovers;
+    };
+
+    void do_accept();
+    void on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket);
+    // Called by a connection for each valid packet.
+    void on_packet(SinkConnection& from, const mw_packet& packet, std::int64_t received_us);
+    void on_closed(SinkConnection& c);
+
+    asio::io_context& io_;
+    SinkListenerConfig config_;
+    const Clock& clock_;
+    SampleSink sink_;
+    asio::ip::tcp::acceptor acceptor_;
+    std::uint16_t port_ = 0;
+    bool stopped_ = false;
+    std::unordered_set<std::shared_ptr<SinkConnection>> connections_;
+    // Index = sink id; created when the sink id is first seen, kept for the daemon's life
+    // so the 64-bit sync line of a subject survives reconnects.
+    std::array<std::unique_ptr<FrameReassembler>, 256> reassemblers_{};
+    std::array<SinkConnection*, 256> owners_{};
+    Counters c_;
+    ReassemblyCounters reassembly_;
+    CounterGroup group_{"ingest_tcp"};
+};
+
+}  // namespace mocap::ingest

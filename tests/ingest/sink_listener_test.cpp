@@ -1,0 +1,193 @@
+#include "ingest/sink_listener.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace mocap::ingest {
+namespace {
+
+using tcp = asio::ip::tcp;
+using namespace std::chrono_literals;
+
+class FixedClock : public Clock {
+public:
+    std::int64_t now_us() const noexcept override { return 777; }
+};
+
+std::vector<std::uint8_t> make_packet(std::uint8_t sink_id, std::uint32_t seq, std::uint32_t counter,
+                                      std::uint8_t nodes) {
+    std::vector<mw_stamped_frame> frames;
+    mw_stamped_frame f{};
+    mw_sync s{counter};
+    mw_sync_encode(&s, &f.frame);
+    frames.push_back(f);
+    for (std::uint8_t n = 1; n <= nodes; ++n) {
+        for (mw_function k : {MW_FN_ACCEL, MW_FN_GYRO, MW_FN_MAG}) {
+            mw_raw r{};
+            r.kind = k;
+            r.node_id = n;
+            r.xyz[2] = 100;
+            r.counter_low = static_cast<std::uint16_t>(counter);
+            f.offset_us = 50;
+            mw_raw_encode(&r, &f.frame);
+            frames.push_back(f);
+        }
+    }
+    mw_packet_header h{sink_id, seq, 1'000'000ull + counter * 10'000ull};
+    std::vector<std::uint8_t> out(MW_PACKET_MAX_SIZE);
+    const auto n = mw_packet_encode(&h, frames.data(), frames.size(), out.data(), out.size());
+    out.resize(static_cast<std::size_t>(n));
+    return out;
+}
+
+class SinkListenerTest : public ::testing::Test {
+protected:
+    void start(SinkListenerConfig cfg) {
+        cfg.host = "127.0.0.1";
+        cfg.port = 0;
+        listener_ = std::make_unique<SinkListener>(io_, cfg, clock_, [this](const SegmentSample& s) {
+            std::lock_guard lock(mu_);
+            samples_.push_back(s);
+        });
+        std::string err;
+        ASSERT_TRUE(listener_->start(&err)) << err;
+        thread_ = std::thread([this] { io_.run(); });
+    }
+    void TearDown() override {
+        asio::post(io_, [this] { listener_->stop(); });
+        work_.reset();
+        io_.stop();
+        if (thread_.joinable()) thread_.join();
+    }
+    tcp::socket connect() {
+        tcp::socket s(client_io_);
+        s.connect({asio::ip::make_address("127.0.0.1"), listener_->port()});
+        return s;
+    }
+    std::size_t count() {
+        std::lock_guard lock(mu_);
+        return samples_.size();
+    }
+    template <typename Pred>
+    bool wait_until(Pred p, std::chrono::milliseconds limit = 3000ms) {
+        const auto end = std::chrono::steady_clock::now() + limit;
+        while (std::chrono::steady_clock::now() < end) {
+            if (p()) return true;
+            std::this_thread::sleep_for(2ms);
+        }
+        return p();
+    }
+    std::uint64_t counter(std::string_view name) { return *listener_->counters().value(name); }
+
+    asio::io_context io_;
+    asio::executor_work_guard<asio::io_context::executor_type> work_{io_.get_executor()};
+    asio::io_context client_io_;
+    FixedClock clock_;
+    std::unique_ptr<SinkListener> listener_;
+    std::thread thread_;
+    std::mutex mu_;
+    std::vector<SegmentSample> samples_;
+};
+
+TEST_F(SinkListenerTest, PacketsBecomeSamplesWithStamps) {
+    start({});
+    auto s = connect();
+    for (std::uint32_t c = 0; c < 10; ++c) asio::write(s, asio::buffer(make_packet(3, c, c, 15)));
+    ASSERT_TRUE(wait_until([&] { return count() == 150; }));
+    std::lock_guard lock(mu_);
+    EXPECT_EQ(samples_[0].subject_id, 3u);
+    EXPECT_EQ(samples_[0].times.received_us, 777);
+    EXPECT_EQ(samples_[0].times.sink_send_us, 1'000'000);
+    EXPECT_EQ(samples_[0].imu.t_us, 1'000'000);  // SYNC record at offset 0
+    EXPECT_EQ(samples_.back().sync, samples_[0].sync + 9);
+}
+
+TEST_F(SinkListenerTest, GarbageBetweenPacketsIsCountedAndSkipped) {
+    start({});
+    auto s = connect();
+    std::vector<std::uint8_t> stream = make_packet(1, 0, 0, 2);
+    const std::vector<std::uint8_t> junk{'M', 'C', 'A', 'x', 0xFF, 0x00, 'M', 'C', 'A', 'P', 9, 9};
+    stream.insert(stream.end(), junk.begin(), junk.end());
+    auto p2 = make_packet(1, 1, 1, 2);
+    p2[30] ^= 0x5A;  // corrupt a payload byte: CRC failure
+    stream.insert(stream.end(), p2.begin(), p2.end());
+    auto p3 = make_packet(1, 2, 2, 2);
+    stream.insert(stream.end(), p3.begin(), p3.end());
+    // Byte by byte, the worst case for an incremental decoder.
+    for (std::uint8_t b : stream) asio::write(s, asio::buffer(&b, 1));
+    ASSERT_TRUE(wait_until([&] { return count() == 4; }));
+    EXPECT_TRUE(wait_until([&] { return counter("malformed_packets") >= 2; }));
+    EXPECT_GE(counter("crc_failures"), 1u);
+    EXPECT_GT(counter("bytes_discarded"), 0u);
+    EXPECT_EQ(counter("packets"), 2u);
+}
+
+TEST_F(SinkListenerTest, ReconnectTakesOverTheSubject) {
+    start({});
+    auto a = connect();
+    asio::write(a, asio::buffer(make_packet(2, 0, 100, 1)));
+    ASSERT_TRUE(wait_until([&] { return count() == 1; }));
+    auto b = connect();  // the sink came back; the old socket is still open
+    asio::write(b, asio::buffer(make_packet(2, 0, 0, 1)));
+    asio::write(b, asio::buffer(make_packet(2, 1, 1, 1)));
+    ASSERT_TRUE(wait_until([&] { return count() == 3; }));
+    EXPECT_EQ(counter("sink_takeovers"), 1u);
+    std::lock_guard lock(mu_);
+    EXPECT_GT(samples_[1].sync, samples_[0].sync);
+    EXPECT_EQ(samples_[2].sync, samples_[1].sync + 1);
+}
+
+TEST_F(SinkListenerTest, SequenceGapsAndUnknownSinksCounted) {
+    SinkListenerConfig cfg;
+    cfg.max_subjects = 4;
+    start(cfg);
+    auto s = connect();
+    asio::write(s, asio::buffer(make_packet(1, 0, 0, 1)));
+    asio::write(s, asio::buffer(make_packet(1, 5, 1, 1)));
+    asio::write(s, asio::buffer(make_packet(9, 6, 2, 1)));  // sink id beyond max_subjects
+    ASSERT_TRUE(wait_until([&] { return counter("packets") == 3; }));
+    EXPECT_EQ(counter("sequence_gaps"), 1u);
+    EXPECT_EQ(counter("unknown_sink_packets"), 1u);
+    EXPECT_EQ(count(), 2u);
+}
+
+TEST_F(SinkListenerTest, IdleAndGarbageOnlyConnectionsAreClosed) {
+    SinkListenerConfig cfg;
+    cfg.idle_timeout_s = 0.1;
+    cfg.max_garbage_bytes = 4096;
+    start(cfg);
+    auto idle = connect();
+    auto noisy = connect();
+    std::vector<std::uint8_t> junk(8192, 0xAB);
+    asio::write(noisy, asio::buffer(junk));
+    EXPECT_TRUE(wait_until([&] { return counter("idle_timeouts") >= 1; }));
+    EXPECT_TRUE(wait_until([&] { return counter("garbage_closes") == 1; }));
+    // Both sockets see the server close them.
+    std::array<char, 16> b{};
+    boost::system::error_code ec;
+    idle.read_some(asio::buffer(b), ec);
+    EXPECT_TRUE(ec);
+}
+
+TEST_F(SinkListenerTest, MaxSinksRefusesExtraConnections) {
+    SinkListenerConfig cfg;
+    cfg.max_sinks = 1;
+    start(cfg);
+    auto a = connect();
+    asio::write(a, asio::buffer(make_packet(1, 0, 0, 1)));
+    ASSERT_TRUE(wait_until([&] { return count() == 1; }));
+    auto b = connect();
+    std::array<char, 16> buf{};
+    boost::system::error_code ec;
+    b.read_some(asio::buffer(buf), ec);
+    EXPECT_TRUE(ec);
+    EXPECT_EQ(counter("connections_refused"), 1u);
+}
+
+}  // namespace
+}  // namespace mocap::ingest
