@@ -25,6 +25,7 @@ struct StageTimes {
     std::int64_t filtered_us = 0;   ///< daemon: filter update finished (latest segment)
     std::int64_t assembled_us = 0;  ///< daemon: subject frame complete or deadline hit
     std::int64_t encoded_us = 0;    ///< daemon: frame encoded for clients
+    std::int64_t dequeued_us = 0;   ///< daemon: worker took the sample off its queue (latest)
 };
 
 /// A sample on its way from ingest to the segment's filter worker.
