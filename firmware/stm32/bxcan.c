@@ -79,3 +79,8 @@ int bxcan_receive_fifo0(mw_can_frame *frame)
     }
     return 1;
 }
+
+int bxcan_bus_error(void)
+{
+    return (CAN1->ESR & (CAN_ESR_EPVF | CAN_ESR_BOFF)) != 0u || (CAN1->MSR & CAN_MSR_INAK) != 0u;
+}

@@ -77,6 +77,7 @@ typedef struct {
 #define CAN_RIR_RTR (1u << 1)
 #define CAN_RIR_STID_SHIFT 21
 #define CAN_FMR_FINIT (1u << 0)
+#define CAN_ESR_EPVF (1u << 1)
 #define CAN_ESR_BOFF (1u << 2)
 
 /* Bit timing: BRP = prescaler - 1, TS1 = segment1 - 1, TS2 = segment2 - 1, SJW = jump - 1. */

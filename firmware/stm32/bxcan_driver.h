@@ -22,4 +22,7 @@ int bxcan_transmit(const mw_can_frame *frame);
 /* 1 = *frame filled, 0 = FIFO empty, -1 = an extended/remote frame was discarded. */
 int bxcan_receive_fifo0(mw_can_frame *frame);
 
+/* Nonzero while the controller is error-passive, bus-off, or still waiting to join the bus. */
+int bxcan_bus_error(void);
+
 #endif

@@ -355,6 +355,22 @@ TEST_F(SensorNodeTest, MalformedConfigIsCountedNotApplied)
     EXPECT_EQ(fake.imu.reg(0x1C), 0x18);
 }
 
+TEST_F(SensorNodeTest, CanBusErrorIsReported)
+{
+    static int bus_error = 0;
+    bus_error = 0;
+    sensor_node_hal h = fake.hal();
+    h.can_bus_error = [](void*) { return bus_error; };
+    ASSERT_EQ(sensor_node_init(&node, &h, 5), MW_OK);
+    sensor_node_poll(&node);
+    fake.take_tx();
+    bus_error = 1;
+    sensor_node_poll(&node);
+    const auto st = statuses(fake.take_tx());
+    ASSERT_EQ(st.size(), 1u);
+    EXPECT_TRUE(st[0].error_flags & MW_ERRF_CAN_BUS);
+}
+
 TEST(SensorNodeInit, RejectsBadArguments)
 {
     fake_node_hal fake;

@@ -444,6 +444,52 @@ TEST_F(SinkNodeTest, ConfigBroadcastAndSinkStatus)
     EXPECT_EQ(statuses[3].state, MW_NODE_RUNNING);
 }
 
+TEST_F(SinkNodeTest, LateFrameAtLowRateStartsAPacketWithinOffsetRange)
+{
+    config.rate_hz = 5; // 200 ms between SYNCs
+    start();
+    sink_node_poll(sink.get()); // SYNC 0 at t0
+    const uint64_t t0 = fake.now_us;
+    mw_raw raw{MW_FN_ACCEL, 1, {1, 2, 3}, 0};
+    mw_can_frame f{};
+    ASSERT_EQ(mw_raw_encode(&raw, &f), MW_OK);
+    fake.now_us = t0 + 40'000;
+    fake.rx.push_back(f);
+    sink_node_poll(sink.get());
+    fake.now_us = t0 + 120'000; // offset 120 ms does not fit 16 bits of microseconds
+    fake.rx.push_back(f);
+    sink_node_poll(sink.get());
+    fake.now_us = t0 + 200'000; // SYNC 1 closes the continuation
+    sink_node_poll(sink.get());
+    const auto packets = decode_all(fake.connections.at(0));
+    ASSERT_EQ(packets.size(), 2u);
+    EXPECT_EQ(packets[0]->header.timestamp_us, t0);
+    ASSERT_EQ(packets[0]->frame_count, 2u);
+    EXPECT_EQ(packets[0]->frames[1].offset_us, 40'000u);
+    EXPECT_EQ(packets[1]->header.timestamp_us, t0 + 120'000);
+    ASSERT_EQ(packets[1]->frame_count, 1u);
+    EXPECT_EQ(packets[1]->frames[0].offset_us, 0u);
+    EXPECT_EQ(sink->counters.batch_splits, 1u);
+}
+
+TEST_F(SinkNodeTest, SinkStatusReportsCanFramesLostOnReception)
+{
+    config.status_period_s = 1;
+    static uint32_t lost = 0;
+    lost = 258;
+    start();
+    sink_node_hal h = fake.hal();
+    h.can_rx_lost = [](void*) { return lost; };
+    sink->hal = h;
+    run(20'000);
+    const auto packets = decode_all(fake.connections.at(0));
+    ASSERT_FALSE(packets.empty());
+    mw_status status{};
+    ASSERT_EQ(mw_status_decode(&packets[0]->frames[1].frame, &status), MW_OK);
+    EXPECT_EQ(status.node_id, MW_NODE_ID_SINK);
+    EXPECT_EQ(status.tx_overflows, 2u) << "258 wraps to 2 in the 8-bit field";
+}
+
 TEST_F(SinkNodeTest, BusyCanControllerQueuesSyncAndCountsOverflow)
 {
     start();

@@ -251,6 +251,9 @@ void sensor_node_poll(sensor_node *node)
     while (node->hal.can_receive(node->hal.user, &frame) == 1) {
         handle_frame(node, &frame);
     }
+    if (node->hal.can_bus_error != NULL && node->hal.can_bus_error(node->hal.user)) {
+        node->event_flags |= MW_ERRF_CAN_BUS;
+    }
     const uint64_t now = now_us(node);
     if (node->state == MW_NODE_FAULT && now >= node->next_imu_retry_us) {
         if (init_imu(node)) {

@@ -83,9 +83,16 @@ static int hal_can_receive(void *user, mw_can_frame *frame)
     }
 }
 
+static int hal_can_bus_error(void *user)
+{
+    (void)user;
+    return bxcan_bus_error();
+}
+
 sensor_node_hal board_hal(void)
 {
-    sensor_node_hal hal = {NULL, hal_spi_transfer, hal_can_transmit, hal_can_receive, hal_time_us};
+    sensor_node_hal hal = {NULL, hal_spi_transfer, hal_can_transmit, hal_can_receive, hal_time_us,
+                           hal_can_bus_error};
     return hal;
 }
 

@@ -9,12 +9,9 @@ static sensor_node g_node;
 
 int main(void)
 {
-    const int can_rc = board_init();
+    (void)board_init(); /* a bus not joined yet shows as MW_ERRF_CAN_BUS through the HAL */
     const sensor_node_hal hal = board_hal();
     (void)sensor_node_init(&g_node, &hal, (uint8_t)MOCAP_NODE_ID);
-    if (can_rc != 0) {
-        g_node.event_flags |= MW_ERRF_CAN_BUS; /* reported once the bus comes up */
-    }
     for (;;) {
         sensor_node_poll(&g_node);
         board_led(g_node.state == MW_NODE_RUNNING);

@@ -24,7 +24,7 @@ void sink_node_default_config(sink_node_config *config)
     config->backoff_max_us = 5000000u;
     config->connect_timeout_us = 10000000u;
     config->status_period_s = 1;
-    config->config_period_s = 5;
+    config->config_period_s = 1;
     config->node_config.node_id = MW_NODE_ID_BROADCAST;
     config->node_config.rate_hz = 100;
     config->node_config.accel_range = MW_ACCEL_16G;
@@ -185,9 +185,15 @@ static void add_to_batch(sink_node *sink, const mw_can_frame *frame, uint64_t at
         close_batch(sink, at_us);
         open_batch(sink, timestamp);
     }
+    if (at_us - sink->batch_timestamp_us > 0xFFFFu) {
+        /* offset_us is 16 bits: at low rates a batch outlives it; continue in a packet
+         * stamped with this frame's time (docs/protocol.md §3.4). */
+        ++sink->counters.batch_splits;
+        close_batch(sink, at_us);
+        open_batch(sink, at_us);
+    }
     mw_stamped_frame stamped;
-    const uint64_t offset = at_us - sink->batch_timestamp_us;
-    stamped.offset_us = offset > 0xFFFFu ? (uint16_t)0xFFFFu : (uint16_t)offset;
+    stamped.offset_us = (uint16_t)(at_us - sink->batch_timestamp_us);
     stamped.frame = *frame;
     if (mw_packet_builder_add(&sink->builder, &stamped) == MW_OK && node_frame) {
         ++sink->batch_node_frames;
@@ -230,7 +236,8 @@ static void send_status(sink_node *sink, uint64_t now)
     }
     status.protocol_version = MW_CAN_PROTOCOL_VERSION;
     status.uptime_s = (uint16_t)((now - sink->start_us) / US_PER_S);
-    status.tx_overflows = (uint8_t)sink->counters.can_tx_overflows;
+    /* For the sink this field counts CAN frames lost on reception (docs/protocol.md §1.6). */
+    status.tx_overflows = (uint8_t)(sink->hal.can_rx_lost != NULL ? sink->hal.can_rx_lost(sink->hal.user) : 0u);
     status.sync_missed = 0;
     if (mw_status_encode(&status, &frame) == MW_OK) {
         sink->can_tx_overflow_event = 0;

@@ -75,7 +75,11 @@ static int hal_can_transmit(void *user, const mw_can_frame *frame)
     return bxcan_transmit(frame);
 }
 
-uint32_t board_can_rx_overruns(void) { return g_can_overruns; }
+static uint32_t hal_can_rx_lost(void *user)
+{
+    (void)user;
+    return g_can_overruns;
+}
 
 /* ---- USART1: interrupt-driven rings --------------------------------------------------------- */
 
@@ -155,6 +159,7 @@ void board_sink_hal(sink_node_hal *hal)
     hal->can_transmit = hal_can_transmit;
     hal->can_receive = hal_can_receive;
     hal->time_us = hal_time_us;
+    hal->can_rx_lost = hal_can_rx_lost;
 }
 
 void board_led(int on) { F4_GPIOD->BSRR = on ? (1u << LED_PIN) : (1u << (LED_PIN + 16u)); }

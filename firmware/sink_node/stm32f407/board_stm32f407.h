@@ -22,14 +22,12 @@
  * join the bus (it keeps trying in hardware). */
 int board_init(void);
 
-/* CAN and time functions of the sink HAL (the uplink members are set by esp_at_uplink()). */
+/* CAN, time and CAN-loss functions of the sink HAL (the uplink members are set by
+ * esp_at_uplink()). */
 void board_sink_hal(sink_node_hal *hal);
 
 /* The serial port of the ESP8266. */
 esp_at_serial board_serial(void);
-
-/* Frames lost because the RX ring or the hardware FIFO was full. */
-uint32_t board_can_rx_overruns(void);
 
 void board_led(int on);
 

@@ -34,7 +34,7 @@ int main(void)
                                 MOCAP_ESP_BAUD};
     (void)esp_at_init(&g_at, &serial, &wifi);
 
-    sink_node_hal hal;
+    sink_node_hal hal = {0};
     board_sink_hal(&hal);
     esp_at_uplink(&g_at, &hal);
 

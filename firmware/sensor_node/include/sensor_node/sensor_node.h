@@ -46,6 +46,9 @@ typedef struct sensor_node_hal {
     int (*can_receive)(void *user, mw_can_frame *frame);
     /* Monotonic microseconds since an arbitrary origin. */
     uint64_t (*time_us)(void *user);
+    /* Optional (may be NULL): nonzero while the CAN controller is error-passive, bus-off or
+     * not on the bus; reported as MW_ERRF_CAN_BUS. */
+    int (*can_bus_error)(void *user);
 } sensor_node_hal;
 
 /* Counters only go up (they wrap at 2^32). */

@@ -11,10 +11,12 @@
  * - Batching: every CAN frame received between SYNC n and SYNC n+1 goes into one sink->host
  *   packet (mocap_wire/mw_packet.h) whose timestamp_us is the time SYNC n was sent and whose
  *   first record is SYNC n itself (offset 0), followed by the frames in arrival order with
- *   offset_us = arrival - timestamp (saturated at 65535). The packet is closed when SYNC n+1
- *   is sent, or earlier when it holds config.max_batch_frames frames (the rest of the instant
- *   then follows in a continuation packet with the same timestamp and no SYNC record). A
- *   packet goes out even if some nodes sent nothing (node loss is the host's to see).
+ *   offset_us = arrival - timestamp. The packet is closed when SYNC n+1 is sent, or earlier
+ *   when it holds config.max_batch_frames frames (the rest of the instant then follows in a
+ *   continuation packet with the same timestamp and no SYNC record), or when a frame arrives
+ *   more than 65535 us after the timestamp (the continuation is stamped with that frame's
+ *   time; only at rates below ~16 Hz). A packet goes out even if some nodes sent nothing
+ *   (node loss is the host's to see).
  *   Every status_period_s the sink's own STATUS (node id 0) is appended to the batch.
  * - Uplink: packets are written whole through the HAL. The packet sequence is per connection
  *   (0 for the first packet after a connect); a packet the uplink refused as busy still uses
@@ -81,6 +83,9 @@ typedef struct sink_node_hal {
     int (*uplink_write)(void *user, const uint8_t *data, size_t len);
     /* Closes the connection or abandons the attempt; uplink_state() is DOWN afterwards. */
     void (*uplink_close)(void *user);
+    /* Optional (may be NULL): CAN frames lost on reception so far (controller FIFO or driver
+     * ring overruns), reported in the sink's STATUS. */
+    uint32_t (*can_rx_lost)(void *user);
 } sink_node_hal;
 
 typedef struct sink_node_config {
@@ -103,7 +108,7 @@ typedef struct sink_node_counters {
     uint32_t packets_out;       /* packets the uplink took */
     uint32_t packets_dropped;   /* packets built while down, or refused as busy */
     uint32_t packets_busy;      /* of which refused as busy */
-    uint32_t batch_splits;      /* packets closed early by max_batch_frames */
+    uint32_t batch_splits;      /* packets closed early (max_batch_frames or offset_us range) */
     uint32_t bytes_out;         /* bytes the uplink took */
     uint32_t syncs_sent;        /* SYNC frames queued for the bus */
     uint32_t syncs_skipped;     /* SYNC instants skipped because the loop was late */
@@ -146,7 +151,7 @@ typedef struct sink_node {
 } sink_node;
 
 /* Defaults: 100 Hz, 128 frames per packet, back-off 100 ms .. 5 s, connect timeout 10 s,
- * STATUS every 1 s, CONFIG every 5 s, nodes at +-16 g, +-2000 dps, raw mode, STATUS 1 s. */
+ * STATUS every 1 s, CONFIG every 1 s, nodes at +-16 g, +-2000 dps, raw mode, STATUS 1 s. */
 void sink_node_default_config(sink_node_config *config);
 
 /* Validates the config, copies the HAL, starts the schedule (the first SYNC is due at once)
