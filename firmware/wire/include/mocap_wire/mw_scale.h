@@ -19,6 +19,8 @@
 
 #include <stdint.h>
 
+#include "mocap_wire/mw_common.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
