@@ -18,6 +18,7 @@
 // from TOML), then call validate(); other skeleton functions assume a valid model.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <string_view>
@@ -28,7 +29,15 @@
 
 namespace mocap::skeleton {
 
+using filter::Quat;
 using filter::Vec3;
+
+/// kMaxSegments identity quaternions (Eigen's default constructor leaves them unset).
+inline std::array<Quat, kMaxSegments> identity_quats() {
+    std::array<Quat, kMaxSegments> a;
+    a.fill(Quat::Identity());
+    return a;
+}
 
 struct SegmentDef {
     std::string name;             ///< [A-Za-z0-9_]+, unique (also the BVH joint name)

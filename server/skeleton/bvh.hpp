@@ -173,7 +173,7 @@ std::vector<BvhSegmentSource> cmu_segment_sources();
 struct BvhSegmentMapping {
     std::size_t segment_count = 0;
     std::array<int, kMaxSegments> joint{};
-    std::array<Quat, kMaxSegments> q_joint_segment{};
+    std::array<Quat, kMaxSegments> q_joint_segment = identity_quats();
 };
 
 struct BvhMappingResult {
