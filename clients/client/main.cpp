@@ -1,0 +1,380 @@
+// mocap-client — command-line client of mocapd's pose service.
+//
+//   mocap-client --connect HOST:PORT cat [--frames N] [--json] [--subject ID]...
+//   mocap-client --connect HOST:PORT stats [--json]
+//   mocap-client --connect HOST:PORT control --token T calibrate --subject ID [--pose T|N]
+//   mocap-client --connect HOST:PORT control --token T record-start [--path FILE]
+//   mocap-client --connect HOST:PORT control --token T record-stop | reload
+//   mocap-client --connect HOST:PORT load --clients N --duration S [--json]
+//
+// Exit codes: 0 success, 1 refused/failed request or bad data, 2 connection problem.
+// The token may also come from the environment (MOCAP_TOKEN) to keep it out of `ps`.
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <string>
+
+#include "json_out.hpp"
+#include "load_client.hpp"
+#include "pose_client.hpp"
+
+namespace {
+
+using namespace std::chrono_literals;
+using mocap::client::PoseClient;
+using mocap::client::ReadStatus;
+namespace v1 = mocap::v1;
+
+constexpr int kExitFailed = 1;
+constexpr int kExitConnection = 2;
+
+std::uint32_t parse_fields(const std::vector<std::string>& names) {
+    std::uint32_t fields = 0;
+    for (const std::string& n : names) {
+        if (n == "orientations") fields |= v1::FIELD_ORIENTATIONS;
+        if (n == "positions") fields |= v1::FIELD_POSITIONS;
+        if (n == "joints") fields |= v1::FIELD_JOINT_ANGLES;
+        if (n == "raw") fields |= v1::FIELD_RAW;
+        if (n == "all") fields |= 0xF;
+    }
+    return fields;
+}
+
+std::string frame_json(const v1::SkeletonFrame& f, const v1::Hello& hello, std::int64_t receive_us) {
+    using namespace mocap::client;
+    std::string out = "{\"subject\":";
+    json_uint(out, f.subject_id());
+    out += ",\"sync\":";
+    json_uint(out, f.sync());
+    auto field = [&out](const char* name, std::int64_t value, const char* before = ",") {
+        out += before;
+        json_string(out, name);
+        out += ':';
+        json_int(out, value);
+    };
+    field("sample_us", f.sample_us());
+    field("receive_us", receive_us);
+    out += ",\"times\":";
+    field("sink_send_us", f.times().sink_send_us(), "{");
+    field("received_us", f.times().received_us());
+    field("filtered_us", f.times().filtered_us());
+    field("assembled_us", f.times().assembled_us());
+    field("encoded_us", f.times().encoded_us());
+    out += "},\"segments\":[";
+    const int n = static_cast<int>(f.segment_count());
+    const bool has_q = f.q_world_segment_wxyz_size() == 4 * n;
+    const bool has_p = f.position_m_size() == 3 * n;
+    const bool has_raw = f.q_earth_sensor_wxyz_size() == 4 * n;
+    auto array = [&out](const auto& values, int first, int count) {
+        out += '[';
+        for (int c = 0; c < count; ++c) {
+            if (c) out += ',';
+            json_number(out, values.Get(first + c), 7);
+        }
+        out += ']';
+    };
+    for (int i = 0; i < n; ++i) {
+        if (i) out += ',';
+        out += "{\"name\":";
+        const auto& segs = hello.skeleton().segments();
+        json_string(out, i < segs.size() ? segs.Get(i).name() : "segment" + std::to_string(i));
+        if (has_q) {
+            out += ",\"q\":";
+            array(f.q_world_segment_wxyz(), 4 * i, 4);
+        }
+        if (has_p) {
+            out += ",\"p\":";
+            array(f.position_m(), 3 * i, 3);
+        }
+        if (has_raw) {
+            out += ",\"q_raw\":";
+            array(f.q_earth_sensor_wxyz(), 4 * i, 4);
+        }
+        out += ",\"flags\":";
+        json_uint(out, i < f.flags_size() ? f.flags(i) : 0);
+        out += '}';
+    }
+    out += ']';
+    if (f.joint_angles_rad_size() > 0) {
+        out += ",\"joint_angles_rad\":{";
+        const auto& names = hello.skeleton().joint_angle_names();
+        for (int j = 0; j < f.joint_angles_rad_size(); ++j) {
+            if (j) out += ',';
+            json_string(out, j < names.size() ? names.Get(j) : "joint" + std::to_string(j));
+            out += ':';
+            json_number(out, f.joint_angles_rad(j), 7);
+        }
+        out += '}';
+    }
+    out += '}';
+    return out;
+}
+
+std::string frame_text(const v1::SkeletonFrame& f, const v1::Hello& hello, std::int64_t receive_us) {
+    int stale = 0, never = 0;
+    for (std::uint32_t flags : f.flags()) {
+        stale += (flags & v1::SEGMENT_STALE) ? 1 : 0;
+        never += (flags & v1::SEGMENT_NEVER_SEEN) ? 1 : 0;
+    }
+    char head[256];
+    const double latency_ms =
+        f.times().sink_send_us() ? (receive_us - f.times().sink_send_us()) / 1000.0 : 0.0;
+    std::snprintf(head, sizeof head,
+                  "subject %u sync %llu t=%.3fs latency=%.2fms segments=%u stale=%d never=%d",
+                  f.subject_id(), static_cast<unsigned long long>(f.sync()), f.sample_us() / 1e6,
+                  latency_ms, f.segment_count(), stale, never);
+    std::string line = head;
+    if (f.segment_count() > 0 && f.q_world_segment_wxyz_size() >= 4) {
+        const std::string root =
+            hello.skeleton().segments_size() > 0 ? hello.skeleton().segments(0).name() : "segment0";
+        char seg[160];
+        std::snprintf(seg, sizeof seg, " | %s q=(%.3f %.3f %.3f %.3f)", root.c_str(),
+                      f.q_world_segment_wxyz(0), f.q_world_segment_wxyz(1),
+                      f.q_world_segment_wxyz(2), f.q_world_segment_wxyz(3));
+        line += seg;
+        if (f.position_m_size() >= 3) {
+            std::snprintf(seg, sizeof seg, " p=(%.3f %.3f %.3f)", f.position_m(0), f.position_m(1),
+                          f.position_m(2));
+            line += seg;
+        }
+    }
+    return line;
+}
+
+int run_cat(PoseClient& client, const mocap::client::SubscribeOptions& sub, std::uint64_t frames,
+            bool json, double idle_timeout_s) {
+    std::string error;
+    if (!client.subscribe(sub, 3s, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    const auto idle = std::chrono::milliseconds(static_cast<long long>(idle_timeout_s * 1000));
+    v1::SkeletonFrame f;
+    std::uint64_t shown = 0, drops_reported = 0;
+    while (frames == 0 || shown < frames) {
+        const ReadStatus s = client.next_frame(f, idle);
+        if (client.drops_announced() != drops_reported) {
+            std::cerr << "mocap-client: server dropped " << client.drops_announced() - drops_reported
+                      << " frame(s) for this client (reading too slowly)\n";
+            drops_reported = client.drops_announced();
+        }
+        if (s == ReadStatus::kTimeout) {
+            std::cerr << "mocap-client: no frame within " << idle_timeout_s << " s\n";
+            return kExitFailed;
+        }
+        if (s != ReadStatus::kMessage) {
+            std::cerr << "mocap-client: connection ended"
+                      << (client.goodbye() ? ": " + client.goodbye()->message() : std::string())
+                      << "\n";
+            return frames == 0 ? 0 : kExitConnection;
+        }
+        std::cout << (json ? frame_json(f, client.hello(), client.last_receive_us())
+                           : frame_text(f, client.hello(), client.last_receive_us()))
+                  << '\n';
+        if (frames != 0 && (shown + 1) % 64 != 0) {
+        } else {
+            std::cout.flush();
+        }
+        ++shown;
+    }
+    std::cout.flush();
+    return 0;
+}
+
+int run_stats(PoseClient& client, bool json) {
+    std::string error;
+    v1::Stats stats;
+    if (!client.request_stats(stats, 3s, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    using namespace mocap::client;
+    if (json) {
+        std::string out = "{\"server_time_us\":";
+        json_int(out, stats.server_time_us());
+        out += ",\"counters\":{";
+        for (int i = 0; i < stats.counters_size(); ++i) {
+            if (i) out += ',';
+            json_string(out, stats.counters(i).name());
+            out += ':';
+            json_uint(out, stats.counters(i).value());
+        }
+        out += "},\"latencies\":[";
+        for (int i = 0; i < stats.latencies_size(); ++i) {
+            const auto& l = stats.latencies(i);
+            if (i) out += ',';
+            out += "{\"stage\":";
+            json_string(out, l.stage());
+            out += ",\"count\":";
+            json_uint(out, l.count());
+            for (const auto& [name, value] : {std::pair{"p50_us", l.p50_us()}, {"p90_us", l.p90_us()},
+                                              {"p99_us", l.p99_us()}, {"max_us", l.max_us()}}) {
+                out += ",\"";
+                out += name;
+                out += "\":";
+                json_number(out, value);
+            }
+            out += '}';
+        }
+        out += "]}";
+        std::cout << out << std::endl;
+        return 0;
+    }
+    std::printf("%s\n", client.hello().server_version().c_str());
+    for (const auto& c : stats.counters()) {
+        std::printf("%-44s %llu\n", c.name().c_str(), static_cast<unsigned long long>(c.value()));
+    }
+    if (stats.latencies_size() > 0) {
+        std::printf("\n%-16s %10s %10s %10s %10s %10s\n", "stage", "count", "p50_us", "p90_us",
+                    "p99_us", "max_us");
+        for (const auto& l : stats.latencies()) {
+            std::printf("%-16s %10llu %10.1f %10.1f %10.1f %10.1f\n", l.stage().c_str(),
+                        static_cast<unsigned long long>(l.count()), l.p50_us(), l.p90_us(),
+                        l.p99_us(), l.max_us());
+        }
+    }
+    return 0;
+}
+
+int run_control(PoseClient& client, v1::ControlRequest request) {
+    std::string error;
+    v1::ControlReply reply;
+    if (!client.control(request, reply, 10s, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    if (!reply.ok()) {
+        std::cerr << "mocap-client: refused: " << reply.error() << "\n";
+        return kExitFailed;
+    }
+    std::cout << "ok\n";
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"mocap-client: read poses from mocapd, query its stats, send control requests"};
+    std::string connect = "127.0.0.1:7001";
+    app.add_option("--connect", connect, "HOST:PORT of mocapd's pose service")->capture_default_str();
+    double connect_timeout_s = 3.0;
+    app.add_option("--connect-timeout", connect_timeout_s, "seconds to connect and get Hello")
+        ->capture_default_str();
+    app.require_subcommand(1);
+
+    mocap::client::SubscribeOptions sub;
+    std::vector<std::string> field_names;
+
+    auto* cat = app.add_subcommand("cat", "print received poses, one line per frame");
+    std::uint64_t cat_frames = 0;
+    bool cat_json = false;
+    double cat_idle_s = 10.0;
+    cat->add_option("--frames", cat_frames, "stop after N frames (0 = until the server closes)");
+    cat->add_flag("--json", cat_json, "one JSON object per frame per line");
+    cat->add_option("--subject", sub.subject_ids, "subject id (repeatable; default all)");
+    cat->add_option("--decimation", sub.decimation, "every n-th frame per subject")->capture_default_str();
+    cat->add_option("--fields", field_names, "orientations, positions, joints, raw, all")
+        ->delimiter(',');
+    cat->add_option("--timeout", cat_idle_s, "give up after this many seconds without a frame")
+        ->capture_default_str();
+
+    auto* stats = app.add_subcommand("stats", "print the server's counters and stage latencies");
+    bool stats_json = false;
+    stats->add_flag("--json", stats_json, "one JSON object");
+
+    auto* control = app.add_subcommand("control", "calibrate, start/stop recording, reload");
+    std::string token;
+    control->add_option("--token", token, "control token (or set MOCAP_TOKEN)");
+    control->require_subcommand(1);
+    auto* calibrate = control->add_subcommand("calibrate", "calibrate a subject from its still pose");
+    std::uint32_t cal_subject = 0;
+    std::string cal_pose = "T";
+    calibrate->add_option("--subject", cal_subject, "subject id")->required();
+    calibrate->add_option("--pose", cal_pose, "T or N")->check(CLI::IsMember({"T", "N", "t", "n"}))
+        ->capture_default_str();
+    auto* record_start = control->add_subcommand("record-start", "start recording");
+    std::string record_path;
+    record_start->add_option("--path", record_path, "output path (default: the daemon's)");
+    auto* record_stop = control->add_subcommand("record-stop", "stop recording");
+    auto* reload = control->add_subcommand("reload", "reload the configuration");
+
+    auto* load = app.add_subcommand("load", "N subscriptions; frames, gaps, drops, latency");
+    mocap::client::LoadOptions load_options;
+    double load_duration_s = 5.0;
+    bool load_json = false;
+    load->add_option("--clients", load_options.clients, "connections")->capture_default_str();
+    load->add_option("--duration", load_duration_s, "seconds of measurement")->capture_default_str();
+    load->add_flag("--json", load_json, "one JSON object");
+    load->add_option("--subject", load_options.subject_ids, "subject id (repeatable; default all)");
+    load->add_option("--decimation", load_options.decimation, "every n-th frame per subject")
+        ->capture_default_str();
+
+    CLI11_PARSE(app, argc, argv);
+
+    std::string error;
+    const auto endpoint = mocap::client::parse_endpoint(connect, error);
+    if (!endpoint) {
+        std::cerr << "mocap-client: --connect: " << error << "\n";
+        return kExitConnection;
+    }
+    const auto connect_timeout =
+        std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
+
+    if (*load) {
+        load_options.host = endpoint->host;
+        load_options.port = endpoint->port;
+        load_options.duration = std::chrono::milliseconds(static_cast<long long>(load_duration_s * 1000));
+        load_options.connect_timeout = connect_timeout;
+        const auto r = mocap::client::run_load(load_options);
+        if (load_json) {
+            std::cout << mocap::client::load_result_json(r) << std::endl;
+        } else {
+            std::printf("clients %zu (connected %zu, closed early %zu), %.2f s\n", r.clients,
+                        r.connected, r.closed_early, r.duration_s);
+            std::printf("frames %llu (per client %llu..%llu), gaps %llu (missing %llu), drops %llu\n",
+                        static_cast<unsigned long long>(r.frames),
+                        static_cast<unsigned long long>(r.frames_per_client_min),
+                        static_cast<unsigned long long>(r.frames_per_client_max),
+                        static_cast<unsigned long long>(r.gaps),
+                        static_cast<unsigned long long>(r.missing_frames),
+                        static_cast<unsigned long long>(r.drops));
+            if (r.p50_ms) {
+                std::printf("latency sink-send -> receive: p50 %.3f ms, p90 %.3f ms, p99 %.3f ms, max %.3f ms\n",
+                            *r.p50_ms, *r.p90_ms, *r.p99_ms, *r.max_ms);
+            }
+            if (!r.error.empty()) std::printf("first error: %s\n", r.error.c_str());
+        }
+        return r.connected == r.clients ? 0 : kExitConnection;
+    }
+
+    PoseClient client;
+    if (!client.connect(endpoint->host, endpoint->port, connect_timeout, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    if (*cat) {
+        sub.fields = parse_fields(field_names);
+        return run_cat(client, sub, cat_frames, cat_json, cat_idle_s);
+    }
+    if (*stats) return run_stats(client, stats_json);
+
+    if (token.empty()) {
+        if (const char* env = std::getenv("MOCAP_TOKEN")) token = env;
+    }
+    v1::ControlRequest request;
+    request.set_token(token);
+    if (*calibrate) {
+        request.mutable_calibrate()->set_subject_id(cal_subject);
+        request.mutable_calibrate()->set_pose(cal_pose == "N" || cal_pose == "n" ? v1::POSE_N
+                                                                                 : v1::POSE_T);
+    } else if (*record_start) {
+        request.mutable_start_recording()->set_path(record_path);
+    } else if (*record_stop) {
+        request.mutable_stop_recording();
+    } else if (*reload) {
+        request.mutable_reload();
+    }
+    return run_control(client, request);
+}

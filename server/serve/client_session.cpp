@@ -1,0 +1,462 @@
+// client_session.cpp — read loop, bounded drop-oldest write queue, timers, requests.
+#include "serve/client_session.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
+#include "mocap/v1/mocap.pb.h"
+
+namespace mocap::serve {
+
+namespace {
+
+constexpr std::uint32_t kMaxSubscribeSubjects = 4096;
+constexpr std::uint32_t kMaxDecimation = 100000;
+
+bool is_loopback(const asio::ip::address& address) {
+    if (address.is_loopback()) return true;
+    if (address.is_v6() && address.to_v6().is_v4_mapped()) {
+        return asio::ip::make_address_v4(asio::ip::v4_mapped, address.to_v6()).is_loopback();
+    }
+    return false;
+}
+
+}  // namespace
+
+SharedBytes encode_goodbye(CloseReason reason, std::string_view text) {
+    v1::ServerMessage message;
+    message.mutable_goodbye()->set_reason(static_cast<v1::GoodbyeReason>(reason));
+    message.mutable_goodbye()->set_message(std::string(text));
+    return encode_server_message(message);
+}
+
+bool token_equal(std::string_view expected, std::string_view given) {
+    const std::size_t n = std::max(expected.size(), given.size());
+    unsigned diff = expected.size() == given.size() ? 0u : 1u;
+    for (std::size_t i = 0; i < n; ++i) {
+        const auto a = static_cast<unsigned char>(i < expected.size() ? expected[i] : 0);
+        const auto b = static_cast<unsigned char>(i < given.size() ? given[i] : 0);
+        diff |= static_cast<unsigned>(a ^ b);
+    }
+    return diff == 0;
+}
+
+ClientSession::ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx,
+                             std::size_t lane, std::uint64_t id)
+    : socket_(std::move(socket)),
+      timer_(socket_.get_executor()),
+      ctx_(ctx),
+      lane_(lane),
+      id_(id),
+      reader_(ctx.config.max_client_message_bytes),
+      in_(std::make_unique<v1::ClientMessage>()),
+      reply_(std::make_unique<v1::ServerMessage>()),
+      ring_(std::max<std::size_t>(ctx.config.queue_frames, 1)),
+      request_tokens_(static_cast<double>(ctx.config.client_message_burst)),
+      last_refill_(std::chrono::steady_clock::now()) {
+    in_flight_.reserve(kMaxBatch);
+    buffers_.reserve(kMaxBatch);
+}
+
+ClientSession::~ClientSession() = default;
+
+void ClientSession::start() {
+    boost::system::error_code ec;
+    const auto peer = socket_.remote_endpoint(ec);
+    peer_is_loopback_ = !ec && is_loopback(peer.address());
+    if (SharedBytes hello = ctx_.hello()) replies_.push_back(std::move(hello));
+    do_write();
+    do_read();
+    arm_timer(std::chrono::milliseconds(ctx_.config.subscribe_timeout_ms));
+}
+
+// ---------------------------------------------------------------------------- read
+
+void ClientSession::do_read() {
+    if (closed_) return;
+    const auto area = reader_.write_area();
+    socket_.async_read_some(asio::buffer(area.data(), area.size()),
+                            [self = shared_from_this()](const boost::system::error_code& ec,
+                                                        std::size_t n) { self->on_read(ec, n); });
+}
+
+void ClientSession::on_read(const boost::system::error_code& ec, std::size_t n) {
+    if (ec) return fail(ec, "read");
+    // While closing, input is read and discarded until the client closes too (or the
+    // grace timer fires): closing a socket with unread input sends RST, which can
+    // destroy the Goodbye before the client reads it.
+    if (!closing_) {
+        reader_.commit(n);
+        parse_messages();
+    }
+    do_read();
+}
+
+void ClientSession::parse_messages() {
+    for (;;) {
+        const FrameResult r = reader_.next();
+        if (r.status == FrameStatus::kNeedMore) return;
+        if (r.status == FrameStatus::kTooLarge) {
+            ctx_.counters.oversized_messages.fetch_add(1, std::memory_order_relaxed);
+            return protocol_error(CloseReason::kMalformed, LogLimiter::kOversized,
+                                  "message longer than max_client_message_bytes");
+        }
+        if (r.status == FrameStatus::kBadPrefix ||
+            !in_->ParseFromArray(r.payload.data(), static_cast<int>(r.payload.size()))) {
+            ctx_.counters.malformed_messages.fetch_add(1, std::memory_order_relaxed);
+            return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed,
+                                  "unparseable message");
+        }
+        if (!take_request_token()) {
+            ctx_.counters.rate_limited.fetch_add(1, std::memory_order_relaxed);
+            return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited,
+                                  "too many requests");
+        }
+        if (!handle(*in_)) return;
+    }
+}
+
+bool ClientSession::take_request_token() {
+    const auto now = std::chrono::steady_clock::now();
+    const double dt_s = std::chrono::duration<double>(now - last_refill_).count();
+    last_refill_ = now;
+    request_tokens_ = std::min(static_cast<double>(ctx_.config.client_message_burst),
+                               request_tokens_ + dt_s * ctx_.config.max_client_messages_per_s);
+    if (request_tokens_ < 1.0) return false;
+    request_tokens_ -= 1.0;
+    return true;
+}
+
+void ClientSession::protocol_error(CloseReason reason, LogLimiter::Kind kind, const char* what) {
+    std::uint64_t suppressed = 0;
+    if (ctx_.log.allow(kind, suppressed)) {
+        boost::system::error_code ec;
+        const auto peer = socket_.remote_endpoint(ec);
+        spdlog::warn("serve: client {} ({}) closed: {} ({} similar suppressed)", id_,
+                     ec ? std::string("?") : peer.address().to_string(), what, suppressed);
+    }
+    close_with_goodbye(reason, what);
+}
+
+bool ClientSession::handle(const v1::ClientMessage& message) {
+    using M = v1::ClientMessage;
+    switch (message.body_case()) {
+        case M::kSubscribe:
+            handle_subscribe(message);
+            break;
+        case M::kStatsRequest:
+            handle_stats(message);
+            break;
+        case M::kControl:
+            handle_control(message);
+            break;
+        case M::kPing: {
+            reply_->Clear();
+            v1::Pong* pong = reply_->mutable_pong();
+            pong->set_nonce(message.ping().nonce());
+            pong->set_client_time_us(message.ping().client_time_us());
+            pong->set_server_time_us(ctx_.wall_clock_us());
+            send_reply(*reply_);
+            break;
+        }
+        case M::BODY_NOT_SET:
+            // A newer client's message type: tolerated (forward compatibility), counted.
+            ctx_.counters.unknown_messages.fetch_add(1, std::memory_order_relaxed);
+            break;
+    }
+    if (closing_) return false;
+    // Any valid message keeps an unsubscribed client alive for another timeout.
+    if (!subscribed_) arm_timer(std::chrono::milliseconds(ctx_.config.subscribe_timeout_ms));
+    return true;
+}
+
+void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
+    const v1::Subscribe& sub = message.subscribe();
+    if (static_cast<std::uint32_t>(sub.subject_ids_size()) > kMaxSubscribeSubjects) {
+        ctx_.counters.malformed_messages.fetch_add(1, std::memory_order_relaxed);
+        return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed,
+                              "too many subjects in Subscribe");
+    }
+    unsubscribe();
+    subjects_.assign(sub.subject_ids().begin(), sub.subject_ids().end());
+    std::sort(subjects_.begin(), subjects_.end());
+    subjects_.erase(std::unique(subjects_.begin(), subjects_.end()), subjects_.end());
+    decimation_ = std::clamp<std::uint32_t>(sub.decimation(), 1, kMaxDecimation);
+    fields_ = normalize_fields(sub.fields());
+    decimation_counts_.clear();
+    ctx_.broadcaster.subscribe(lane_, shared_from_this(), subjects_, fields_);
+    subscribed_ = true;
+    ctx_.counters.subscriptions.fetch_add(1, std::memory_order_relaxed);
+    timer_.cancel();  // a subscribed client may stay silent
+
+    reply_->Clear();
+    v1::Subscribed* ack = reply_->mutable_subscribed();
+    for (std::uint32_t s : subjects_) ack->add_subject_ids(s);
+    ack->set_decimation(decimation_);
+    ack->set_fields(fields_);
+    ack->set_queue_frames(static_cast<std::uint32_t>(ring_.size()));
+    send_reply(*reply_);
+}
+
+void ClientSession::unsubscribe() {
+    if (!subscribed_) return;
+    ctx_.broadcaster.unsubscribe(lane_, this, subjects_, fields_);
+    subscribed_ = false;
+    ring_clear();
+}
+
+void ClientSession::handle_stats(const v1::ClientMessage& message) {
+    ctx_.counters.stats_requests.fetch_add(1, std::memory_order_relaxed);
+    v1::ServerMessage reply;  // rare: a fresh message keeps reply_ small
+    v1::Stats* stats = reply.mutable_stats();
+    stats->set_request_id(message.stats_request().request_id());
+    stats->set_server_time_us(ctx_.wall_clock_us());
+    auto add_counters = [stats](const std::vector<NamedCounter>& counters) {
+        for (const NamedCounter& c : counters) {
+            v1::Counter* out = stats->add_counters();
+            out->set_name(c.name);
+            out->set_value(c.value);
+        }
+    };
+    add_counters(ctx_.counters.snapshot());
+    if (ctx_.handlers.stats) {
+        const StatsSnapshot snapshot = ctx_.handlers.stats();
+        add_counters(snapshot.counters);
+        for (const StageLatencySummary& l : snapshot.latencies) {
+            v1::StageLatency* out = stats->add_latencies();
+            out->set_stage(l.stage);
+            out->set_count(l.count);
+            out->set_p50_us(l.p50_us);
+            out->set_p90_us(l.p90_us);
+            out->set_p99_us(l.p99_us);
+            out->set_max_us(l.max_us);
+        }
+    }
+    send_reply(reply);
+}
+
+void ClientSession::handle_control(const v1::ClientMessage& message) {
+    const v1::ControlRequest& request = message.control();
+    const ServeConfig& config = ctx_.config;
+    auto refuse = [&](ServeCounters::C& counter, const char* why) {
+        counter.fetch_add(1, std::memory_order_relaxed);
+        std::uint64_t suppressed = 0;
+        if (ctx_.log.allow(LogLimiter::kControlRefused, suppressed)) {
+            spdlog::warn("serve: control request from client {} refused: {} ({} suppressed)",
+                         id_, why, suppressed);
+        }
+        return ControlResult::failure(why);
+    };
+    ControlResult result;
+    if (config.control_token.empty()) {
+        result = refuse(ctx_.counters.control_refused_disabled, "control disabled (no token configured)");
+    } else if (config.control_loopback_only && !peer_is_loopback_) {
+        result = refuse(ctx_.counters.control_refused_not_loopback, "control only from loopback");
+    } else if (request.token().empty()) {
+        result = refuse(ctx_.counters.control_refused_no_token, "token required");
+    } else if (!token_equal(config.control_token, request.token())) {
+        result = refuse(ctx_.counters.control_refused_bad_token, "bad token");
+    } else {
+        const ControlHandlers& h = ctx_.handlers;
+        using R = v1::ControlRequest;
+        auto unsupported = [] { return ControlResult::failure("not supported by this server"); };
+        switch (request.action_case()) {
+            case R::kCalibrate: {
+                const auto pose = request.calibrate().pose() == v1::POSE_N ? CalibrationPose::kN
+                                                                            : CalibrationPose::kT;
+                result = h.calibrate ? h.calibrate(request.calibrate().subject_id(), pose)
+                                     : unsupported();
+                break;
+            }
+            case R::kStartRecording:
+                result = h.start_recording ? h.start_recording(request.start_recording().path())
+                                           : unsupported();
+                break;
+            case R::kStopRecording:
+                result = h.stop_recording ? h.stop_recording() : unsupported();
+                break;
+            case R::kReload:
+                result = h.reload ? h.reload() : unsupported();
+                break;
+            case R::ACTION_NOT_SET:
+                result = ControlResult::failure("no action in request");
+                break;
+        }
+        (result.ok ? ctx_.counters.control_ok : ctx_.counters.control_failed)
+            .fetch_add(1, std::memory_order_relaxed);
+    }
+    reply_->Clear();
+    v1::ControlReply* reply = reply_->mutable_control_reply();
+    reply->set_request_id(request.request_id());
+    reply->set_ok(result.ok);
+    reply->set_error(result.error);
+    send_reply(*reply_);
+}
+
+void ClientSession::send_reply(const v1::ServerMessage& message) {
+    if (closing_) return;
+    if (replies_.size() >= kMaxPendingReplies) {
+        // The client asks but does not read its answers.
+        ctx_.counters.rate_limited.fetch_add(1, std::memory_order_relaxed);
+        return close();
+    }
+    SharedBytes bytes = encode_server_message(message);
+    if (!bytes) return;
+    replies_.push_back(std::move(bytes));
+    if (!writing_) do_write();
+}
+
+// --------------------------------------------------------------------------- write
+
+void ClientSession::deliver(const EncodedFrame& frame) {
+    if (!subscribed_ || closing_) return;
+    if (decimation_ > 1) {
+        auto it = std::find_if(decimation_counts_.begin(), decimation_counts_.end(),
+                               [&](const auto& p) { return p.first == frame.subject_id; });
+        if (it == decimation_counts_.end()) {
+            decimation_counts_.emplace_back(frame.subject_id, 0);
+            it = decimation_counts_.end() - 1;
+        }
+        if (it->second++ % decimation_ != 0) return;
+    }
+    const SharedBytes& bytes = frame.by_fields[fields_];
+    if (!bytes) return;  // subscribed after this frame was encoded
+    if (ring_full()) {
+        ring_pop();
+        ++dropped_unreported_;
+        ++dropped_total_;
+        ctx_.counters.frames_dropped.fetch_add(1, std::memory_order_relaxed);
+    }
+    ring_push(bytes);
+    if (!writing_) do_write();
+}
+
+void ClientSession::do_write() {
+    if (closed_ || writing_) return;
+    in_flight_.clear();
+    buffers_.clear();
+    in_flight_frames_ = 0;
+    if (dropped_unreported_ > 0 && !closing_) {
+        reply_->Clear();
+        reply_->mutable_drops()->set_dropped(dropped_unreported_);
+        reply_->mutable_drops()->set_dropped_total(dropped_total_);
+        dropped_unreported_ = 0;
+        if (SharedBytes notice = encode_server_message(*reply_)) in_flight_.push_back(notice);
+    }
+    while (!replies_.empty() && in_flight_.size() < kMaxBatch) {
+        in_flight_.push_back(std::move(replies_.front()));
+        replies_.pop_front();
+    }
+    while (ring_size_ > 0 && in_flight_.size() < kMaxBatch) {
+        in_flight_.push_back(ring_pop());
+        ++in_flight_frames_;
+    }
+    if (in_flight_.empty()) {
+        if (closing_ && !send_shut_) {
+            // Goodbye written: FIN, then wait for the client's close (or the timer).
+            boost::system::error_code ignored;
+            socket_.shutdown(asio::ip::tcp::socket::shutdown_send, ignored);
+            send_shut_ = true;
+        }
+        return;
+    }
+    for (const SharedBytes& b : in_flight_) buffers_.emplace_back(b->data(), b->size());
+    writing_ = true;
+    asio::async_write(socket_, buffers_,
+                      [self = shared_from_this()](const boost::system::error_code& ec,
+                                                  std::size_t n) { self->on_write(ec, n); });
+}
+
+void ClientSession::on_write(const boost::system::error_code& ec, std::size_t n) {
+    writing_ = false;
+    if (ec) {
+        if (ec != asio::error::operation_aborted) {
+            ctx_.counters.write_errors.fetch_add(1, std::memory_order_relaxed);
+        }
+        return fail(ec, "write");
+    }
+    ctx_.counters.bytes_sent.fetch_add(n, std::memory_order_relaxed);
+    ctx_.counters.frames_sent.fetch_add(in_flight_frames_, std::memory_order_relaxed);
+    in_flight_.clear();  // release the shared buffers now, not at the next write
+    do_write();
+}
+
+// ------------------------------------------------------------------- ring buffer
+
+void ClientSession::ring_push(SharedBytes bytes) {
+    ring_[(ring_head_ + ring_size_) % ring_.size()] = std::move(bytes);
+    ++ring_size_;
+}
+
+SharedBytes ClientSession::ring_pop() {
+    SharedBytes out = std::move(ring_[ring_head_]);
+    ring_head_ = (ring_head_ + 1) % ring_.size();
+    --ring_size_;
+    return out;
+}
+
+void ClientSession::ring_clear() {
+    while (ring_size_ > 0) ring_pop();
+    ring_head_ = 0;
+}
+
+// ------------------------------------------------------------- timers and closing
+
+void ClientSession::arm_timer(std::chrono::milliseconds after) {
+    timer_.expires_after(after);
+    timer_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
+        self->on_timer(ec);
+    });
+}
+
+void ClientSession::on_timer(const boost::system::error_code& ec) {
+    if (ec) return fail(ec, "timer");
+    // Re-armed after this expiry was already queued: not a timeout.
+    if (timer_.expiry() > asio::steady_timer::clock_type::now()) return;
+    if (closed_) return;
+    if (closing_) return close();  // the client did not take its Goodbye in time
+    if (!subscribed_) {
+        ctx_.counters.idle_timeouts.fetch_add(1, std::memory_order_relaxed);
+        protocol_error(CloseReason::kTimeout, LogLimiter::kIdle,
+                       "nothing received within subscribe_timeout_ms");
+    }
+}
+
+void ClientSession::fail(const boost::system::error_code& ec, const char* what) {
+    if (ec == asio::error::operation_aborted) return;  // our own cancel/close
+    if (ec != asio::error::eof && ec != asio::error::connection_reset &&
+        ec != asio::error::broken_pipe) {
+        std::uint64_t suppressed = 0;
+        if (ctx_.log.allow(LogLimiter::kIoError, suppressed)) {
+            spdlog::info("serve: client {} {}: {} ({} similar suppressed)", id_, what,
+                         ec.message(), suppressed);
+        }
+    }
+    close();
+}
+
+void ClientSession::close_with_goodbye(CloseReason reason, std::string_view text) {
+    if (closing_ || closed_) return;
+    closing_ = true;
+    ring_clear();
+    if (SharedBytes bye = encode_goodbye(reason, text)) replies_.push_back(std::move(bye));
+    arm_timer(std::chrono::milliseconds(ctx_.config.close_grace_ms));
+    if (!writing_) do_write();
+}
+
+void ClientSession::close() {
+    if (closed_) return;
+    closed_ = true;
+    closing_ = true;
+    boost::system::error_code ignored;
+    timer_.cancel();
+    socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+    socket_.close(ignored);
+    unsubscribe();
+    replies_.clear();
+    ctx_.counters.connections_closed.fetch_add(1, std::memory_order_relaxed);
+    ctx_.on_closed(lane_, id_);
+}
+
+}  // namespace mocap::serve

@@ -1,0 +1,157 @@
+// client_session.hpp — one connected client of the pose service (Boost.Asio).
+//
+// Thread model: a session lives on exactly one serve thread (its lane's io_context,
+// run by one thread), so its handlers never run concurrently and need no strand or
+// lock. Everything a session does is asynchronous; nothing here blocks.
+//
+// Conversation (docs/client-protocol.md): the server sends Hello at once; the client
+// must send a valid message within subscribe_timeout_ms, and keep doing so until it
+// has subscribed (then it may only read). Every write is a batch of whole messages
+// and there is ONE write in flight per client. Frames wait in a bounded queue of
+// queue_frames; when it is full the OLDEST frame is dropped, counted, and announced
+// to this client by a DropNotice written before its next frame. Replies (Subscribed,
+// Stats, ControlReply, Pong) use a separate small queue and are never dropped.
+// Garbage, an oversized length, a flood of requests or silence before subscribing:
+// counted, logged (rate-limited), Goodbye written, FIN sent, further input discarded
+// until the client closes or close_grace_ms passes, then closed.
+//
+// Ownership: shared_ptr (enable_shared_from_this); the server's session table, the
+// broadcaster's index and pending handlers hold it. Cost per delivered frame: a
+// shared_ptr copy into the ring; per write: one writev of up to kMaxBatch messages.
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "core/asio.hpp"
+#include "serve/framing.hpp"
+#include "serve/pose_broadcaster.hpp"
+#include "serve/serve_config.hpp"
+#include "serve/serve_counters.hpp"
+
+namespace mocap::v1 {
+class ClientMessage;
+class ServerMessage;
+}  // namespace mocap::v1
+
+namespace mocap::serve {
+
+/// Why the server closes a connection (mirrors mocap.v1.GoodbyeReason).
+enum class CloseReason { kServerFull = 1, kTimeout, kMalformed, kRateLimited, kShutdown };
+
+/// Goodbye message bytes (length-prefixed) for `reason`.
+SharedBytes encode_goodbye(CloseReason reason, std::string_view text);
+
+/// Constant-time token comparison (time depends only on the longer length).
+bool token_equal(std::string_view expected, std::string_view given);
+
+/// What every session of one server shares. Owned by PoseServer; outlives sessions.
+struct SessionContext {
+    const ServeConfig& config;
+    const ControlHandlers& handlers;
+    ServeCounters& counters;
+    LogLimiter& log;
+    PoseBroadcaster& broadcaster;
+    std::function<SharedBytes()> hello;  ///< current Hello bytes (any thread)
+    std::function<std::int64_t()> wall_clock_us;
+    /// Called once on the lane thread when the session has closed.
+    std::function<void(std::size_t lane, std::uint64_t id)> on_closed;
+};
+
+class ClientSession : public std::enable_shared_from_this<ClientSession> {
+public:
+    /// Most messages written in one batch (one writev).
+    static constexpr std::size_t kMaxBatch = 32;
+    /// Replies that may wait for a client that does not read; beyond: closed.
+    static constexpr std::size_t kMaxPendingReplies = 16;
+
+    /// `socket` must belong to the lane's io_context.
+    ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, std::size_t lane,
+                  std::uint64_t id);
+    ~ClientSession();
+    ClientSession(const ClientSession&) = delete;
+    ClientSession& operator=(const ClientSession&) = delete;
+
+    /// Lane thread: sends Hello, starts the read loop and the subscribe timer.
+    void start();
+    /// Lane thread: queue `frame` if subscribed to its subject (honouring decimation);
+    /// starts a write if none is in flight. Never closes the session synchronously.
+    void deliver(const EncodedFrame& frame);
+    /// Lane thread: close now (no Goodbye). Idempotent.
+    void close();
+    /// Lane thread: write Goodbye (after pending replies), then close; frames stop.
+    void close_with_goodbye(CloseReason reason, std::string_view text);
+
+    [[nodiscard]] std::uint64_t id() const { return id_; }
+    [[nodiscard]] std::uint64_t dropped_total() const { return dropped_total_; }
+
+private:
+    void do_read();
+    void on_read(const boost::system::error_code& ec, std::size_t n);
+    void parse_messages();
+    void do_write();
+    void on_write(const boost::system::error_code& ec, std::size_t n);
+    void arm_timer(std::chrono::milliseconds after);
+    void on_timer(const boost::system::error_code& ec);
+    void fail(const boost::system::error_code& ec, const char* what);
+
+    /// Returns false if the session is closing because of this message.
+    bool handle(const v1::ClientMessage& message);
+    void handle_subscribe(const v1::ClientMessage& message);
+    void handle_stats(const v1::ClientMessage& message);
+    void handle_control(const v1::ClientMessage& message);
+    void send_reply(const v1::ServerMessage& message);
+    bool take_request_token();
+    void protocol_error(CloseReason reason, LogLimiter::Kind kind, const char* what);
+    void unsubscribe();
+
+    // Bounded ring of frames waiting to be written (capacity queue_frames).
+    bool ring_full() const { return ring_size_ == ring_.size(); }
+    void ring_push(SharedBytes bytes);
+    SharedBytes ring_pop();
+    void ring_clear();
+
+    asio::ip::tcp::socket socket_;
+    asio::steady_timer timer_;
+    SessionContext& ctx_;
+    const std::size_t lane_;
+    const std::uint64_t id_;
+    bool peer_is_loopback_ = false;
+
+    DelimitedReader reader_;
+    std::unique_ptr<v1::ClientMessage> in_;     ///< reused parse target
+    std::unique_ptr<v1::ServerMessage> reply_;  ///< reused reply scratch
+
+    bool subscribed_ = false;
+    std::vector<std::uint32_t> subjects_;  ///< sorted, unique; empty = all
+    std::uint32_t decimation_ = 1;
+    std::uint32_t fields_ = 0;
+    std::vector<std::pair<std::uint32_t, std::uint64_t>> decimation_counts_;  ///< per subject
+
+    std::vector<SharedBytes> ring_;
+    std::size_t ring_head_ = 0;
+    std::size_t ring_size_ = 0;
+    std::deque<SharedBytes> replies_;
+    std::vector<SharedBytes> in_flight_;
+    std::vector<asio::const_buffer> buffers_;
+    std::size_t in_flight_frames_ = 0;
+    bool writing_ = false;
+    bool closing_ = false;
+    bool closed_ = false;
+    bool send_shut_ = false;  ///< Goodbye written and FIN sent
+
+    std::uint64_t dropped_unreported_ = 0;
+    std::uint64_t dropped_total_ = 0;
+
+    double request_tokens_ = 0;
+    std::chrono::steady_clock::time_point last_refill_{};
+};
+
+}  // namespace mocap::serve

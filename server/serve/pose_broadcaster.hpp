@@ -1,0 +1,85 @@
+// pose_broadcaster.hpp — fan-out of encoded frames to the client sessions.
+//
+// publish() is called by the daemon's assembler thread(s). It encodes the frame once
+// per field selection that some client uses (nothing when nobody listens), then hands
+// the shared buffers to every serve thread ("lane") through a small mutex-guarded
+// backlog and one wake-up post. On its own thread, each lane walks its subscription
+// index and gives the frame to each subscribed session, which queues it (bounded,
+// drop-oldest) and writes it when its previous write has completed. publish() never
+// waits for a client: its cost is the encoding plus one short lock per lane.
+//
+// Thread-safety: publish() and the field-user counts from any thread; subscribe(),
+// unsubscribe() and drain only on the owning lane's io_context thread.
+// Memory: backlog vectors are reserved at construction (publish_backlog_frames per
+// lane); each published frame allocates only its encoded buffers.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+#include "core/asio.hpp"
+#include "core/frame.hpp"
+#include "serve/pose_encoder.hpp"
+#include "serve/pose_frame.hpp"
+#include "serve/serve_counters.hpp"
+
+namespace mocap::serve {
+
+class ClientSession;
+
+/// One frame as every client may receive it: one shared buffer per field selection in
+/// use (index = normalised fields; null where nobody subscribed with that selection).
+struct EncodedFrame {
+    std::uint32_t subject_id = 0;
+    std::uint64_t sync = 0;
+    std::array<SharedBytes, kFieldCombinations> by_fields{};
+};
+
+class PoseBroadcaster {
+public:
+    /// `lanes`: one io_context per serve thread (not owned; must outlive this object).
+    PoseBroadcaster(std::vector<asio::io_context*> lanes, std::size_t backlog_frames,
+                    std::function<std::int64_t()> wall_clock_us, ServeCounters& counters);
+    ~PoseBroadcaster();
+    PoseBroadcaster(const PoseBroadcaster&) = delete;
+    PoseBroadcaster& operator=(const PoseBroadcaster&) = delete;
+
+    /// Any thread. Encodes and queues `frame` for every lane; returns at once.
+    /// Precondition: as PoseEncoder::encode_frame.
+    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+
+    /// After stop(), publish() is a no-op (used while the server shuts down).
+    void stop() { stopped_.store(true, std::memory_order_release); }
+
+    /// Lane thread only. `subjects` empty = every subject. `fields` normalised.
+    void subscribe(std::size_t lane, const std::shared_ptr<ClientSession>& session,
+                   const std::vector<std::uint32_t>& subjects, std::uint32_t fields);
+    /// Lane thread only; undoes subscribe() for the same arguments.
+    void unsubscribe(std::size_t lane, const ClientSession* session,
+                     const std::vector<std::uint32_t>& subjects, std::uint32_t fields);
+
+    [[nodiscard]] std::size_t lane_count() const { return lanes_.size(); }
+
+private:
+    struct Lane;
+    void drain(Lane& lane);
+
+    std::vector<std::unique_ptr<Lane>> lanes_;
+    std::size_t backlog_frames_;
+    std::function<std::int64_t()> wall_clock_us_;
+    ServeCounters& counters_;
+    std::atomic<bool> stopped_{false};
+    std::array<std::atomic<std::uint32_t>, kFieldCombinations> field_users_{};
+
+    std::mutex encode_mutex_;  ///< guards encoder_ (publishers may be several threads)
+    PoseEncoder encoder_;
+};
+
+}  // namespace mocap::serve

@@ -1,0 +1,213 @@
+// pose_server.cpp — acceptor, lanes (one io_context + thread each), session table.
+#include "serve/pose_server.hpp"
+
+#include <pthread.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+
+#include "mocap/v1/mocap.pb.h"
+
+namespace mocap::serve {
+
+PoseServer::PoseServer(ServeConfig config, ControlHandlers handlers)
+    : config_(std::move(config)), handlers_(std::move(handlers)) {
+    if (!config_.wall_clock_us) {
+        config_.wall_clock_us = [] {
+            return std::chrono::duration_cast<std::chrono::microseconds>(
+                       std::chrono::system_clock::now().time_since_epoch())
+                .count();
+        };
+    }
+    const std::size_t lane_count = std::max<std::size_t>(config_.io_threads, 1);
+    std::vector<asio::io_context*> ios;
+    for (std::size_t i = 0; i < lane_count; ++i) {
+        lanes_.push_back(std::make_unique<Lane>());
+        ios.push_back(&lanes_.back()->io);
+    }
+    broadcaster_ = std::make_unique<PoseBroadcaster>(std::move(ios), config_.publish_backlog_frames,
+                                                     config_.wall_clock_us, counters_);
+    session_context_ = std::make_unique<SessionContext>(SessionContext{
+        config_, handlers_, counters_, log_, *broadcaster_, [this] { return hello(); },
+        config_.wall_clock_us,
+        [this](std::size_t lane, std::uint64_t id) { on_session_closed(lane, id); }});
+    goodbye_full_ = encode_goodbye(CloseReason::kServerFull, "client limit reached");
+    set_description({});
+}
+
+PoseServer::~PoseServer() { stop(); }
+
+void PoseServer::set_description(const ServeDescription& description) {
+    v1::ServerMessage message;
+    v1::Hello* hello = message.mutable_hello();
+    hello->set_server_version(config_.server_version);
+    hello->set_protocol_version(1);
+    hello->set_max_client_message_bytes(config_.max_client_message_bytes);
+    hello->set_subscribe_timeout_ms(config_.subscribe_timeout_ms);
+    hello->set_frame_rate_hz(config_.frame_rate_hz);
+    hello->set_world_frame(config_.world_frame);
+    v1::SkeletonDefinition* skeleton = hello->mutable_skeleton();
+    for (const SegmentInfo& s : description.segments) {
+        v1::Segment* out = skeleton->add_segments();
+        out->set_name(s.name);
+        out->set_parent(s.parent);
+        out->set_offset_x_m(s.offset_m[0]);
+        out->set_offset_y_m(s.offset_m[1]);
+        out->set_offset_z_m(s.offset_m[2]);
+        out->set_node_id(s.node_id);
+    }
+    for (const std::string& name : description.joint_angle_names) {
+        skeleton->add_joint_angle_names(name);
+    }
+    for (const SubjectInfo& s : description.subjects) {
+        v1::Subject* out = hello->add_subjects();
+        out->set_id(s.id);
+        out->set_name(s.name);
+    }
+    SharedBytes bytes = encode_server_message(message);
+    std::lock_guard lock(hello_mutex_);
+    hello_ = std::move(bytes);
+}
+
+SharedBytes PoseServer::hello() const {
+    std::lock_guard lock(hello_mutex_);
+    return hello_;
+}
+
+bool PoseServer::start(std::string& error) {
+    if (running_.load()) {
+        error = "pose server already started";
+        return false;
+    }
+    boost::system::error_code ec;
+    const auto address = asio::ip::make_address(config_.bind_address, ec);
+    if (ec) {
+        error = "bind address '" + config_.bind_address + "': " + ec.message();
+        return false;
+    }
+    const asio::ip::tcp::endpoint endpoint(address, config_.port);
+    const std::string where = config_.bind_address + ":" + std::to_string(config_.port);
+    auto acceptor = std::make_unique<asio::ip::tcp::acceptor>(lanes_[0]->io);
+    if (acceptor->open(endpoint.protocol(), ec) ||
+        acceptor->set_option(asio::socket_base::reuse_address(true), ec) ||
+        acceptor->bind(endpoint, ec) || acceptor->listen(asio::socket_base::max_listen_connections, ec)) {
+        error = "bind " + where + ": " + ec.message();
+        return false;
+    }
+    bound_port_ = acceptor->local_endpoint(ec).port();
+    acceptor_ = std::move(acceptor);
+    accept_retry_ = std::make_unique<asio::steady_timer>(lanes_[0]->io);
+    running_ = true;
+    do_accept();
+    for (std::size_t i = 0; i < lanes_.size(); ++i) {
+        Lane& lane = *lanes_[i];
+        lane.thread = std::thread([&lane, i] {
+            const std::string name = "mocap-serve-" + std::to_string(i);
+            pthread_setname_np(pthread_self(), name.c_str());
+            auto guard = asio::make_work_guard(lane.io);
+            lane.io.run();
+        });
+    }
+    spdlog::info("serve: listening on {}:{} ({} thread(s), max {} clients)", config_.bind_address,
+                 bound_port_.load(), lanes_.size(), config_.max_clients);
+    return true;
+}
+
+void PoseServer::stop() {
+    if (!running_.exchange(false)) return;
+    broadcaster_->stop();
+    for (std::size_t i = 0; i < lanes_.size(); ++i) {
+        Lane& lane = *lanes_[i];
+        asio::post(lane.io, [this, &lane, i] {
+            boost::system::error_code ignored;
+            if (i == 0) {
+                acceptor_->close(ignored);
+                accept_retry_->cancel();
+            }
+            // Copy: close() erases from the table through on_session_closed().
+            std::vector<std::shared_ptr<ClientSession>> sessions;
+            sessions.reserve(lane.sessions.size());
+            for (auto& [id, session] : lane.sessions) sessions.push_back(session);
+            for (auto& session : sessions) session->close();
+            lane.io.stop();  // remaining handlers are destroyed with the io_context
+        });
+    }
+    for (auto& lane : lanes_) {
+        if (lane->thread.joinable()) lane->thread.join();
+    }
+    spdlog::info("serve: stopped");
+}
+
+void PoseServer::do_accept() {
+    asio::io_context& target = lanes_[next_lane_]->io;
+    acceptor_->async_accept(target, [this](const boost::system::error_code& ec,
+                                           asio::ip::tcp::socket socket) {
+        on_accept(ec, std::move(socket));
+    });
+}
+
+void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
+    if (ec == asio::error::operation_aborted || !running_.load()) return;
+    if (ec) {
+        // E.g. EMFILE: back off briefly instead of spinning on a failing accept.
+        counters_.accept_errors.fetch_add(1, std::memory_order_relaxed);
+        std::uint64_t suppressed = 0;
+        if (log_.allow(LogLimiter::kAcceptError, suppressed)) {
+            spdlog::warn("serve: accept: {} ({} suppressed)", ec.message(), suppressed);
+        }
+        accept_retry_->expires_after(std::chrono::milliseconds(100));
+        accept_retry_->async_wait([this](const boost::system::error_code& wait_ec) {
+            if (wait_ec) return;
+            do_accept();
+        });
+        return;
+    }
+    const std::size_t lane = next_lane_;
+    next_lane_ = (next_lane_ + 1) % lanes_.size();
+    if (active_clients_.load() >= config_.max_clients) {
+        counters_.connections_rejected_full.fetch_add(1, std::memory_order_relaxed);
+        std::uint64_t suppressed = 0;
+        if (log_.allow(LogLimiter::kClientFull, suppressed)) {
+            spdlog::warn("serve: client limit {} reached, connection refused ({} suppressed)",
+                         config_.max_clients, suppressed);
+        }
+        reject(socket);
+    } else {
+        active_clients_.fetch_add(1);
+        counters_.connections_accepted.fetch_add(1, std::memory_order_relaxed);
+        asio::post(lanes_[lane]->io, [this, lane, s = std::move(socket)]() mutable {
+            start_session(lane, std::move(s));
+        });
+    }
+    do_accept();
+}
+
+void PoseServer::reject(asio::ip::tcp::socket& socket) {
+    // A fresh socket's send buffer always has room for a few dozen bytes: one
+    // non-blocking write, no session, no state.
+    boost::system::error_code ignored;
+    socket.non_blocking(true, ignored);
+    socket.write_some(asio::buffer(*goodbye_full_), ignored);
+    socket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+    socket.close(ignored);
+}
+
+void PoseServer::start_session(std::size_t lane, asio::ip::tcp::socket socket) {
+    boost::system::error_code ignored;
+    socket.set_option(asio::ip::tcp::no_delay(true), ignored);  // frames are small and urgent
+    if (config_.send_buffer_bytes > 0) {
+        socket.set_option(asio::socket_base::send_buffer_size(
+                              static_cast<int>(config_.send_buffer_bytes)),
+                          ignored);
+    }
+    const std::uint64_t id = next_id_.fetch_add(1);
+    auto session = std::make_shared<ClientSession>(std::move(socket), *session_context_, lane, id);
+    lanes_[lane]->sessions.emplace(id, session);
+    session->start();
+}
+
+void PoseServer::on_session_closed(std::size_t lane, std::uint64_t id) {
+    if (lanes_[lane]->sessions.erase(id) > 0) active_clients_.fetch_sub(1);
+}
+
+}  // namespace mocap::serve

@@ -1,0 +1,115 @@
+// pose_server.hpp — the protobuf pose service (TCP, default port 7001).
+//
+// How the daemon uses it:
+//
+//   serve::PoseServer server(config, handlers);   // ServeConfig + ControlHandlers
+//   server.set_description(description);          // segments, joint names, subjects
+//   std::string error;
+//   if (!server.start(error)) { ... }             // binds, starts io_threads threads
+//   ... assembler thread, per subject frame:
+//   server.publish(subject_frame, skeleton_pose); // encode once, fan out, never blocks
+//   ... on SIGTERM:
+//   server.stop();                                // closes every client, joins threads
+//
+// Threads: start() runs `io_threads` serve threads, each with its own io_context (a
+// "lane"). Lane 0 also runs the acceptor; accepted clients are spread round-robin over
+// the lanes and stay on theirs (see client_session.hpp for one client's model).
+// Control and stats callbacks run on serve threads. publish() may be called from any
+// thread; set_description() too (clients connecting later see the new Hello).
+//
+// Counters: counters() / counter_snapshot(); they are also part of every Stats reply.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "core/asio.hpp"
+#include "core/frame.hpp"
+#include "serve/client_session.hpp"
+#include "serve/pose_broadcaster.hpp"
+#include "serve/pose_frame.hpp"
+#include "serve/serve_config.hpp"
+#include "serve/serve_counters.hpp"
+
+namespace mocap::serve {
+
+class PoseServer {
+public:
+    explicit PoseServer(ServeConfig config, ControlHandlers handlers = {});
+    /// Calls stop().
+    ~PoseServer();
+    PoseServer(const PoseServer&) = delete;
+    PoseServer& operator=(const PoseServer&) = delete;
+
+    /// Any thread. Builds the Hello that clients connecting from now on receive.
+    void set_description(const ServeDescription& description);
+
+    /// Binds bind_address:port and starts the serve threads. On failure returns false
+    /// and sets `error` (e.g. "bind 0.0.0.0:7001: Address already in use"). Call once.
+    [[nodiscard]] bool start(std::string& error);
+
+    /// Closes the acceptor and every client, joins the serve threads. Idempotent.
+    void stop();
+
+    /// The bound port (useful with port 0); 0 before start().
+    [[nodiscard]] std::uint16_t port() const { return bound_port_.load(); }
+
+    /// Any thread; see PoseBroadcaster::publish.
+    void publish(const SubjectFrame& frame, const SkeletonPose& pose) {
+        broadcaster_->publish(frame, pose);
+    }
+
+    /// Connected clients (including ones still handshaking).
+    [[nodiscard]] std::size_t client_count() const { return active_clients_.load(); }
+    [[nodiscard]] const ServeCounters& counters() const { return counters_; }
+    [[nodiscard]] std::vector<NamedCounter> counter_snapshot() const {
+        return counters_.snapshot();
+    }
+    [[nodiscard]] const ServeConfig& config() const { return config_; }
+
+private:
+    struct Lane {
+        asio::io_context io{1};
+        std::unordered_map<std::uint64_t, std::shared_ptr<ClientSession>> sessions;  // lane thread
+        std::thread thread;
+    };
+
+    void do_accept();
+    void on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket);
+    void start_session(std::size_t lane, asio::ip::tcp::socket socket);
+    void reject(asio::ip::tcp::socket& socket);
+    void on_session_closed(std::size_t lane, std::uint64_t id);
+    SharedBytes hello() const;
+
+    ServeConfig config_;
+    ControlHandlers handlers_;
+    ServeCounters counters_;
+    LogLimiter log_;
+
+    mutable std::mutex hello_mutex_;
+    SharedBytes hello_;
+    SharedBytes goodbye_full_;
+
+    // Lanes (io_contexts) are declared before the broadcaster and the session context,
+    // which refer to them, and destroyed after them.
+    std::vector<std::unique_ptr<Lane>> lanes_;
+    std::unique_ptr<PoseBroadcaster> broadcaster_;
+    std::unique_ptr<SessionContext> session_context_;
+    std::unique_ptr<asio::ip::tcp::acceptor> acceptor_;  // lane 0
+    std::unique_ptr<asio::steady_timer> accept_retry_;   // lane 0: back-off after errors
+
+    std::size_t next_lane_ = 0;  // lane 0 thread only
+    std::atomic<std::uint64_t> next_id_{1};
+    std::atomic<std::size_t> active_clients_{0};
+    std::atomic<std::uint16_t> bound_port_{0};
+    std::atomic<bool> running_{false};
+};
+
+}  // namespace mocap::serve

@@ -1,0 +1,100 @@
+// serve_config.hpp — everything the daemon gives the pose service: settings, the
+// skeleton/subject description announced in Hello, and the control/stats callbacks.
+//
+// Units are in the names. The daemon fills these from its TOML config; the defaults
+// here are the documented defaults (config/mocapd.toml repeats them).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace mocap::serve {
+
+struct ServeConfig {
+    std::string bind_address = "0.0.0.0";  ///< IPv4/IPv6 literal to listen on
+    std::uint16_t port = 7001;             ///< 0 = any free port (tests); see PoseServer::port()
+    std::size_t io_threads = 1;            ///< serve threads; each owns a share of the clients
+    std::size_t max_clients = 256;         ///< connections beyond this get Goodbye(SERVER_FULL)
+    std::size_t queue_frames = 64;         ///< per-client frame queue; the oldest frame is
+                                           ///< dropped (and announced) when it is full
+    std::uint32_t subscribe_timeout_ms = 5000;  ///< an unsubscribed client must send a valid
+                                                ///< message at least this often
+    std::uint32_t max_client_message_bytes = 4096;  ///< longer ClientMessages close the link
+    double max_client_messages_per_s = 20.0;  ///< sustained request rate per client
+    std::uint32_t client_message_burst = 40;  ///< requests allowed at once before the rate applies
+    std::uint32_t send_buffer_bytes = 0;  ///< SO_SNDBUF per client; 0 = kernel default. Small
+                                          ///< values keep a lagging client's data fresh.
+    std::uint32_t close_grace_ms = 1000;  ///< time a closing client gets to read its Goodbye
+    std::size_t publish_backlog_frames = 4096;  ///< frames waiting for one serve thread;
+                                                ///< beyond it frames are dropped (counted)
+    std::string control_token;         ///< empty = every control request is refused
+    bool control_loopback_only = true;  ///< refuse control from non-loopback peers
+    std::uint32_t frame_rate_hz = 100;  ///< announced in Hello
+    std::string world_frame = "ENU";    ///< announced in Hello ("ENU" or "NED")
+    std::string server_version = "mocapd";  ///< announced in Hello
+    /// Wall clock (CLOCK_REALTIME µs) for encoded_us and Stats; empty = system_clock.
+    std::function<std::int64_t()> wall_clock_us;
+};
+
+struct SegmentInfo {
+    std::string name;
+    int parent = -1;                    ///< index of the parent segment; -1 = root
+    std::array<double, 3> offset_m{};   ///< joint position in the parent's frame
+    std::uint32_t node_id = 0;          ///< CAN node id of the segment's sensor
+};
+
+struct SubjectInfo {
+    std::uint32_t id = 0;
+    std::string name;
+};
+
+/// What Hello tells every client: segment order of frames, joint-angle names, subjects.
+struct ServeDescription {
+    std::vector<SegmentInfo> segments;
+    std::vector<std::string> joint_angle_names;
+    std::vector<SubjectInfo> subjects;
+};
+
+enum class CalibrationPose { kT, kN };
+
+struct ControlResult {
+    bool ok = false;
+    std::string error;  ///< shown to the client when !ok
+    static ControlResult success() { return {true, {}}; }
+    static ControlResult failure(std::string why) { return {false, std::move(why)}; }
+};
+
+struct NamedCounter {
+    std::string name;
+    std::uint64_t value = 0;
+};
+
+struct StageLatencySummary {
+    std::string stage;  ///< e.g. "ingest", "filter", "assembly", "encode"
+    std::uint64_t count = 0;
+    double p50_us = 0, p90_us = 0, p99_us = 0, max_us = 0;
+};
+
+struct StatsSnapshot {
+    std::vector<NamedCounter> counters;
+    std::vector<StageLatencySummary> latencies;
+};
+
+/// Actions the daemon performs for control requests, and its stats. Each is called on
+/// a serve thread after the token was checked; it must return quickly (start the work
+/// elsewhere and report "accepted" rather than block: it delays that thread's clients).
+/// An empty function answers "not supported". Must be safe to call from any thread.
+struct ControlHandlers {
+    std::function<ControlResult(std::uint32_t subject_id, CalibrationPose pose)> calibrate;
+    std::function<ControlResult(const std::string& path)> start_recording;  ///< "" = default
+    std::function<ControlResult()> stop_recording;
+    std::function<ControlResult()> reload;
+    /// Daemon-wide counters and stage latencies for StatsRequest (serve adds its own).
+    std::function<StatsSnapshot()> stats;
+};
+
+}  // namespace mocap::serve
