@@ -1,7 +1,9 @@
 // Sensor-node core against a register model of the MPU9250 and a fake CAN bus.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <deque>
 #include <vector>
 
@@ -189,21 +191,97 @@ TEST_F(SensorNodeTest, ConfigChangesRangeRegistersAndIsAcknowledged)
     EXPECT_EQ(st[0].gyro_range, MW_GYRO_500DPS);
 }
 
-TEST_F(SensorNodeTest, UnsupportedModeIsRejectedAndReported)
+// Sensor-frame readings for an orientation q_enu_sensor (w, x, y, z): specific force of a
+// node at rest (+1 g up) and an earth field of 20 uT north, 40 uT down, as model counts.
+void set_static_pose(mpu9250_model& imu, const std::array<double, 4>& q)
 {
+    const double w = q[0], x = q[1], y = q[2], z = q[3];
+    const double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                            {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                            {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+    const double up[3] = {0, 0, 1};
+    const double field_ut[3] = {0, 20, -40};
+    for (int i = 0; i < 3; ++i) { // sensor = R^T earth
+        double a = 0, m = 0;
+        for (int k = 0; k < 3; ++k) {
+            a += r[k][i] * up[k];
+            m += r[k][i] * field_ut[k];
+        }
+        imu.accel[i] = static_cast<int16_t>(std::lround(a * 2048.0)); // +-16 g
+        const auto counts = static_cast<int16_t>(std::lround(m / 0.15));
+        // AK8963 axes: x_ak = y, y_ak = x, z_ak = -z (ASA neutral).
+        if (i == 0) imu.mag_raw[1] = counts;
+        if (i == 1) imu.mag_raw[0] = counts;
+        if (i == 2) imu.mag_raw[2] = static_cast<int16_t>(-counts);
+    }
+    imu.gyro = {0, 0, 0};
+}
+
+double angle_deg(const float a[4], const std::array<double, 4>& b)
+{
+    const double dot = std::fabs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]);
+    return 2.0 * std::acos(std::min(1.0, dot)) * 180.0 / M_PI;
+}
+
+TEST_F(SensorNodeTest, AttitudeModeSendsTheNodesOrientation)
+{
+    const double h = std::sqrt(0.5);
+    // Level, x axis pointing north: a +90 deg turn about up from the ENU axes.
+    const std::array<double, 4> north{h, 0, 0, h};
+    // Rolled 30 deg about x, then turned 40 deg about up.
+    const double r2 = 15.0 * M_PI / 180.0, y2 = 20.0 * M_PI / 180.0;
+    const std::array<double, 4> tilted{std::cos(y2) * std::cos(r2), std::cos(y2) * std::sin(r2),
+                                       std::sin(y2) * std::sin(r2), std::sin(y2) * std::cos(r2)};
+    for (const auto& pose : {north, tilted}) {
+        fake.imu = mpu9250_model{};
+        set_static_pose(fake.imu, pose);
+        start(3);
+        fake.take_tx();
+        mw_config cfg{0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_ATTITUDE, 1};
+        mw_can_frame f{};
+        ASSERT_EQ(mw_config_encode(&cfg, &f), MW_OK);
+        fake.rx.push_back(f);
+        sensor_node_poll(&node);
+        fake.take_tx();
+        for (uint32_t c = 0; c < 100; ++c) {
+            fake.send_sync(c);
+            sensor_node_poll(&node);
+            const auto out = samples(fake.take_tx());
+            ASSERT_EQ(out.size(), 1u) << "attitude mode: ATT only";
+            mw_attitude att{};
+            ASSERT_EQ(mw_attitude_decode(&out[0], &att), MW_OK);
+            EXPECT_EQ(att.node_id, 3);
+            EXPECT_EQ(att.counter_low, c);
+            EXPECT_LT(angle_deg(att.q, pose), 1.0) << "sample " << c << " (initialised from the first)";
+        }
+    }
+}
+
+TEST_F(SensorNodeTest, AttitudeIntegratesGyroWithoutMagnetometer)
+{
+    fake.imu.mag_present = false;
+    set_static_pose(fake.imu, {1, 0, 0, 0});
     start(3);
-    fake.take_tx();
-    mw_config cfg{3, 100, MW_ACCEL_8G, MW_GYRO_1000DPS, MW_MODE_ATTITUDE, 1};
+    mw_config cfg{0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_RAW_ATTITUDE, 1};
     mw_can_frame f{};
     ASSERT_EQ(mw_config_encode(&cfg, &f), MW_OK);
     fake.rx.push_back(f);
     sensor_node_poll(&node);
-    EXPECT_EQ(fake.imu.reg(0x1C), 0x18) << "ranges unchanged";
-    EXPECT_EQ(node.counters.configs_rejected, 1u);
-    const auto st = statuses(fake.take_tx());
-    ASSERT_EQ(st.size(), 1u);
-    EXPECT_TRUE(st[0].error_flags & MW_ERRF_CONFIG_REJECTED);
-    EXPECT_EQ(st[0].mode, MW_MODE_RAW);
+    fake.take_tx();
+    fake.imu.gyro = {0, 0, 1475}; // 1475 / 16.384 = 90.03 deg/s about up
+    float last_q[4] = {0, 0, 0, 0};
+    for (uint32_t c = 0; c <= 100; ++c) {
+        fake.send_sync(c);
+        sensor_node_poll(&node);
+        const auto out = samples(fake.take_tx());
+        ASSERT_EQ(out.size(), 4u) << "raw + attitude";
+        mw_attitude att{};
+        ASSERT_EQ(mw_attitude_decode(&out[3], &att), MW_OK);
+        std::copy(att.q, att.q + 4, last_q);
+    }
+    // 100 periods of 10 ms at 90.03 deg/s after the first (initialising) sample.
+    const double yaw = 90.03 * M_PI / 180.0;
+    EXPECT_LT(angle_deg(last_q, {std::cos(yaw / 2), 0, 0, std::sin(yaw / 2)}), 0.5);
 }
 
 TEST_F(SensorNodeTest, MissingSensorFaultsThenRecovers)

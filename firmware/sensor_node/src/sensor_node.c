@@ -126,6 +126,7 @@ int sensor_node_init(sensor_node *node, const sensor_node_hal *hal, uint8_t node
     node->config.status_period_s = SENSOR_NODE_DEFAULT_STATUS_PERIOD_S;
     node->state = MW_NODE_BOOT;
     node->boot_us = now_us(node);
+    attitude_reset(&node->attitude);
     (void)init_imu(node);
     node->event_flags = MW_ERRF_RESET;
     node->status_due = 1;
@@ -157,11 +158,40 @@ static void queue_raw(sensor_node *node, mw_function kind, const int16_t xyz[3],
     }
 }
 
+/* Feeds the filter with the sample (instants = SYNC periods since the previous sample) and
+ * queues the ATT frame. */
+static void update_attitude(sensor_node *node, const mpu9250_sample *sample, uint32_t instants, uint16_t counter_low)
+{
+    float gyro[3], accel[3], mag[3];
+    if (mw_gyro_to_rad_s(sample->gyro, node->config.gyro_range, gyro) != MW_OK ||
+        mw_accel_to_m_s2(sample->accel, node->config.accel_range, accel) != MW_OK) {
+        return;
+    }
+    const int mag_ok = mw_mag_to_ut(sample->mag, mag) == MW_OK;
+    const float dt_s = (float)instants / (float)node->config.rate_hz;
+    attitude_update(&node->attitude, gyro, accel, mag_ok ? mag : NULL, dt_s);
+    if (!node->attitude.initialized) {
+        return;
+    }
+    mw_attitude att;
+    mw_can_frame frame;
+    att.node_id = node->config.node_id;
+    for (int i = 0; i < 4; ++i) {
+        att.q[i] = node->attitude.q[i];
+    }
+    att.counter_low = counter_low;
+    if (mw_attitude_encode(&att, &frame) == MW_OK) {
+        (void)sensor_node_queue_frame(node, &frame);
+    }
+}
+
 static void on_sync(sensor_node *node, const mw_sync *sync)
 {
     ++node->counters.syncs;
+    uint32_t instants = 1;
     if (node->have_sync && sync->counter - node->last_sync_counter > 1u) {
         node->counters.sync_missed += sync->counter - node->last_sync_counter - 1u;
+        instants = sync->counter - node->last_sync_counter;
     }
     node->have_sync = 1;
     node->last_sync_counter = sync->counter;
@@ -184,21 +214,19 @@ static void on_sync(sensor_node *node, const mw_sync *sync)
         node->event_flags |= MW_ERRF_MAG;
     }
     const uint16_t low = (uint16_t)sync->counter;
-    queue_raw(node, MW_FN_ACCEL, sample.accel, low);
-    queue_raw(node, MW_FN_GYRO, sample.gyro, low);
-    queue_raw(node, MW_FN_MAG, sample.mag, low);
+    if (node->config.mode != MW_MODE_ATTITUDE) {
+        queue_raw(node, MW_FN_ACCEL, sample.accel, low);
+        queue_raw(node, MW_FN_GYRO, sample.gyro, low);
+        queue_raw(node, MW_FN_MAG, sample.mag, low);
+    }
+    if (node->config.mode != MW_MODE_RAW) {
+        update_attitude(node, &sample, instants, low);
+    }
 }
 
 static void on_config(sensor_node *node, const mw_config *config)
 {
     if (config->node_id != MW_NODE_ID_BROADCAST && config->node_id != node->config.node_id) {
-        return;
-    }
-    /* Only raw mode is built into this node: it has no on-node attitude filter. */
-    if (config->mode != MW_MODE_RAW) {
-        ++node->counters.configs_rejected;
-        node->event_flags |= MW_ERRF_CONFIG_REJECTED;
-        node->status_due = 1;
         return;
     }
     if (node->state != MW_NODE_FAULT) {
@@ -207,6 +235,9 @@ static void on_config(sensor_node *node, const mw_config *config)
             ++node->counters.sensor_errors;
             node->event_flags |= MW_ERRF_IMU;
         }
+    }
+    if (node->config.mode == MW_MODE_RAW && config->mode != MW_MODE_RAW) {
+        attitude_reset(&node->attitude); /* stale while it did not run: start from a measurement */
     }
     const uint8_t own_id = node->config.node_id;
     node->config = *config;

@@ -2,7 +2,7 @@
  *
  * What it does: on every SYNC frame from the sink it reads one MPU9250 sample and queues the
  * ACCEL, GYRO and MAG frames (tagged with the low 16 bits of the SYNC counter) for CAN
- * transmission; it applies CONFIG frames addressed to it or broadcast (rate -> low-pass
+ * transmission, or in attitude mode the ATT frame of its own filter (attitude.h), or both; it applies CONFIG frames addressed to it or broadcast (rate -> low-pass
  * filter, accelerometer/gyroscope ranges, status period); it sends STATUS frames periodically
  * and early when its state or a persistent condition changes or a new kind of event occurs. Message formats: mocap_wire/mw_can.h.
  *
@@ -13,7 +13,8 @@
  * Ownership: the caller allocates `sensor_node` (about 300 bytes) and keeps it alive.
  * Threading: single context; call sensor_node_poll() from the main loop as often as possible
  * (each call drains the CAN receive path, so SYNC-to-sample latency is one loop iteration).
- * Cost: one poll with a SYNC = one 23-byte SPI burst + three frame encodes; otherwise O(1).
+ * Cost: one poll with a SYNC = one 23-byte SPI burst + three frame encodes (+ one filter
+ * update and one ATT encode in attitude modes); otherwise O(1).
  */
 #ifndef MOCAP_SENSOR_NODE_SENSOR_NODE_H
 #define MOCAP_SENSOR_NODE_SENSOR_NODE_H
@@ -22,6 +23,7 @@
 #include <stdint.h>
 
 #include "mocap_wire/mw_can.h"
+#include "sensor_node/attitude.h"
 #include "sensor_node/mpu9250.h"
 
 #ifdef __cplusplus
@@ -67,6 +69,7 @@ typedef struct sensor_node_counters {
 typedef struct sensor_node {
     sensor_node_hal hal;
     mpu9250 imu;
+    attitude_filter attitude;  /* runs only in MW_MODE_ATTITUDE / MW_MODE_RAW_ATTITUDE */
     mw_config config;          /* node_id is this node's id; rate/ranges/mode/status period in use */
     mw_node_state state;
     uint8_t event_flags;       /* MW_ERRF_* events since the last STATUS */
