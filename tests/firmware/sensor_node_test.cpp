@@ -61,6 +61,13 @@ struct fake_node_hal {
         rx.push_back(f);
     }
 
+    void send_config(const mw_config& config)
+    {
+        mw_can_frame f{};
+        ASSERT_EQ(mw_config_encode(&config, &f), MW_OK);
+        rx.push_back(f);
+    }
+
     std::vector<mw_can_frame> take_tx()
     {
         std::vector<mw_can_frame> out;
@@ -168,16 +175,11 @@ TEST_F(SensorNodeTest, ConfigChangesRangeRegistersAndIsAcknowledged)
 {
     start(7);
     fake.take_tx();
-    mw_config other{9, 100, MW_ACCEL_2G, MW_GYRO_250DPS, MW_MODE_RAW, 1};
-    mw_can_frame f{};
-    ASSERT_EQ(mw_config_encode(&other, &f), MW_OK);
-    fake.rx.push_back(f);
+    fake.send_config({9, 100, MW_ACCEL_2G, MW_GYRO_250DPS, MW_MODE_RAW, 1});
     sensor_node_poll(&node);
     EXPECT_EQ(fake.imu.reg(0x1C), 0x18) << "a CONFIG for node 9 leaves node 7 alone";
 
-    mw_config all{0, 200, MW_ACCEL_4G, MW_GYRO_500DPS, MW_MODE_RAW, 2};
-    ASSERT_EQ(mw_config_encode(&all, &f), MW_OK);
-    fake.rx.push_back(f);
+    fake.send_config({0, 200, MW_ACCEL_4G, MW_GYRO_500DPS, MW_MODE_RAW, 2});
     sensor_node_poll(&node);
     EXPECT_EQ(fake.imu.reg(0x1C), 0x08) << "ACCEL_CONFIG: +-4 g";
     EXPECT_EQ(fake.imu.reg(0x1B), 0x08) << "GYRO_CONFIG: +-500 dps";
@@ -237,10 +239,7 @@ TEST_F(SensorNodeTest, AttitudeModeSendsTheNodesOrientation)
         set_static_pose(fake.imu, pose);
         start(3);
         fake.take_tx();
-        mw_config cfg{0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_ATTITUDE, 1};
-        mw_can_frame f{};
-        ASSERT_EQ(mw_config_encode(&cfg, &f), MW_OK);
-        fake.rx.push_back(f);
+        fake.send_config({0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_ATTITUDE, 1});
         sensor_node_poll(&node);
         fake.take_tx();
         for (uint32_t c = 0; c < 100; ++c) {
@@ -262,10 +261,7 @@ TEST_F(SensorNodeTest, AttitudeIntegratesGyroWithoutMagnetometer)
     fake.imu.mag_present = false;
     set_static_pose(fake.imu, {1, 0, 0, 0});
     start(3);
-    mw_config cfg{0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_RAW_ATTITUDE, 1};
-    mw_can_frame f{};
-    ASSERT_EQ(mw_config_encode(&cfg, &f), MW_OK);
-    fake.rx.push_back(f);
+    fake.send_config({0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_RAW_ATTITUDE, 1});
     sensor_node_poll(&node);
     fake.take_tx();
     fake.imu.gyro = {0, 0, 1475}; // 1475 / 16.384 = 90.03 deg/s about up
