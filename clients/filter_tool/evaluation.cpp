@@ -49,15 +49,18 @@ EvalResult evaluate(std::span<const EvalSample> samples, double convergence_thre
     r.convergence_threshold_deg = convergence_threshold_deg;
     double s_total = 0, s_heading = 0, s_incl = 0, s_roll = 0, s_pitch = 0, s_yaw = 0;
     const double threshold_rad = convergence_threshold_deg / kRadToDeg;
-    // Walk backwards once: the convergence instant is the sample after the last one above
-    // the threshold.
+    // The convergence instant is the sample after the last one above the threshold.
     std::optional<std::size_t> last_above;
     for (std::size_t i = 0; i < samples.size(); ++i) {
         const EvalSample& s = samples[i];
         if (!s.has_reference) continue;
         const Quat q_err = filter::mul(s.q_est, filter::conj(s.q_ref));
         const double total = filter::error_total_rad(q_err);
-        if (total >= threshold_rad) last_above = i;
+        if (total >= threshold_rad) {
+            last_above = i;
+        } else if (!r.first_below_s) {
+            r.first_below_s = s.t_s - samples.front().t_s;
+        }
         if (!s.evaluated) continue;
         const filter::EulerZyx e = filter::to_euler_zyx(s.q_est);
         const filter::EulerZyx f = filter::to_euler_zyx(s.q_ref);
@@ -109,6 +112,8 @@ std::string eval_json(const EvalResult& r, std::string_view filter_name) {
     out += ",\"samples\":" + std::to_string(r.samples) + ',';
     append_number(out, "convergence_time_s",
                   r.convergence_time_s ? *r.convergence_time_s : std::numeric_limits<double>::quiet_NaN());
+    out += ',';
+    append_number(out, "first_below_s", r.first_below_s ? *r.first_below_s : std::numeric_limits<double>::quiet_NaN());
     out += ',';
     append_number(out, "convergence_threshold_deg", r.convergence_threshold_deg);
     out += ",\"filter\":";

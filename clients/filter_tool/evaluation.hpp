@@ -42,6 +42,10 @@ struct EvalResult {
     /// Time from the first sample (all samples, mask ignored) after which the total error
     /// stays below the threshold until the end; nullopt if it is above it at the end.
     std::optional<double> convergence_time_s;
+    /// Time from the first sample at which the total error first falls below the threshold
+    /// (nullopt if never). With noisy data it can be much earlier than convergence_time_s,
+    /// which a single late excursion above the threshold pushes back.
+    std::optional<double> first_below_s;
     double convergence_threshold_deg = 10.0;
 };
 
@@ -49,8 +53,8 @@ struct EvalResult {
 /// the convergence time over the samples with a reference.
 EvalResult evaluate(std::span<const EvalSample> samples, double convergence_threshold_deg = 10.0);
 
-/// One JSON object (no newline): the EvalResult fields plus "filter"; the convergence time
-/// is null when the run never stays below the threshold.
+/// One JSON object (no newline): the EvalResult fields plus "filter"; convergence_time_s
+/// and first_below_s are null when the run never stays / never gets below the threshold.
 std::string eval_json(const EvalResult& result, std::string_view filter_name);
 
 }  // namespace mocap::tools

@@ -108,9 +108,13 @@ TEST(Evaluation, ConvergenceTimeIsAfterTheLastExcursion) {
     const EvalResult r = evaluate(s);
     ASSERT_TRUE(r.convergence_time_s.has_value());
     EXPECT_DOUBLE_EQ(*r.convergence_time_s, 4.0);  // relative to the first sample (t = 10)
+    ASSERT_TRUE(r.first_below_s.has_value());
+    EXPECT_DOUBLE_EQ(*r.first_below_s, 2.0);
     // Still above at the end: never converged.
     s.back().q_est = about(Vec3::UnitZ(), 11.0);
     EXPECT_FALSE(evaluate(s).convergence_time_s.has_value());
+    EXPECT_DOUBLE_EQ(evaluate(s).first_below_s.value(), 2.0);
+    EXPECT_FALSE(evaluate(s, 4.0).first_below_s.has_value());
     // Always below: converged from the start.
     for (auto& x : s) x.q_est = ref;
     EXPECT_DOUBLE_EQ(evaluate(s).convergence_time_s.value(), 0.0);
@@ -125,16 +129,19 @@ TEST(Evaluation, JsonHasTheContractKeys) {
     r.rmse_total_deg = 1.5;
     r.rmse_heading_deg = 1.25;
     r.convergence_time_s = 3.5;
+    r.first_below_s = 0.25;
     const std::string j = eval_json(r, "ma\"d");
     for (const char* key : {"\"rmse_total_deg\":1.5", "\"rmse_heading_deg\":1.25", "\"rmse_inclination_deg\":0",
                             "\"rmse_roll_deg\":0", "\"rmse_pitch_deg\":0", "\"rmse_yaw_deg\":0", "\"samples\":42",
-                            "\"convergence_time_s\":3.5", "\"filter\":\"ma\\\"d\""}) {
+                            "\"convergence_time_s\":3.5", "\"first_below_s\":0.25", "\"filter\":\"ma\\\"d\""}) {
         EXPECT_NE(j.find(key), std::string::npos) << key << " in " << j;
     }
     EXPECT_EQ(j.front(), '{');
     EXPECT_EQ(j.back(), '}');
     r.convergence_time_s.reset();
+    r.first_below_s.reset();
     EXPECT_NE(eval_json(r, "x").find("\"convergence_time_s\":null"), std::string::npos);
+    EXPECT_NE(eval_json(r, "x").find("\"first_below_s\":null"), std::string::npos);
 }
 
 // A filter that reports a fixed orientation, to check run_filter's frame and masks.

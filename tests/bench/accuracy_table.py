@@ -1,0 +1,364 @@
+#!/usr/bin/env python3
+"""Accuracy table: every filter x the three simulated scenarios x several seeds, through the
+real command-line tools (mocap-sim csv, mocap-filter --eval). Writes docs/accuracy.md.
+
+    python3 tests/bench/accuracy_table.py [--build build] [--seeds 5] [--out docs/accuracy.md]
+                                          [--filters a,b,...] [--scenarios a,b,...]
+
+Python 3 standard library only. Runs one process at a time (about a minute on one core).
+Exit status 1 if a tool fails or a number is not finite.
+"""
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+SCENARIOS = ["fourati", "realistic", "magnetic"]
+SKIP_S = 5.0
+PAPER_Q0 = (0.2, 0.5, 0.7, 0.3)  # Fourati et al.'s initial estimate, NED, normalised below
+R = math.sqrt(0.5)
+Q_ENU_NED = (0.0, R, R, 0.0)     # rotates NED vectors into ENU; its own inverse
+METRICS = [("rmse_total_deg", "total"), ("rmse_inclination_deg", "incl."), ("rmse_heading_deg", "heading"),
+           ("rmse_roll_deg", "roll"), ("rmse_pitch_deg", "pitch"), ("rmse_yaw_deg", "yaw")]
+
+
+def normalise(q):
+    n = math.sqrt(sum(c * c for c in q))
+    return tuple(c / n for c in q)
+
+
+def qmul(a, b):
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return (w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2)
+
+
+class ToolError(RuntimeError):
+    pass
+
+
+def run(cmd):
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    if p.returncode != 0:
+        raise ToolError("%s failed (%d): %s" % (" ".join(cmd), p.returncode, p.stderr.strip()))
+    return p.stdout
+
+
+class Tools:
+    def __init__(self, build, tmp):
+        self.sim = os.path.join(build, "clients", "sim", "mocap-sim")
+        self.filt = os.path.join(build, "clients", "filter_tool", "mocap-filter")
+        for b in (self.sim, self.filt):
+            if not os.access(b, os.X_OK):
+                raise ToolError("missing %s (build first: cmake --build %s --target mocap-sim mocap-filter)" % (b, build))
+        self.tmp = tmp
+        self.runs = 0
+
+    def filters(self):
+        """name -> {key: default} from mocap-filter --list, in the factory's order."""
+        out = {}
+        for line in run([self.filt, "--list"]).splitlines():
+            parts = line.split()
+            if parts:
+                out[parts[0]] = dict(p.split("=", 1) for p in parts[1:])
+        return out
+
+    def scenario(self, scenario, seed, frame, extra=()):
+        path = os.path.join(self.tmp, "%s_%d_%s%s.csv" % (scenario, seed, frame, "_".join(extra).replace("-", "")))
+        if not os.path.exists(path):
+            run([self.sim, "csv", "--scenario", scenario, "--seed", str(seed), "--frame", frame, "--out", path]
+                + list(extra))
+        return path
+
+    def evaluate(self, name, params, csv, frame):
+        cmd = [self.filt, "--filter", name, "--frame", frame, "--in", csv,
+               "--out", os.path.join(self.tmp, "est.csv"), "--eval", "--skip-seconds", str(SKIP_S)]
+        for k, v in params.items():
+            cmd += ["--param", "%s=%s" % (k, v)]
+        self.runs += 1
+        r = json.loads(run(cmd))
+        for key, _ in METRICS:
+            if not (isinstance(r.get(key), (int, float)) and math.isfinite(r[key])):
+                raise ToolError("%s: %s is not a finite number: %r" % (" ".join(cmd), key, r.get(key)))
+        return r
+
+
+def q0_params(q):
+    return {"q0w": "%.12g" % q[0], "q0x": "%.12g" % q[1], "q0y": "%.12g" % q[2], "q0z": "%.12g" % q[3]}
+
+
+def paper_start_enu(scenario):
+    """The paper's far-off start as an ENU initial estimate. fourati: the paper's NED value,
+    converted (q_enu = q_enu_ned ⊗ q_ned); other scenarios: the same numbers taken as ENU."""
+    q = normalise(PAPER_Q0)
+    return qmul(Q_ENU_NED, q) if scenario == "fourati" else q
+
+
+def frame_of(scenario):
+    # fourati is evaluated in the paper's NED frame so that its Euler angles are the paper's.
+    return "ned" if scenario == "fourati" else "enu"
+
+
+def fmt_spread(values, digits=1):
+    if not values:
+        return "–"
+    med = statistics.median(values)
+    if len(values) == 1:
+        return "%.*f" % (digits, med)
+    return "%.*f (%.*f–%.*f)" % (digits, med, digits, min(values), digits, max(values))
+
+
+def fmt_conv(times):
+    """Median convergence time; runs that never stay within 10° count as +inf."""
+    if not times:
+        return "–"
+    never = sum(1 for t in times if t is None)
+    vals = sorted(float("inf") if t is None else t for t in times)
+    med = statistics.median(vals)
+    s = "never" if math.isinf(med) else "%.1f s" % med
+    finite = [v for v in vals if not math.isinf(v)]
+    if len(vals) > 1 and finite:
+        s += " (%.1f–%s)" % (min(finite), "never" if never else "%.1f" % max(finite))
+    if never:
+        s += ", %d/%d never" % (never, len(vals))
+    return s
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--build", default=os.environ.get("MOCAP_BUILD_DIR", "build"))
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--out", default="docs/accuracy.md")
+    ap.add_argument("--filters", default="", help="comma-separated subset (default: every name of mocap-filter --list)")
+    ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    args = ap.parse_args()
+
+    started = time.time()
+    with tempfile.TemporaryDirectory(prefix="mocap_accuracy_") as tmp:
+        tools = Tools(args.build, tmp)
+        available = tools.filters()
+        names = [n for n in args.filters.split(",") if n] or list(available)
+        unknown = [n for n in names if n not in available]
+        if unknown:
+            raise ToolError("unknown filter(s): %s (mocap-filter --list: %s)" % (", ".join(unknown), ", ".join(available)))
+        scenarios = [s for s in args.scenarios.split(",") if s]
+        seeds = list(range(1, args.seeds + 1))
+
+        table = {}  # (scenario, filter) -> [result per seed], default parameters
+        conv = {}   # (scenario, filter) -> [convergence time from the paper's start per seed]
+        for sc in scenarios:
+            frame = frame_of(sc)
+            for seed in seeds:
+                csv = tools.scenario(sc, seed, frame)
+                for name in names:
+                    table.setdefault((sc, name), []).append(tools.evaluate(name, {}, csv, frame))
+                    if "q0w" in available[name]:
+                        r = tools.evaluate(name, q0_params(paper_start_enu(sc)), csv, frame)
+                        conv.setdefault((sc, name), []).append(r.get("convergence_time_s"))
+            print("%s done (%d runs, %.0f s)" % (sc, tools.runs, time.time() - started), file=sys.stderr)
+
+        study = fourati_study(tools, seeds, available) if "fourati" in scenarios and "csmo" in available else None
+        text = render(args, names, available, scenarios, seeds, table, conv, study, tools.runs, time.time() - started)
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with open(args.out, "w") as f:
+        f.write(text)
+    print("wrote %s (%d filter runs, %.0f s)" % (args.out, tools.runs, time.time() - started), file=sys.stderr)
+
+
+def fourati_study(tools, seeds, available):
+    """CSMO with the paper's gains on the paper's simulation, with the start, the known field
+    and the magnetometer noise varied one at a time."""
+    truth0 = Q_ENU_NED  # the paper's q(0) = identity (NED) in ENU
+    has_dip = "dip_deg" in available["csmo"]
+    variants = [
+        ("paper's start [0.2, 0.5, 0.7, 0.3]", q0_params(paper_start_enu("fourati")), ()),
+        ("started at the truth", q0_params(truth0), ()),
+    ]
+    if has_dip:
+        variants.append(("at the truth, field dip known (60°)", dict(q0_params(truth0), dip_deg="60"), ()))
+    variants += [
+        ("at the truth, magnetometer noise ÷ 4 (0.1 G)", q0_params(truth0), ("--mag-noise-scale", "0.25")),
+        ("at the truth, magnetometer noise ÷ 40 (0.01 G)", q0_params(truth0), ("--mag-noise-scale", "0.025")),
+    ]
+    rows = []
+    for label, params, extra in variants:
+        results = [tools.evaluate("csmo", params, tools.scenario("fourati", s, "ned", extra), "ned") for s in seeds]
+        rows.append((label, results))
+    return rows
+
+
+def render(args, names, available, scenarios, seeds, table, conv, study, runs, elapsed):
+    cmd = "python3 tests/bench/accuracy_table.py --build %s --seeds %d" % (args.build, args.seeds)
+    if args.filters:
+        cmd += " --filters " + args.filters
+    if args.scenarios != ",".join(SCENARIOS):
+        cmd += " --scenarios " + args.scenarios
+    L = []
+    L.append("# Orientation accuracy on simulated recordings")
+    L.append("")
+    L.append("Generated by one command (after building `mocap-sim` and `mocap-filter`):")
+    L.append("")
+    L.append("```sh")
+    L.append(cmd)
+    L.append("```")
+    L.append("")
+    L.append("It runs the real tools, `mocap-sim csv` then `mocap-filter --eval --skip-seconds %g`, for every "
+             "filter of `mocap-filter --list` (%s) on the three scenarios with seeds %d–%d (%d filter runs, %.0f s). "
+             "Every number is a median over the seeds, with the smallest and largest in parentheses. "
+             "Errors are the BROAD definitions of design.md (q_err = q_est ⊗ conj(q_ref); total, inclination, "
+             "heading; roll/pitch/yaw are ZYX Euler differences, wrapped), RMSE in degrees over the samples with "
+             "`movement = 1` after the first %g s."
+             % (SKIP_S, ", ".join("`%s`" % n for n in names), seeds[0], seeds[-1], runs, elapsed, SKIP_S))
+    L.append("")
+    L.append("Each filter runs with its defaults (`mocap-filter --list` prints them). Starts: `csmo` starts from "
+             "its `q0*` parameters (identity by default: on `fourati` that is 180° from the truth, whose start is "
+             "NED's axes, see below); the other filters take their first attitude from the first sample.")
+    L.append("")
+    for sc in scenarios:
+        L.append("## `%s`" % sc)
+        L.append("")
+        L.append(SCENARIO_TEXT[sc])
+        L.append("")
+        L.append("| filter | " + " | ".join(label for _, label in METRICS) + " | samples |")
+        L.append("| --- | " + " | ".join("---:" for _ in METRICS) + " | ---: |")
+        for name in names:
+            rs = table.get((sc, name), [])
+            cells = [fmt_spread([r[k] for r in rs]) for k, _ in METRICS]
+            L.append("| `%s` | %s | %d |" % (name, " | ".join(cells), statistics.median([r["samples"] for r in rs])))
+        L.append("")
+
+    L.append("## Time to converge")
+    L.append("")
+    L.append("First instant after which the total error stays below 10° until the end of the recording "
+             "(`convergence_time_s` of `mocap-filter --eval`), median over the seeds. *From the paper's start*: "
+             "the filter's initial estimate set to Fourati et al.'s far-off [0.2, 0.5, 0.7, 0.3] (normalised; on "
+             "`fourati` that NED value converted to ENU, q_enu_ned ⊗ q0, i.e. the same start relative to the truth "
+             "as in the paper; on the other scenarios the same numbers as an ENU attitude) — only filters with an "
+             "initial-quaternion parameter (`q0w..q0z`). *Default start*: the filter's own start (its first-sample "
+             "attitude, or identity for `csmo`).")
+    L.append("")
+    L.append("| filter | " + " | ".join("%s, paper's start | %s, default start" % (sc, sc) for sc in scenarios) + " |")
+    L.append("| --- | " + " | ".join("---: | ---:" for _ in scenarios) + " |")
+    for name in names:
+        cells = []
+        for sc in scenarios:
+            cells.append(fmt_conv(conv[(sc, name)]) if (sc, name) in conv else "no `q0` parameter")
+            cells.append(fmt_conv([r.get("convergence_time_s") for r in table[(sc, name)]]))
+        L.append("| `%s` | %s |" % (name, " | ".join(cells)))
+    L.append("")
+
+    if study:
+        L.extend(render_study(study, seeds))
+    L.append(LIMITS_TEXT)
+    return "\n".join(L) + "\n"
+
+
+def render_study(study, seeds):
+    L = ["## Fourati et al.'s benchmark: what CSMO with the paper's gains achieves", ""]
+    L.append("CSMO with the paper's gains (k1..k3 = 1e-3, k4..k6 = 9e-4, ρ = 3e-4 at 100 Hz: the `csmo` "
+             "defaults) on the `fourati` scenario, seeds %d–%d, errors in the paper's NED frame after %g s:"
+             % (seeds[0], seeds[-1], SKIP_S))
+    L.append("")
+    L.append("| CSMO run | roll | pitch | yaw | total | inclination | heading | converged (10°) |")
+    L.append("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for label, rs in study:
+        cells = [fmt_spread([r[k] for r in rs]) for k in
+                 ("rmse_roll_deg", "rmse_pitch_deg", "rmse_yaw_deg", "rmse_total_deg", "rmse_inclination_deg",
+                  "rmse_heading_deg")]
+        L.append("| %s | %s | %s |" % (label, " | ".join(cells), fmt_conv([r.get("convergence_time_s") for r in rs])))
+    L.append("")
+    paper, truth = study[0][1], study[1][1]
+    med = lambda rs, k: statistics.median([r[k] for r in rs])
+    L.append("**Finding.** From the truth, CSMO with the paper's gains gives roll %.1f°, pitch %.1f° and yaw "
+             "%.1f° RMSE (medians); from the paper's far-off start the run needs a median %s to stay within 10° "
+             "and the RMSE after %g s is dominated by that transient (yaw %.1f°). An independent reproduction "
+             "reported roll ≈ 2.4°, pitch ≈ 1.0°, yaw ≈ 10° and ~55–60 s to converge; the paper itself reports "
+             "Euler errors around 3° and convergence in a few seconds."
+             % (med(truth, "rmse_roll_deg"), med(truth, "rmse_pitch_deg"), med(truth, "rmse_yaw_deg"),
+                fmt_conv([r.get("convergence_time_s") for r in paper]), SKIP_S, med(paper, "rmse_yaw_deg")))
+    L.append("")
+    L.append(FOURATI_EXPLANATION)
+    L.append("")
+    return L
+
+
+SCENARIO_TEXT = {
+    "fourati": """Fourati et al.'s simulation (*Complementary Sliding Mode Observer*), 60 s at 100 Hz, mapped to
+our conventions:
+
+- **Rotation.** The paper's Table I angular-velocity profile could not be consulted here, so the
+  simulator uses a stand-in of the same kind: smooth rotation about all three axes, the body rate of
+  the NED Euler trajectory roll = 40° sin(2π·0.10 t), pitch = 30° sin(2π·0.07 t),
+  yaw = 90° sin(2π·0.03 t) (peak rate 0.61 rad/s). The truth is the integral of that rate from
+  the paper's q(0) = identity (NED).
+- **Noise (Table II).** White, σ = 0.4 on every axis of every sensor, in the paper's units: gyro
+  0.4 rad/s, accelerometer 0.4 m/s², magnetometer 0.4 G (written as 40 µT). No gyro bias, no linear
+  acceleration. Field 0.5 G (50 µT) at 60° inclination.
+- **NED → ENU.** The sensor frame is unchanged, so the gyro, accelerometer and magnetometer samples
+  are the paper's. The earth frame is ENU: q_enu_sensor = q_enu_ned ⊗ q_ned_sensor with
+  q_enu_ned = (0, √½, √½, 0) (x_e = y_n, y_e = x_n, z_e = −z_n); the truth therefore starts at
+  q_enu_ned, the sensor's axes on north/east/down. The field is (0, 25, −43.3) µT in ENU
+  (north, down), i.e. (25, 0, 43.3) µT in NED.
+- **Accelerometer sign.** The paper writes f = M(a + g) with g = [0, 0, +9.81] in NED, which makes
+  a level sensor at rest read +9.81 on its *down* axis, the opposite of a real accelerometer. The
+  simulator writes real specific force, f = R(q)ᵀ (a_lin + [0, 0, 9.81]_ENU) = R(q_ned)ᵀ (a_lin − g_ned):
+  +9.81 on the *up* axis at rest, as an MPU9250 reports and as every filter here expects.
+- The table evaluates this scenario with `--frame ned` (`mocap-sim csv --frame ned`,
+  `mocap-filter --frame ned`), so roll/pitch/yaw are the paper's NED Euler angles; total,
+  inclination and heading are the same in both frames.""",
+    "realistic": """A worn MPU9250-like sensor, 90 s at 100 Hz: white noise gyro 0.3 °/s, accelerometer
+0.03 m/s², magnetometer 0.5 µT on a 50 µT field with 60° dip; a constant gyro bias of 0.5–2 °/s
+per axis (random sign, from the seed); a random start attitude (any heading, tilt up to ~20°);
+rest for the first 5–7 s, then movements of 8–16 s separated by 2–4 s of rest (smooth random
+rotations, three sinusoids of 0.15–1.2 Hz per axis, peaks ~2 rad/s, a weak pull of the sensor's
+z axis back to up) with bursts of linear acceleration of 2–6 m/s² lasting 0.3–0.8 s every
+1.5–4 s. `movement` = 1 while the subject moves (as in BROAD), so rests are not evaluated.""",
+    "magnetic": """`realistic` (same motion, bias and noise for the same seed) plus a magnetic disturbance
+as near a steel object: for 16 s in the middle (37–53 s, 1.5 s ramps) the horizontal field turns
+by 39° (direction from the seed) and grows by 10%, and the vertical field weakens by 4 µT (norm
+50 → ~47.6 µT, dip 60° → ~54.6°). A filter that trusts the magnetometer follows the 39°.""",
+}
+
+FOURATI_EXPLANATION = """**Why yaw is so much worse than roll and pitch.** Table II's magnetometer noise is 0.4 G per axis on
+a 0.5 G field at 60° inclination, whose horizontal part — the only part that carries heading — is
+0.5 · cos 60° = 0.25 G. One sample's heading is therefore off by atan(0.4 / 0.25) ≈ 58° (1σ):
+almost random. The accelerometer's 0.4 m/s² on 9.81 m/s² tilts one sample by only
+atan(0.4 / 9.81) ≈ 2.3°. A complementary filter averages both over the same number of samples,
+so its heading error from measurement noise is about 58 / 2.3 ≈ 25 times its tilt error, and the
+sliding-mode (sign) correction of CSMO, fed almost random heading signs, corrects heading slowly:
+from a far-off start it takes tens of seconds, not the few seconds the paper shows. The rows
+with the magnetometer noise divided by 4 and by 40 isolate the cause: with the same gains, start
+and gyro noise, the yaw error falls toward the roll/pitch level as the field noise falls. The
+gyro's 0.4 rad/s white noise (a 0.04 rad random step per sample) is what limits roll and pitch.
+So the reproduction's numbers are what the paper's own noise table implies; the paper's ~3°
+Euler errors and fast convergence are not reachable with Table II's magnetometer noise as
+printed (they would need a magnetometer roughly ten times quieter, or the noise figure to be in
+other units)."""
+
+LIMITS_TEXT = """## What these numbers do not say
+
+The `realistic` scenario is optimistic next to real recordings: its sensors are perfectly
+calibrated (no hard/soft-iron residual, no scale-factor or axis-misalignment error), the field is
+homogeneous outside the disturbance, and the reference is exact. On public recordings with
+optical ground truth (BROAD) the best published filters reach about 2–3° total RMSE and
+Madgwick about 5°; differences between filters there come mostly from those effects, which this
+simulation does not contain. Use these tables to catch regressions and to compare behaviour
+(bias, rest, disturbance, convergence), and `mocap-filter --eval` on real recordings to choose
+parameters."""
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except ToolError as e:
+        print("accuracy_table: %s" % e, file=sys.stderr)
+        sys.exit(1)
