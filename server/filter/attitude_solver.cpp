@@ -1,6 +1,5 @@
 #include "filter/attitude_solver.hpp"
 
-#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -13,6 +12,16 @@ double measured_dip_rad(const Vec3& accel, const Vec3& mag) {
     const double na = accel.norm(), nm = mag.norm();
     if (!(na > 0.0) || !(nm > 0.0)) return std::numeric_limits<double>::quiet_NaN();
     return std::asin(std::clamp(-accel.dot(mag) / (na * nm), -1.0, 1.0));
+}
+
+bool own_dip_field_direction(const Vec3& accel, const Vec3& mag, Vec3& h_ref_enu) {
+    const double nn = accel.squaredNorm() * mag.squaredNorm();
+    if (!(nn > 0.0) || !std::isfinite(nn)) return false;
+    const double sin_dip = -accel.dot(mag) / std::sqrt(nn);
+    const double cos2 = 1.0 - sin_dip * sin_dip;
+    if (!(cos2 > 0.0)) return false;
+    h_ref_enu = Vec3(0.0, std::sqrt(cos2), -sin_dip);
+    return true;
 }
 
 std::string_view to_string(AttitudeStatus s) {
@@ -45,6 +54,22 @@ AttitudeStatus unit_pair(const Vec3& accel, const Vec3& mag, const Vec3& h_ref,
     return AttitudeStatus::ok;
 }
 
+// Solves A x = b for the symmetric positive definite 3x3 A = JᵀJ + λI by the adjugate:
+// JᵀJ is positive semidefinite and λ > 0, so det(A) >= λ³ > 0. About 40 flops, against
+// ~150 ns for a pivoting factorisation.
+Vec3 solve_spd3(const Mat3& a, const Vec3& b) {
+    const double c00 = a(1, 1) * a(2, 2) - a(1, 2) * a(1, 2);
+    const double c01 = a(0, 2) * a(1, 2) - a(0, 1) * a(2, 2);
+    const double c02 = a(0, 1) * a(1, 2) - a(0, 2) * a(1, 1);
+    const double c11 = a(0, 0) * a(2, 2) - a(0, 2) * a(0, 2);
+    const double c12 = a(0, 1) * a(0, 2) - a(0, 0) * a(1, 2);
+    const double c22 = a(0, 0) * a(1, 1) - a(0, 1) * a(0, 1);
+    const double inv_det = 1.0 / (a(0, 0) * c00 + a(0, 1) * c01 + a(0, 2) * c02);
+    return inv_det * Vec3(c00 * b.x() + c01 * b.y() + c02 * b.z(),
+                          c01 * b.x() + c11 * b.y() + c12 * b.z(),
+                          c02 * b.x() + c12 * b.y() + c22 * b.z());
+}
+
 }  // namespace
 
 AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu,
@@ -63,10 +88,10 @@ AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref
         const Vec3 h_hat = rotate(q, h_s);
         // Steps 4-6 with J = −2 [[ĥ]ₓ ; [f̂]ₓ] and ε = [h_n − ĥ ; f_n − f̂], written out:
         //   JᵀJ = 4 (2 I − ĥĥᵀ − f̂f̂ᵀ),   Jᵀε = 2 (ĥ × h_n + f̂ × f_n).
-        const Mat3 jtj = 4.0 * (2.0 * Mat3::Identity() - h_hat * h_hat.transpose() -
-                                f_hat * f_hat.transpose());
+        const Mat3 a = (8.0 + p.lambda) * Mat3::Identity() -
+                       4.0 * (h_hat * h_hat.transpose() + f_hat * f_hat.transpose());
         const Vec3 jte = 2.0 * (h_hat.cross(h_n) + f_hat.cross(f_n));
-        const Vec3 delta = p.alpha * (jtj + p.lambda * Mat3::Identity()).ldlt().solve(jte);
+        const Vec3 delta = p.alpha * solve_spd3(a, jte);
         // Step 7 (erratum): earth-side correction.
         q = (Quat(1.0, delta.x(), delta.y(), delta.z()) * q).normalized();
         ++r.iterations;

@@ -26,6 +26,11 @@ namespace mocap::filter {
 /// Unit field direction in ENU for an inclination (dip) below the horizon, rad.
 Vec3 field_direction_enu(double dip_rad);
 
+/// The reference for a pair measured at its own dip, (0, cos dip, −sin dip) with
+/// sin dip = −â·m̂, without trigonometric calls. Returns false if either vector is zero or
+/// the pair is parallel (no horizontal component).
+bool own_dip_field_direction(const Vec3& accel, const Vec3& mag, Vec3& h_ref_enu);
+
 /// Dip of a measured accel/mag pair (angle of the field below the plane normal to the
 /// specific force), rad; NaN if either vector is zero.
 double measured_dip_rad(const Vec3& accel, const Vec3& mag);

@@ -23,6 +23,8 @@ Csmo::Csmo(const CsmoParams& params)
     : params_(params),
       k_switch_(params.k1, params.k2, params.k3),
       k_linear_(params.k4, params.k5, params.k6),
+      fixed_dip_(std::isfinite(params.dip_deg)),
+      h_ref_fixed_(field_direction_enu(fixed_dip_ ? params.dip_deg * kDegToRad : 0.0)),
       clock_(params.max_step_s) {
     lma_.lambda = params.lm_lambda;
     lma_.alpha = params.lm_alpha;
@@ -46,10 +48,9 @@ void Csmo::set_orientation(const Quat& q_earth_sensor) {
 bool Csmo::measure(const ImuSample& sample, const Quat& start, Quat& q_m) const {
     if (!sample.has_mag()) return false;
     const Vec3 a = to_vec3(sample.accel_m_s2), m = to_vec3(sample.mag_ut);
-    const double dip = std::isfinite(params_.dip_deg) ? params_.dip_deg * kDegToRad
-                                                      : measured_dip_rad(a, m);
-    if (!std::isfinite(dip)) return false;
-    const AttitudeSolution s = solve_lma(a, m, field_direction_enu(dip), start, lma_);
+    Vec3 h_ref = h_ref_fixed_;
+    if (!fixed_dip_ && !own_dip_field_direction(a, m, h_ref)) return false;
+    const AttitudeSolution s = solve_lma(a, m, h_ref, start, lma_);
     if (!s.ok()) return false;
     q_m = s.q_earth_sensor;
     return true;

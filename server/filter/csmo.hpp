@@ -26,7 +26,7 @@
 // magnetometer sets heading only; this is what real recordings need (the dip is site-specific).
 //
 // Thread-safety: not thread-safe (one instance per sensor, pinned to a worker).
-// Cost: one LMA solve (≤ lm_iterations, usually 2) + two quaternion products, ~0.2 µs.
+// Cost: one LMA solve (lm_iterations, default 2) + two quaternion products, ~0.2 µs.
 // No allocation after construction.
 #pragma once
 
@@ -61,7 +61,7 @@ struct CsmoParams {
         ///< inclination below the horizon, deg (paper: 60); NaN = each sample's own dip
     double lm_lambda = 0.01;  ///< key "lm_lambda": LMA damping (design.md erratum: 0.01)
     double lm_alpha = 1.0;    ///< key "lm_alpha": LMA step scale (design.md erratum: 1)
-    int lm_iterations = 3;    ///< key "lm_iterations": LMA iterations per sample (warm-started)
+    int lm_iterations = 2;    ///< key "lm_iterations": LMA iterations per sample (warm-started)
     double max_step_s = 0.5;  ///< key "max_step_s": larger timestamp steps restart the time base
 };
 
@@ -96,6 +96,8 @@ private:
     CsmoParams params_;
     LmaParams lma_;
     Vec3 k_switch_, k_linear_;
+    bool fixed_dip_;    // dip_deg finite
+    Vec3 h_ref_fixed_;  // reference field for a fixed dip
     CsmoState state_;
     SampleClock clock_;
 };

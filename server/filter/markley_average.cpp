@@ -68,6 +68,29 @@ MaxEigen max_eigenvector_power(const Mat4& m, const Quat& hint, bool psd) {
     return max_eigenvector(m);
 }
 
+void QuatAccumulator::add(const double* qw, const double* qx, const double* qy,
+                          const double* qz, const double* w, int n) {
+    double ww = 0, wx = 0, wy = 0, wz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0, s = 0;
+    for (int i = 0; i < n; ++i) {
+        const double a = w[i] * qw[i], b = w[i] * qx[i], c = w[i] * qy[i], d = w[i] * qz[i];
+        ww += a * qw[i];
+        wx += a * qx[i];
+        wy += a * qy[i];
+        wz += a * qz[i];
+        xx += b * qx[i];
+        xy += b * qy[i];
+        xz += b * qz[i];
+        yy += c * qy[i];
+        yz += c * qz[i];
+        zz += d * qz[i];
+        s += w[i];
+    }
+    Mat4 m;
+    m << ww, wx, wy, wz, wx, xx, xy, xz, wy, xy, yy, yz, wz, xz, yz, zz;
+    m_ += m;
+    weight_sum_ += s;
+}
+
 Quat QuatAccumulator::mean(const Quat& hint) const {
     if (weight_sum_ <= 0.0 && m_.isZero()) return hint;
     return max_eigenvector_power(m_, hint, psd_).q;
