@@ -99,6 +99,28 @@ TEST(AttitudeSolver, InclinationOnlyChangesTheReferenceNotTheAnswer) {
     }
 }
 
+TEST(AttitudeSolver, OwnDipReferenceMatchesTheMeasuredDipWithoutTrig) {
+    std::mt19937 rng(14);
+    for (int i = 0; i < 100; ++i) {
+        const Quat truth = random_quat(rng);
+        const double dip = (i % 9) * 20.0 * kDeg - 80 * kDeg;
+        const Pair m = measure(truth, dip);
+        Vec3 h;
+        ASSERT_TRUE(own_dip_field_direction(m.accel, m.mag, h));
+        EXPECT_LT((h - field_direction_enu(dip)).norm(), 1e-9);
+        // With its own dip even a disturbed pair is consistent: LMA lands on TRIAD's answer.
+        Vec3 h2;
+        ASSERT_TRUE(own_dip_field_direction(m.accel, m.mag + Vec3(3, -2, 1), h2));
+        const AttitudeSolution s2 = solve_lma(m.accel, m.mag + Vec3(3, -2, 1), h2, truth);
+        const AttitudeSolution t = solve_triad(m.accel, m.mag + Vec3(3, -2, 1), h2);
+        EXPECT_LT(qdist(s2.q_earth_sensor, t.q_earth_sensor), 1e-6);
+        EXPECT_LT(s2.residual, 1e-6);
+    }
+    Vec3 h;
+    EXPECT_FALSE(own_dip_field_direction(Vec3::Zero(), Vec3(0, 1, 0), h));
+    EXPECT_FALSE(own_dip_field_direction(Vec3(0, 0, 1), Vec3(0, 0, -2), h));
+}
+
 TEST(AttitudeSolver, NoisyFieldTiltsLmaButNotTriad) {
     // LMA weighs both directions alike (the paper); TRIAD takes tilt from the accelerometer.
     const Quat truth = quat_from_rotvec(Vec3(0.2, -0.1, 0.7));

@@ -184,6 +184,26 @@ TEST(MarkleyAverage, AccumulatorPowerIterationMatchesEigenSolver) {
     }
 }
 
+TEST(MarkleyAverage, StructureOfArraysAddEqualsOneByOne) {
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    std::vector<double> qw, qx, qy, qz, w;
+    QuatAccumulator one;
+    for (int i = 0; i < 37; ++i) {
+        const Quat q = random_quat(rng);
+        qw.push_back(q.w());
+        qx.push_back(q.x());
+        qy.push_back(q.y());
+        qz.push_back(q.z());
+        w.push_back(u(rng));
+        one.add(q, w.back());
+    }
+    QuatAccumulator soa;
+    soa.add(qw.data(), qx.data(), qy.data(), qz.data(), w.data(), 37);
+    EXPECT_LT((soa.matrix() - one.matrix()).norm(), 1e-12);
+    EXPECT_NEAR(soa.weight_sum(), one.weight_sum(), 1e-12);
+}
+
 TEST(MarkleyAverage, PowerIterationHandlesNegativeSemidefiniteMatrixForm) {
     std::mt19937 rng(10);
     const Quat center = random_quat(rng);
