@@ -47,13 +47,24 @@ SubjectAssembler::SubjectAssembler(std::uint32_t subject_id, std::uint16_t segme
     instants_.resize(config_.window);
 }
 
-SubjectAssembler::Instant* SubjectAssembler::oldest() noexcept {
-    if (open_count_ == 0) return nullptr;
-    Instant* best = nullptr;
-    for (Instant& in : instants_) {
-        if (in.open && (best == nullptr || in.frame.sync < best->frame.sync)) best = &in;
+std::size_t SubjectAssembler::oldest_index() const noexcept {
+    if (open_count_ == 0) return kNoSlot;
+    // Cached: the window is scanned once per emitted frame, not once per pose.
+    if (oldest_index_ == kNoSlot) {
+        for (std::size_t i = 0; i < instants_.size(); ++i) {
+            const Instant& in = instants_[i];
+            if (in.open &&
+                (oldest_index_ == kNoSlot || in.frame.sync < instants_[oldest_index_].frame.sync)) {
+                oldest_index_ = i;
+            }
+        }
     }
-    return best;
+    return oldest_index_;
+}
+
+SubjectAssembler::Instant* SubjectAssembler::oldest() noexcept {
+    const std::size_t i = oldest_index();
+    return i == kNoSlot ? nullptr : &instants_[i];
 }
 
 bool SubjectAssembler::resolved(const Instant& in) const noexcept {
@@ -107,6 +118,7 @@ void SubjectAssembler::emit(Instant& in, std::int64_t now_us) {
     last_emitted_sync_ = in.frame.sync;
     in.open = false;
     --open_count_;
+    oldest_index_ = kNoSlot;
     sink_.on_frame(out_);
 }
 
@@ -157,6 +169,11 @@ void SubjectAssembler::on_pose(const PoseUpdate& u, std::int64_t now_us) {
         in.frame.sync = u.sync;
         in.frame.sample_us = u.pose.sample_us;
         in.frame.times = u.times;
+        const std::size_t slot = u.sync % window;
+        if (open_count_ == 0 ||
+            (oldest_index_ != kNoSlot && u.sync < instants_[oldest_index_].frame.sync)) {
+            oldest_index_ = slot;
+        }
         ++open_count_;
     } else if ((in.have_mask & bit(k)) != 0) {
         stats_.segments_duplicate.add();
@@ -182,12 +199,8 @@ void SubjectAssembler::flush(std::int64_t now_us) {
 }
 
 std::int64_t SubjectAssembler::next_deadline_us() const noexcept {
-    if (open_count_ == 0) return kNoDeadline;
-    const Instant* best = nullptr;
-    for (const Instant& in : instants_) {
-        if (in.open && (best == nullptr || in.frame.sync < best->frame.sync)) best = &in;
-    }
-    return best->first_us + config_.deadline_us;
+    const std::size_t i = oldest_index();
+    return i == kNoSlot ? kNoDeadline : instants_[i].first_us + config_.deadline_us;
 }
 
 AssemblerSet::AssemblerSet(const AssemblerConfig& config, FrameSink& sink)

@@ -27,8 +27,9 @@
 //   (frames_forced, emitted with whatever it has).
 //
 // Memory: window × sizeof(SubjectFrame) (~1.6 KiB) per subject, allocated at construction.
-// The hot path (on_pose/advance) never allocates. Cost: O(window) per call to find the
-// oldest open instant (32 by default) plus the frame copy on emission.
+// The hot path (on_pose/advance) never allocates. Cost: O(1) per pose, plus per emitted frame
+// a scan of the window (32 slots by default) and the frame copy (measured in
+// docs/performance.md).
 #pragma once
 
 #include <cstddef>
@@ -108,6 +109,8 @@ class SubjectAssembler {
         SubjectFrame frame{};  // sync, sample_us, times and the delivered segments
     };
 
+    static constexpr std::size_t kNoSlot = static_cast<std::size_t>(-1);
+    [[nodiscard]] std::size_t oldest_index() const noexcept;
     [[nodiscard]] Instant* oldest() noexcept;
     [[nodiscard]] bool resolved(const Instant& in) const noexcept;
     void emit(Instant& in, std::int64_t now_us);
@@ -122,6 +125,7 @@ class SubjectAssembler {
 
     std::vector<Instant> instants_;  // slot = sync % window
     std::size_t open_count_ = 0;
+    mutable std::size_t oldest_index_ = kNoSlot;  // cache of oldest_index(); kNoSlot = rescan
     bool emitted_any_ = false;
     std::uint64_t last_emitted_sync_ = 0;
 

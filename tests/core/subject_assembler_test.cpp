@@ -172,6 +172,22 @@ TEST(SubjectAssembler, FramesLeaveInSyncOrder) {
     EXPECT_EQ(sink.frames[1].segments[1].flags, 0u);
 }
 
+TEST(SubjectAssembler, AnOlderInstantOpeningLaterStillGoesFirst) {
+    RecordingSink sink;
+    SubjectAssembler a(1, 2, config(), sink);
+    feed(a, 7, {0}, 0);
+    feed(a, 6, {0}, 1'000);  // segment 0 out of order: 6 is now the oldest open instant
+    EXPECT_EQ(a.next_deadline_us(), 1'000 + kDeadline);
+    feed(a, 6, {1}, 2'000);
+    ASSERT_EQ(sink.frames.size(), 1u);
+    EXPECT_EQ(sink.frames[0].sync, 6u);
+    EXPECT_EQ(a.next_deadline_us(), kDeadline);
+    feed(a, 7, {1}, 3'000);
+    ASSERT_EQ(sink.frames.size(), 2u);
+    EXPECT_EQ(sink.frames[1].sync, 7u);
+    EXPECT_EQ(a.stats().frames_complete.value(), 2u);
+}
+
 TEST(SubjectAssembler, OlderInstantBlocksNewerUntilItsDeadline) {
     RecordingSink sink;
     SubjectAssembler a(1, 3, config(), sink);
