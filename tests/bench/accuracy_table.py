@@ -118,7 +118,7 @@ def fmt_spread(values, digits=1):
 
 
 def fmt_conv(times):
-    """Median convergence time; runs that never stay within 10° count as +inf."""
+    """Median time; runs that never get (or stay) within 10° count as +inf."""
     if not times:
         return "–"
     never = sum(1 for t in times if t is None)
@@ -163,7 +163,7 @@ def main():
                     table.setdefault((sc, name), []).append(tools.evaluate(name, {}, csv, frame))
                     if "q0w" in available[name]:
                         r = tools.evaluate(name, q0_params(paper_start_enu(sc)), csv, frame)
-                        conv.setdefault((sc, name), []).append(r.get("convergence_time_s"))
+                        conv.setdefault((sc, name), []).append(r)
             print("%s done (%d runs, %.0f s)" % (sc, tools.runs, time.time() - started), file=sys.stderr)
 
         study = fourati_study(tools, seeds, available) if "fourati" in scenarios and "csmo" in available else None
@@ -174,26 +174,30 @@ def main():
     print("wrote %s (%d filter runs, %.0f s)" % (args.out, tools.runs, time.time() - started), file=sys.stderr)
 
 
+PAPER_START = "paper's start [0.2, 0.5, 0.7, 0.3]"
+OWN_DIP = "each sample's own dip (default)"
+KNOWN_DIP = "reference field at 60° (paper)"
+
+
 def fourati_study(tools, seeds, available):
-    """CSMO with the paper's gains on the paper's simulation, with the start, the known field
-    and the magnetometer noise varied one at a time."""
-    truth0 = Q_ENU_NED  # the paper's q(0) = identity (NED) in ENU
-    has_dip = "dip_deg" in available["csmo"]
-    variants = [
-        ("paper's start [0.2, 0.5, 0.7, 0.3]", q0_params(paper_start_enu("fourati")), ()),
-        ("started at the truth", q0_params(truth0), ()),
-    ]
-    if has_dip:
-        variants.append(("at the truth, field dip known (60°)", dict(q0_params(truth0), dip_deg="60"), ()))
-    variants += [
-        ("at the truth, magnetometer noise ÷ 4 (0.1 G)", q0_params(truth0), ("--mag-noise-scale", "0.25")),
-        ("at the truth, magnetometer noise ÷ 40 (0.01 G)", q0_params(truth0), ("--mag-noise-scale", "0.025")),
-    ]
+    """CSMO with the paper's gains on the paper's simulation: start, reference field and
+    magnetometer noise varied one at a time. Returns [(start, field, mag noise, [results])]."""
+    truth0 = q0_params(Q_ENU_NED)  # the paper's q(0) = identity (NED), in ENU
+    paper0 = q0_params(paper_start_enu("fourati"))
+    fields = [(OWN_DIP, {})]
+    if "dip_deg" in available["csmo"]:
+        fields.append((KNOWN_DIP, {"dip_deg": "60"}))
     rows = []
-    for label, params, extra in variants:
+    for field, fparams in fields:
+        for start, q0 in ((PAPER_START, paper0), ("the truth", truth0)):
+            rows.append((start, field, "0.4 G (Table II)", dict(q0, **fparams), ()))
+        for label, scale in (("0.1 G (÷ 4)", "0.25"), ("0.01 G (÷ 40)", "0.025")):
+            rows.append(("the truth", field, label, dict(truth0, **fparams), ("--mag-noise-scale", scale)))
+    out = []
+    for start, field, noise, params, extra in rows:
         results = [tools.evaluate("csmo", params, tools.scenario("fourati", s, "ned", extra), "ned") for s in seeds]
-        rows.append((label, results))
-    return rows
+        out.append((start, field, noise, results))
+    return out
 
 
 def render(args, names, available, scenarios, seeds, table, conv, study, runs, elapsed):
@@ -238,23 +242,29 @@ def render(args, names, available, scenarios, seeds, table, conv, study, runs, e
 
     L.append("## Time to converge")
     L.append("")
-    L.append("First instant after which the total error stays below 10° until the end of the recording "
-             "(`convergence_time_s` of `mocap-filter --eval`), median over the seeds. *From the paper's start*: "
-             "the filter's initial estimate set to Fourati et al.'s far-off [0.2, 0.5, 0.7, 0.3] (normalised; on "
+    L.append("Two readings of `mocap-filter --eval`, median over the seeds: *reaches* = first instant the total "
+             "error falls below 10° (`first_below_s`); *stays* = first instant after which it stays below 10° "
+             "until the end (`convergence_time_s`; one late excursion above 10° pushes it back, which on the "
+             "noisy `fourati` data happens to filters that are converged). *From the paper's start*: the "
+             "filter's initial estimate set to Fourati et al.'s far-off [0.2, 0.5, 0.7, 0.3] (normalised; on "
              "`fourati` that NED value converted to ENU, q_enu_ned ⊗ q0, i.e. the same start relative to the truth "
-             "as in the paper; on the other scenarios the same numbers as an ENU attitude) — only filters with an "
-             "initial-quaternion parameter (`q0w..q0z`). *Default start*: the filter's own start (its first-sample "
-             "attitude, or identity for `csmo`).")
+             "as in the paper; on the other scenarios the same numbers as an ENU attitude); only filters with an "
+             "initial-quaternion parameter (`q0w..q0z`) can be started there. *Default start*: the filter's own "
+             "start (its first-sample attitude, or identity for `csmo`).")
     L.append("")
-    L.append("| filter | " + " | ".join("%s, paper's start | %s, default start" % (sc, sc) for sc in scenarios) + " |")
-    L.append("| --- | " + " | ".join("---: | ---:" for _ in scenarios) + " |")
-    for name in names:
-        cells = []
-        for sc in scenarios:
-            cells.append(fmt_conv(conv[(sc, name)]) if (sc, name) in conv else "no `q0` parameter")
-            cells.append(fmt_conv([r.get("convergence_time_s") for r in table[(sc, name)]]))
-        L.append("| `%s` | %s |" % (name, " | ".join(cells)))
-    L.append("")
+    for sc in scenarios:
+        L.append("| `%s` | reaches, paper's start | stays, paper's start | reaches, default start | stays, default start |" % sc)
+        L.append("| --- | ---: | ---: | ---: | ---: |")
+        for name in names:
+            d = table[(sc, name)]
+            if (sc, name) in conv:
+                p = conv[(sc, name)]
+                cells = [fmt_conv([r.get("first_below_s") for r in p]), fmt_conv([r.get("convergence_time_s") for r in p])]
+            else:
+                cells = ["no `q0` parameter", "no `q0` parameter"]
+            cells += [fmt_conv([r.get("first_below_s") for r in d]), fmt_conv([r.get("convergence_time_s") for r in d])]
+            L.append("| `%s` | %s |" % (name, " | ".join(cells)))
+        L.append("")
 
     if study:
         L.extend(render_study(study, seeds))
@@ -265,28 +275,79 @@ def render(args, names, available, scenarios, seeds, table, conv, study, runs, e
 def render_study(study, seeds):
     L = ["## Fourati et al.'s benchmark: what CSMO with the paper's gains achieves", ""]
     L.append("CSMO with the paper's gains (k1..k3 = 1e-3, k4..k6 = 9e-4, ρ = 3e-4 at 100 Hz: the `csmo` "
-             "defaults) on the `fourati` scenario, seeds %d–%d, errors in the paper's NED frame after %g s:"
-             % (seeds[0], seeds[-1], SKIP_S))
+             "defaults) on the `fourati` scenario, seeds %d–%d, errors in the paper's NED frame after %g s. "
+             "*Reference field*: the paper's LMA aligns the measured field with a known reference (0.5 G at "
+             "60°, `dip_deg=60`), so the magnetometer also pulls on tilt; our default uses each sample's own dip "
+             "(the angle between its accelerometer and magnetometer readings), so the magnetometer only sets "
+             "heading. *Magnetometer noise*: Table II's 0.4 G, or divided by 4 or 40 "
+             "(`mocap-sim csv --mag-noise-scale`), everything else unchanged." % (seeds[0], seeds[-1], SKIP_S))
     L.append("")
-    L.append("| CSMO run | roll | pitch | yaw | total | inclination | heading | converged (10°) |")
-    L.append("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
-    for label, rs in study:
+    L.append("| start | reference field | magnetometer σ | roll | pitch | yaw | total | incl. | heading "
+             "| reaches 10° | stays within 10° |")
+    L.append("| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for start, field, noise, rs in study:
         cells = [fmt_spread([r[k] for r in rs]) for k in
                  ("rmse_roll_deg", "rmse_pitch_deg", "rmse_yaw_deg", "rmse_total_deg", "rmse_inclination_deg",
                   "rmse_heading_deg")]
-        L.append("| %s | %s | %s |" % (label, " | ".join(cells), fmt_conv([r.get("convergence_time_s") for r in rs])))
+        L.append("| %s | %s | %s | %s | %s | %s |" % (start, field, noise, " | ".join(cells),
+                                                     fmt_conv([r.get("first_below_s") for r in rs]),
+                                                     fmt_conv([r.get("convergence_time_s") for r in rs])))
     L.append("")
-    paper, truth = study[0][1], study[1][1]
-    med = lambda rs, k: statistics.median([r[k] for r in rs])
-    L.append("**Finding.** From the truth, CSMO with the paper's gains gives roll %.1f°, pitch %.1f° and yaw "
-             "%.1f° RMSE (medians); from the paper's far-off start the run needs a median %s to stay within 10° "
-             "and the RMSE after %g s is dominated by that transient (yaw %.1f°). An independent reproduction "
-             "reported roll ≈ 2.4°, pitch ≈ 1.0°, yaw ≈ 10° and ~55–60 s to converge; the paper itself reports "
-             "Euler errors around 3° and convergence in a few seconds."
-             % (med(truth, "rmse_roll_deg"), med(truth, "rmse_pitch_deg"), med(truth, "rmse_yaw_deg"),
-                fmt_conv([r.get("convergence_time_s") for r in paper]), SKIP_S, med(paper, "rmse_yaw_deg")))
+
+    def find(start, field, noise_prefix):
+        for st, f, n, rs in study:
+            if st == start and f == field and n.startswith(noise_prefix):
+                return rs
+        return None
+
+    def med(rs, k):
+        return statistics.median([r[k] for r in rs])
+
+    def rpy(rs):
+        return "roll %.1f°, pitch %.1f°, yaw %.1f°" % (med(rs, "rmse_roll_deg"), med(rs, "rmse_pitch_deg"),
+                                                      med(rs, "rmse_yaw_deg"))
+
+    def yaw_dominates(rs):
+        return med(rs, "rmse_yaw_deg") > 1.5 * max(med(rs, "rmse_roll_deg"), med(rs, "rmse_pitch_deg"))
+
+    L.append("**Findings** (medians over the seeds).")
     L.append("")
-    L.append(FOURATI_EXPLANATION)
+    fields = [OWN_DIP] + ([KNOWN_DIP] if find("the truth", KNOWN_DIP, "0.4") else [])
+    for field in fields:
+        truth = find("the truth", field, "0.4")
+        paper = find(PAPER_START, field, "0.4")
+        q4 = find("the truth", field, "0.1 G")
+        q40 = find("the truth", field, "0.01 G")
+        L.append("- **%s.** Started at the truth: %s. %s From the paper's start, time to reach 10°: %s; to stay "
+                 "within 10°: %s. Started at the truth, time to stay within 10°: %s (largest total error after "
+                 "%g s: %.1f°). With the magnetometer σ ÷ 4: %s; ÷ 40: %s."
+                 % (field[0].upper() + field[1:], rpy(truth),
+                    ("Yaw dominates, as the reproduction reported." if yaw_dominates(truth) else
+                     "Yaw does not dominate here: the noisy magnetometer's error goes into tilt as well."),
+                    fmt_conv([r.get("first_below_s") for r in paper]),
+                    fmt_conv([r.get("convergence_time_s") for r in paper]),
+                    fmt_conv([r.get("convergence_time_s") for r in truth]), SKIP_S, med(truth, "max_total_deg"),
+                    rpy(q4), rpy(q40)))
+    L.append("")
+    truth = find("the truth", OWN_DIP, "0.4")
+    q40 = find("the truth", OWN_DIP, "0.01 G")
+    paper = find(PAPER_START, OWN_DIP, "0.4")
+    q4 = find("the truth", OWN_DIP, "0.1 G")
+    worst_q4 = max(med(q4, k) for k in ("rmse_roll_deg", "rmse_pitch_deg", "rmse_yaw_deg"))
+    L.append("**Verdict on the reproduction** (roll ≈ 2.4°, pitch ≈ 1.0°, yaw ≈ 10°, ~55–60 s to stay within "
+             "10°). %s %s Every error falls as the magnetometer noise alone is reduced (÷ 40: %s), so it is "
+             "Table II's magnetometer noise — 80%% of the field — that costs the accuracy, as the reproduction "
+             "said. The \"time to converge\" depends on the reading: *reaching* 10° from the paper's start "
+             "takes %s, *staying* within 10° is delayed by excursions that a converged filter also makes on "
+             "this data, so a figure near a minute measures the noise more than the transient.%s"
+             % ("With our default reference field CSMO gives %s." % rpy(truth),
+                ("Heading is the largest error, as reported, with magnitudes of the same order; the remaining "
+                 "differences follow from the motion (Table I is a stand-in here) and from how an error splits "
+                 "into Euler angles along the path." if yaw_dominates(truth) else
+                 "The pattern reported (yaw far above roll and pitch) does not appear with our implementation."),
+                rpy(q40), fmt_conv([r.get("first_below_s") for r in paper]),
+                (" The paper's Euler errors around 3° are consistent with a magnetometer about four times quieter "
+                 "than Table II states (÷ 4: %s)." % rpy(q4)) if worst_q4 <= 4.0 else ""))
     L.append("")
     return L
 
@@ -328,21 +389,15 @@ by 39° (direction from the seed) and grows by 10%, and the vertical field weake
 50 → ~47.6 µT, dip 60° → ~54.6°). A filter that trusts the magnetometer follows the 39°.""",
 }
 
-FOURATI_EXPLANATION = """**Why yaw is so much worse than roll and pitch.** Table II's magnetometer noise is 0.4 G per axis on
-a 0.5 G field at 60° inclination, whose horizontal part — the only part that carries heading — is
-0.5 · cos 60° = 0.25 G. One sample's heading is therefore off by atan(0.4 / 0.25) ≈ 58° (1σ):
-almost random. The accelerometer's 0.4 m/s² on 9.81 m/s² tilts one sample by only
-atan(0.4 / 9.81) ≈ 2.3°. A complementary filter averages both over the same number of samples,
-so its heading error from measurement noise is about 58 / 2.3 ≈ 25 times its tilt error, and the
-sliding-mode (sign) correction of CSMO, fed almost random heading signs, corrects heading slowly:
-from a far-off start it takes tens of seconds, not the few seconds the paper shows. The rows
-with the magnetometer noise divided by 4 and by 40 isolate the cause: with the same gains, start
-and gyro noise, the yaw error falls toward the roll/pitch level as the field noise falls. The
-gyro's 0.4 rad/s white noise (a 0.04 rad random step per sample) is what limits roll and pitch.
-So the reproduction's numbers are what the paper's own noise table implies; the paper's ~3°
-Euler errors and fast convergence are not reachable with Table II's magnetometer noise as
-printed (they would need a magnetometer roughly ten times quieter, or the noise figure to be in
-other units)."""
+FOURATI_EXPLANATION = """**Why heading suffers.** Table II's magnetometer noise is 0.4 G per axis on a 0.5 G field at 60°
+inclination, whose horizontal part — the only part that carries heading — is 0.5 · cos 60° =
+0.25 G. One sample's heading is therefore off by about atan(0.4 / 0.25) ≈ 58° (1σ): almost
+random. The accelerometer's 0.4 m/s² on 9.81 m/s² tilts one sample by only atan(0.4 / 9.81) ≈
+2.3°. A complementary filter averages both over a similar number of samples, so from measurement
+noise alone its heading error is an order of magnitude above its tilt error; a sliding-mode
+(sign) correction fed nearly random heading signs corrects heading slowly and lets it wander. The
+gyro's 0.4 rad/s white noise (a 0.04 rad random step per sample) is what the corrections fight
+in between."""
 
 LIMITS_TEXT = """## What these numbers do not say
 
