@@ -28,7 +28,9 @@
 // same build. Random numbers come from an inline xoshiro256+ and a fixed table of normal
 // quantiles (not std::normal_distribution, whose output is library-specific).
 // Memory: all particle arrays (structure of arrays) are allocated in the constructor;
-// update() never allocates. Cost: ~30-50 ns per particle and update (256 particles: ~10 µs).
+// update() never allocates. Cost: ~25 ns per particle and update, linear in N (measured CPU
+// time on the build machines: 64 → 1.9 µs, 256 → 6 µs, 1024 → 25 µs); rates above ~20 rad/s
+// at 100 Hz take a slower sin/cos path.
 // Thread-safety: not thread-safe; one instance per sensor, pinned to a worker.
 #pragma once
 
