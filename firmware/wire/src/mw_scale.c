@@ -12,11 +12,13 @@
 #define MW_INT16_SPAN 32768.0f
 
 uint16_t mw_accel_range_g(mw_accel_range range) {
-    return (unsigned)range <= (unsigned)MW_ACCEL_16G ? (uint16_t)(2u << (unsigned)range) : 0u;
+    static const uint16_t g[4] = {2u, 4u, 8u, 16u};
+    return (unsigned)range < 4u ? g[range] : 0u;
 }
 
 uint16_t mw_gyro_range_dps(mw_gyro_range range) {
-    return (unsigned)range <= (unsigned)MW_GYRO_2000DPS ? (uint16_t)(250u << (unsigned)range) : 0u;
+    static const uint16_t dps[4] = {250u, 500u, 1000u, 2000u};
+    return (unsigned)range < 4u ? dps[range] : 0u;
 }
 
 float mw_accel_m_s2_per_lsb(mw_accel_range range) {
