@@ -103,7 +103,7 @@ const WorkerPool::Route* WorkerPool::find_route(std::uint64_t key) const noexcep
     return (pos != routes_.end() && pos->key == key) ? &*pos : nullptr;
 }
 
-SubmitResult WorkerPool::submit(const SegmentSample& sample) noexcept {
+SubmitResult WorkerPool::submit(const SegmentSample& sample, bool wake) noexcept {
     if (!running_.load(std::memory_order_acquire)) {
         after_stop_.add();
         return SubmitResult::kStopped;
@@ -119,8 +119,13 @@ SubmitResult WorkerPool::submit(const SegmentSample& sample) noexcept {
         return SubmitResult::kDroppedFull;
     }
     w.submitted.add();
-    w.wake.notify_all();
+    if (wake) w.wake.notify_all();
     return SubmitResult::kQueued;
+}
+
+void WorkerPool::wake_workers() noexcept {
+    for (auto& w : workers_)
+        w->wake.notify_all();
 }
 
 bool WorkerPool::spin_until_input(const Worker& w) const noexcept {

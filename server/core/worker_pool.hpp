@@ -62,8 +62,8 @@ struct WorkerPoolConfig {
     std::size_t input_capacity = 1024;   ///< samples per worker input ring (power of two)
     std::size_t output_capacity = 1024;  ///< poses per worker output ring (power of two)
     std::size_t batch = 64;              ///< samples a worker processes before waking the assembler
-    std::uint32_t spin_iterations = 1000;  ///< idle polls (each with a CPU pause) before sleeping
-    bool pin_cpus = false;                 ///< pin worker i to CPU i mod cores (failures counted)
+    std::uint32_t spin_iterations = 200;  ///< idle polls (each with a CPU pause) before sleeping
+    bool pin_cpus = false;                ///< pin worker i to CPU i mod cores (failures counted)
 };
 
 namespace detail {
@@ -106,7 +106,13 @@ class WorkerPool {
     void start();
 
     /// Ingest thread only. Never blocks or allocates; O(log segments) route lookup.
-    SubmitResult submit(const SegmentSample& sample) noexcept;
+    /// wake = true wakes the segment's worker if it sleeps. A caller that submits a batch
+    /// (all samples of one TCP packet) may pass wake = false and call wake_workers() once
+    /// after the batch: one wake-up per worker instead of one per sample.
+    SubmitResult submit(const SegmentSample& sample, bool wake = true) noexcept;
+
+    /// Ingest thread only. Wakes every sleeping worker (cheap for awake ones).
+    void wake_workers() noexcept;
 
     /// Assembler thread only. Pops every ready pose (at most max_per_worker per worker) and
     /// calls on_pose(const PoseUpdate&) for each; returns how many. Per segment, poses come

@@ -294,7 +294,7 @@ TEST(WorkerPool, SleepingWorkerWakesOnSubmit) {
         const std::uint64_t sleeps = counter(pool, "worker_sleeps");
         ASSERT_EQ(pool.submit(sample(0, round % 2, round)), SubmitResult::kQueued);
         std::uint64_t n = 0;
-        for (int i = 0; i < 10'000 && n == 0; ++i) {
+        for (int i = 0; i < 500 && n == 0; ++i) {
             pool.wait_for_output(10'000);
             n = pool.drain([](const PoseUpdate&) {});
         }
@@ -305,6 +305,29 @@ TEST(WorkerPool, SleepingWorkerWakesOnSubmit) {
     }
     pool.stop();
     EXPECT_EQ(got, 20u);
+}
+
+TEST(WorkerPool, BatchSubmitWakesOncePerWorker) {
+    WorkerPoolConfig cfg;
+    cfg.workers = 2;
+    cfg.spin_iterations = 0;
+    WorkerPool pool(cfg);
+    OrderCheckingProcessor p[4];
+    for (std::uint16_t k = 0; k < 4; ++k)
+        pool.add_segment(0, k, p[k]);
+    pool.start();
+    ASSERT_TRUE(eventually([&] { return counter(pool, "worker_sleeps") >= 2; }));
+    for (std::uint16_t k = 0; k < 4; ++k) {
+        ASSERT_EQ(pool.submit(sample(0, k, 1), /*wake=*/false), SubmitResult::kQueued);
+    }
+    pool.wake_workers();
+    std::size_t got = 0;
+    for (int i = 0; i < 500 && got < 4; ++i) {
+        pool.wait_for_output(10'000);
+        got += pool.drain([](const PoseUpdate&) {});
+    }
+    EXPECT_EQ(got, 4u);
+    pool.stop();
 }
 
 TEST(WorkerPool, StopProcessesEverythingQueued) {
