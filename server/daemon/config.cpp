@@ -171,28 +171,62 @@ void read_filter(TableReader& r, DaemonConfig& c) {
     }
 }
 
+void read_vec3(TableReader& t, std::string_view key, std::array<double, 3>& out, double limit) {
+    if (const auto* arr = t.array(key)) {
+        if (arr->size() != 3) t.fail(key, arr, "expected [x, y, z]");
+        for (std::size_t i = 0; i < 3; ++i) {
+            const auto* e = arr->get(i);
+            if (!e->is_number()) t.fail(key, e, "expected numbers");
+            out[i] = e->value<double>().value();
+            if (!std::isfinite(out[i]) || std::abs(out[i]) > limit) {
+                std::ostringstream m;
+                m << "components must be within +-" << limit;
+                t.fail(key, e, m.str());
+            }
+        }
+    }
+}
+
 void read_segment(TableReader& t, SegmentConfig& s) {
     t.read("name", s.name);
     if (s.name.empty()) t.fail("name", t.take("name"), "every segment needs a non-empty name");
     t.read("parent", s.parent);
-    if (const auto* arr = t.array("offset_m")) {
-        if (arr->size() != 3) t.fail("offset_m", arr, "expected [x, y, z] in metres");
-        for (std::size_t i = 0; i < 3; ++i) {
-            const auto* e = arr->get(i);
-            if (!e->is_number()) t.fail("offset_m", e, "expected numbers");
-            s.offset_m[i] = e->value<double>().value();
-            if (std::abs(s.offset_m[i]) > 10.0) t.fail("offset_m", e, "offsets beyond 10 m");
-        }
-    }
+    read_vec3(t, "offset_m", s.offset_m, 10.0);
+    read_vec3(t, "end_m", s.end_m, 10.0);
     t.read("node", s.node, 1, 63);
     if (s.node == 0) t.fail("node", t.take("node"), "every segment needs a CAN node id (1..63)");
     t.read("filter", s.filter);
     t.finish();
 }
 
+void read_choice(TableReader& r, std::string_view key, bool& out, const char* yes, const char* no) {
+    std::string v;
+    r.read(key, v);
+    if (v.empty()) return;
+    if (v == yes) {
+        out = true;
+    } else if (v == no) {
+        out = false;
+    } else {
+        r.fail(key, r.take(key), std::string("must be \"") + yes + "\" or \"" + no + "\"");
+    }
+}
+
 void read_skeleton(TableReader& r, DaemonConfig& c) {
-    r.read("calibration_file", c.calibration_file);
+    r.read("calibration_dir", c.calibration_dir);
+    r.read("calibration_s", c.calibration_s, 0.1, 60.0);
+    read_choice(r, "heading", c.heading_align, "align", "earth");
+    read_choice(r, "facing", c.facing_from_sensor, "sensor", "given");
+    r.read("facing_heading_deg", c.facing_heading_deg, -360.0, 360.0);
+    read_vec3(r, "facing_sensor_axis", c.facing_sensor_axis, 1.0);
+    {
+        const auto& a = c.facing_sensor_axis;
+        if (a[0] * a[0] + a[1] * a[1] + a[2] * a[2] < 0.25) {
+            r.fail("facing_sensor_axis", r.take("facing_sensor_axis"), "must be a unit vector");
+        }
+    }
     r.read("smoothing_alpha", c.smoothing_alpha, 0.001, 1.0);
+    r.read("root_height_m", c.root_height_m, 0.0, 5.0);
     if (const auto* arr = r.array("segment")) {
         std::set<std::string> names;
         std::set<int> nodes;
@@ -218,14 +252,18 @@ void read_skeleton(TableReader& r, DaemonConfig& c) {
 void read_serve(TableReader& r, DaemonConfig& c) {
     r.read("pose_listen", c.pose_listen);
     r.read("max_clients", c.max_clients, 1, 100000);
+    r.read("threads", c.serve_threads, 1, 64);
     r.read("client_queue_frames", c.client_queue_frames, 1, 65536);
     r.read("handshake_timeout_s", c.handshake_timeout_s, 0.05, 3600.0);
     r.read("max_message_bytes", c.max_message_bytes, 64, 16 << 20);
 }
 
 void read_control(TableReader& r, DaemonConfig& c) {
-    r.read("listen", c.control_listen);
     r.read("token", c.control_token);
+    if (const auto* n = r.take("loopback_only")) {
+        if (!n->is_boolean()) r.fail("loopback_only", n, "expected true or false");
+        c.control_loopback_only = n->value<bool>().value();
+    }
 }
 
 }  // namespace

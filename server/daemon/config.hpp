@@ -21,19 +21,23 @@ struct Endpoint {
     std::string host;
     std::uint16_t port = 0;
     [[nodiscard]] std::string str() const;
+    bool operator==(const Endpoint&) const = default;
 };
 
 struct SocketCanConfig {
     std::string interface;       ///< e.g. "can0", "vcan0"
     std::uint32_t subject = 1;   ///< subject id the bus belongs to
+    bool operator==(const SocketCanConfig&) const = default;
 };
 
 struct SegmentConfig {
     std::string name;
     std::string parent;                      ///< "" = root
     std::array<double, 3> offset_m{};        ///< joint position in the parent's frame, metres
+    std::array<double, 3> end_m{};           ///< distal tip in this segment's frame, metres
     std::uint8_t node = 0;                   ///< CAN node id (1..63)
     std::string filter;                      ///< "" = [filter].name
+    bool operator==(const SegmentConfig&) const = default;
 };
 
 struct DaemonConfig {
@@ -54,18 +58,27 @@ struct DaemonConfig {
     std::string filter_name = "mocap";
     std::vector<std::pair<std::string, std::string>> filter_params;
     // [skeleton]
-    std::string calibration_file = "mocapd-calibration.txt";
+    std::string calibration_dir = ".";
+    double calibration_s = 1.0;
+    bool heading_align = true;               ///< heading = "align" (else "earth")
+    bool facing_from_sensor = true;          ///< facing = "sensor" (else "given")
+    double facing_heading_deg = 0.0;
+    std::array<double, 3> facing_sensor_axis{1.0, 0.0, 0.0};
     double smoothing_alpha = 1.0;
+    double root_height_m = 1.0;              ///< only with custom segments
     std::vector<SegmentConfig> segments;  ///< empty = built-in 15-segment body
     // [serve]
     Endpoint pose_listen{"0.0.0.0", 7001};
     std::uint32_t max_clients = 1024;
+    std::uint32_t serve_threads = 1;
     std::uint32_t client_queue_frames = 64;
     double handshake_timeout_s = 5.0;
     std::uint32_t max_message_bytes = 65536;
     // [control]
-    Endpoint control_listen{"127.0.0.1", 7003};
     std::string control_token;
+    bool control_loopback_only = true;
+
+    bool operator==(const DaemonConfig&) const = default;
 };
 
 /// The text of config/mocapd.toml, compiled in.

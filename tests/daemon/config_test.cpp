@@ -16,7 +16,10 @@ TEST(Config, EmbeddedDefaultIsValidAndMatchesStructDefaults) {
     const DaemonConfig d;
     EXPECT_EQ(c->sink_listen.port, 7000);
     EXPECT_EQ(c->pose_listen.port, 7001);
-    EXPECT_EQ(c->control_listen.host, "127.0.0.1");
+    EXPECT_TRUE(c->control_loopback_only);
+    EXPECT_EQ(c->serve_threads, d.serve_threads);
+    EXPECT_EQ(c->calibration_dir, d.calibration_dir);
+    EXPECT_EQ(c->heading_align, d.heading_align);
     EXPECT_EQ(c->log_level, d.log_level);
     EXPECT_EQ(c->ring_capacity, d.ring_capacity);
     EXPECT_EQ(c->max_clients, d.max_clients);

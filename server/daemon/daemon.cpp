@@ -1,0 +1,365 @@
+#include "daemon/daemon.hpp"
+
+#include <spdlog/spdlog.h>
+#include <systemd/sd-daemon.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "filter/filter_factory.hpp"
+
+namespace mocap::daemon {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+serve::StageLatencySummary summarize(std::string stage, const LatencySnapshot& s) {
+    serve::StageLatencySummary out;
+    out.stage = std::move(stage);
+    out.count = s.count;
+    out.p50_us = static_cast<double>(s.percentile_us(50));
+    out.p90_us = static_cast<double>(s.percentile_us(90));
+    out.p99_us = static_cast<double>(s.percentile_us(99));
+    out.max_us = static_cast<double>(s.max_us);
+    return out;
+}
+
+void append(std::vector<serve::NamedCounter>& out, const CounterGroup& g) {
+    for (const auto& c : g.snapshot()) out.push_back({g.component() + "." + c.name, c.value});
+}
+
+}  // namespace
+
+std::optional<skeleton::BodyModel> body_model_from_config(const DaemonConfig& config, std::string* error) {
+    skeleton::BodyModel model;
+    if (config.segments.empty()) {
+        model = skeleton::default_body_model(1.75, config.filter_name);
+    } else {
+        for (const auto& sc : config.segments) {
+            skeleton::SegmentDef d;
+            d.name = sc.name;
+            d.parent = sc.parent.empty() ? -1 : model.index_of(sc.parent);
+            d.offset_m = {sc.offset_m[0], sc.offset_m[1], sc.offset_m[2]};
+            d.end_m = {sc.end_m[0], sc.end_m[1], sc.end_m[2]};
+            d.node_id = sc.node;
+            d.filter = sc.filter.empty() ? config.filter_name : sc.filter;
+            model.segments.push_back(std::move(d));
+        }
+        model.root_height_m = config.root_height_m;
+    }
+    const auto problems = skeleton::validate(model);
+    if (!problems.empty()) {
+        *error = "skeleton: " + problems.front();
+        return std::nullopt;
+    }
+    return model;
+}
+
+Daemon::Daemon(DaemonConfig config, std::string config_path)
+    : config_(std::move(config)), config_path_(std::move(config_path)) {
+    route_counters_.add("samples_routed", samples_routed_);
+    route_counters_.add("samples_unknown_node", unknown_nodes_);
+    route_counters_.add("samples_rejected", samples_rejected_);
+}
+
+Daemon::~Daemon() { shutdown(); }
+
+bool Daemon::start(std::string* error) {
+    auto model = body_model_from_config(config_, error);
+    if (!model) return false;
+    model_ = std::move(*model);
+    node_to_segment_.fill(-1);
+    for (std::size_t i = 0; i < model_.size(); ++i) {
+        const int node = model_.segments[i].node_id;
+        if (node >= 0 && node < static_cast<int>(node_to_segment_.size())) {
+            node_to_segment_[static_cast<std::size_t>(node)] = static_cast<std::int16_t>(i);
+        }
+    }
+
+    // Filters: one per segment per possible subject, built before any thread starts.
+    WorkerPoolConfig pc;
+    pc.workers = config_.workers;
+    pc.input_capacity = config_.ring_capacity;
+    pc.output_capacity = config_.ring_capacity;
+    pool_ = std::make_unique<WorkerPool>(pc, &clock_);
+    std::vector<std::uint32_t> subject_ids;
+    for (std::uint32_t id = 1; id <= config_.max_subjects; ++id) subject_ids.push_back(id);
+    for (const auto& can : config_.socketcan) {
+        if (can.subject > config_.max_subjects) subject_ids.push_back(can.subject);
+    }
+    for (std::uint32_t id : subject_ids) {
+        for (std::size_t i = 0; i < model_.size(); ++i) {
+            const auto& seg = model_.segments[i];
+            auto f = filter::make_filter(seg.filter, config_.filter_params, error);
+            if (!f) {
+                *error = "filter for segment " + seg.name + ": " + *error;
+                return false;
+            }
+            // A particle filter costs tens of times a complementary filter: weigh it so
+            // the pool balances work, not segment counts.
+            const std::uint32_t weight = seg.filter == "pf" ? 20 : 1;
+            processors_.push_back(std::make_unique<FilterProcessor>(std::move(f)));
+            pool_->add_segment(id, static_cast<std::uint16_t>(i), *processors_.back(), weight);
+        }
+    }
+
+    // Skeleton solver -> pose service.
+    serve::ServeConfig sc;
+    sc.bind_address = config_.pose_listen.host;
+    sc.port = config_.pose_listen.port;
+    sc.max_clients = config_.max_clients;
+    sc.queue_frames = config_.client_queue_frames;
+    sc.subscribe_timeout_ms = static_cast<std::uint32_t>(config_.handshake_timeout_s * 1000.0);
+    sc.max_client_message_bytes = config_.max_message_bytes;
+    sc.control_token = config_.control_token;
+    sc.control_loopback_only = config_.control_loopback_only;
+    sc.io_threads = config_.serve_threads;
+    sc.wall_clock_us = [this] { return clock_.now_us(); };
+    sc.server_version = "mocapd";
+
+    serve::ControlHandlers handlers;
+    handlers.calibrate = [this](std::uint32_t subject, serve::CalibrationPose pose) {
+        const auto p = pose == serve::CalibrationPose::kN ? skeleton::CalibrationPose::kNPose
+                                                          : skeleton::CalibrationPose::kTPose;
+        const std::string err = solver_->request_calibration(subject, p);
+        return err.empty() ? serve::ControlResult::success() : serve::ControlResult::failure(err);
+    };
+    handlers.reload = [this] {
+        asio::post(main_io_, [this] { reload(); });
+        return serve::ControlResult::success();
+    };
+    handlers.stats = [this] { return stats(); };
+    server_ = std::make_unique<serve::PoseServer>(sc, handlers);
+
+    PoseSolverOptions so;
+    so.max_subjects = *std::max_element(subject_ids.begin(), subject_ids.end());
+    so.calibration_s = config_.calibration_s;
+    so.calibration_dir = config_.calibration_dir;
+    so.calibration.heading_mode = config_.heading_align ? skeleton::HeadingMode::kAlignToForward
+                                                        : skeleton::HeadingMode::kKeepEarth;
+    so.calibration.facing_source = config_.facing_from_sensor ? skeleton::FacingSource::kFromSensorAxis
+                                                              : skeleton::FacingSource::kGiven;
+    so.calibration.facing_heading_rad = config_.facing_heading_deg * kPi / 180.0;
+    so.calibration.facing_sensor_axis = {config_.facing_sensor_axis[0], config_.facing_sensor_axis[1],
+                                         config_.facing_sensor_axis[2]};
+    so.smoothing.alpha = config_.smoothing_alpha;
+    solver_ = std::make_unique<PoseSolver>(model_, so, [this](const SubjectFrame& f, const serve::SkeletonPose& p) {
+        server_->publish(f, p);
+    });
+    for (const auto& line : solver_->load_calibrations()) spdlog::info("{}", line);
+
+    AssemblerConfig ac;
+    ac.deadline_us = static_cast<std::int64_t>(config_.assembly_deadline_ms * 1000.0);
+    assemblers_ = std::make_unique<AssemblerSet>(ac, *solver_);
+    for (std::uint32_t id : subject_ids) assemblers_->add_subject(id, static_cast<std::uint16_t>(model_.size()));
+
+    serve::ServeDescription desc;
+    for (const auto& s : model_.segments) {
+        desc.segments.push_back({s.name, s.parent, {s.offset_m.x(), s.offset_m.y(), s.offset_m.z()},
+                                 static_cast<std::uint32_t>(std::max(0, s.node_id))});
+    }
+    for (const auto& j : solver_->joints()) {
+        for (const char* axis : {"flexion", "abduction", "rotation"}) desc.joint_angle_names.push_back(j.name + "." + axis);
+    }
+    for (std::uint32_t id : subject_ids) desc.subjects.push_back({id, "subject-" + std::to_string(id)});
+    server_->set_description(desc);
+
+    // Ingest.
+    ingest::SinkListenerConfig lc;
+    lc.host = config_.sink_listen.host;
+    lc.port = config_.sink_listen.port;
+    lc.max_sinks = config_.max_sinks;
+    lc.max_subjects = std::min<std::uint32_t>(config_.max_subjects, 255);
+    lc.idle_timeout_s = config_.sink_idle_timeout_s;
+    const auto sink = [this](const SegmentSample& s) { route(s); };
+    sink_listener_ = std::make_unique<ingest::SinkListener>(ingest_io_, lc, clock_, sink);
+    for (const auto& can : config_.socketcan) {
+        ingest::SocketCanConfig cc;
+        cc.interface = can.interface;
+        cc.subject = can.subject;
+        can_readers_.push_back(std::make_unique<ingest::SocketCanReader>(ingest_io_, cc, clock_, sink));
+    }
+
+    // Bind everything before announcing readiness: a failure here exits non-zero.
+    pool_->start();
+    if (!server_->start(*error)) return false;
+    if (!sink_listener_->start(error)) return false;
+    for (auto& r : can_readers_) {
+        if (!r->start(error)) return false;
+    }
+    ingest_thread_ = std::thread([this] {
+        auto guard = asio::make_work_guard(ingest_io_);
+        ingest_io_.run();
+    });
+    if (sd_watchdog_enabled(0, &watchdog_usec_) <= 0) watchdog_usec_ = 0;
+    assembler_thread_ = std::thread([this] { assembler_loop(); });
+
+    signals_.add(SIGTERM);
+    signals_.add(SIGINT);
+    signals_.add(SIGHUP);
+    spdlog::info("mocapd ready: sinks on {}, poses on {}, {} segments x {} subjects, {} workers",
+                 config_.sink_listen.str(), config_.pose_listen.str(), model_.size(), subject_ids.size(),
+                 pool_->worker_count());
+    sd_notify(0, "READY=1\nSTATUS=serving");
+    return true;
+}
+
+void Daemon::route(const SegmentSample& in) {
+    if (in.times.sink_send_us != 0) ingest_latency_.record(in.times.received_us - in.times.sink_send_us);
+    const std::int16_t seg = in.node_id < node_to_segment_.size() ? node_to_segment_[in.node_id] : -1;
+    if (seg < 0) {
+        unknown_nodes_.add();
+        return;
+    }
+    SegmentSample s = in;
+    s.segment_index = static_cast<std::uint16_t>(seg);
+    if (pool_->submit(s) == SubmitResult::kQueued) {
+        samples_routed_.add();
+    } else {
+        samples_rejected_.add();
+    }
+}
+
+void Daemon::assembler_loop() {
+    auto last_ping = std::chrono::steady_clock::now();
+    while (!assembler_stop_.load(std::memory_order_acquire)) {
+        const std::int64_t now = clock_.now_us();
+        const std::int64_t next = assemblers_->next_deadline_us();
+        const std::int64_t wait = next == kNoDeadline ? 50'000 : std::clamp<std::int64_t>(next - now, 0, 50'000);
+        pool_->wait_for_output(wait);
+        pool_->drain([this](const PoseUpdate& u) { assemblers_->on_pose(u, clock_.now_us()); });
+        assemblers_->advance(clock_.now_us());
+        if (watchdog_usec_ != 0) {
+            const auto t = std::chrono::steady_clock::now();
+            if (t - last_ping > std::chrono::microseconds(watchdog_usec_ / 4)) {
+                sd_notify(0, "WATCHDOG=1");
+                last_ping = t;
+            }
+        }
+    }
+    // Drain what the workers still produce, then emit every open instant.
+    pool_->drain([this](const PoseUpdate& u) { assemblers_->on_pose(u, clock_.now_us()); }, SIZE_MAX);
+    assemblers_->flush(clock_.now_us());
+}
+
+serve::StatsSnapshot Daemon::stats() const {
+    serve::StatsSnapshot s;
+    if (sink_listener_) append(s.counters, sink_listener_->counters());
+    for (const auto& r : can_readers_) append(s.counters, r->counters());
+    append(s.counters, route_counters_);
+    if (pool_) append(s.counters, pool_->counters());
+    if (assemblers_) append(s.counters, assemblers_->counters());
+    if (solver_) append(s.counters, solver_->counters());
+    s.latencies.push_back(summarize("ingest", ingest_latency_.snapshot()));
+    if (pool_) {
+        s.latencies.push_back(summarize("queue_wait", pool_->queue_wait_snapshot()));
+        s.latencies.push_back(summarize("filter", pool_->filter_snapshot()));
+    }
+    if (assemblers_) s.latencies.push_back(summarize("assembly", assemblers_->assembly_snapshot()));
+    return s;
+}
+
+void Daemon::log_stats() {
+    const auto s = stats();
+    std::string line;
+    for (const auto& c : s.counters) {
+        if (c.value != 0) line += " " + c.name + "=" + std::to_string(c.value);
+    }
+    for (const auto& c : server_->counter_snapshot()) {
+        if (c.value != 0) line += " " + c.name + "=" + std::to_string(c.value);
+    }
+    for (const auto& l : s.latencies) {
+        if (l.count != 0) line += fmt::format(" {}_p99_us={:.0f}", l.stage, l.p99_us);
+    }
+    spdlog::info("stats:{} clients={}", line, server_->client_count());
+}
+
+void Daemon::arm_stats_timer() {
+    if (config_.stats_interval_s <= 0) return;
+    stats_timer_.expires_after(std::chrono::milliseconds(static_cast<std::int64_t>(config_.stats_interval_s * 1000)));
+    stats_timer_.async_wait([this](const boost::system::error_code& ec) {
+        if (ec) return;
+        log_stats();
+        arm_stats_timer();
+    });
+}
+
+void Daemon::reload() {
+    if (config_path_.empty()) {
+        spdlog::info("reload: running on the embedded default config; nothing to reload");
+        return;
+    }
+    std::string err;
+    auto next = load_config_file(config_path_, &err);
+    if (!next) {
+        spdlog::error("reload: keeping the running config: {}", err);
+        return;
+    }
+    // Only [log] changes at run time; the rest is reported so nobody believes it applied.
+    spdlog::set_level(spdlog::level::from_str(next->log_level));
+    const bool timer_changed = next->stats_interval_s != config_.stats_interval_s;
+    config_.log_level = next->log_level;
+    config_.stats_interval_s = next->stats_interval_s;
+    if (timer_changed) {
+        stats_timer_.cancel();
+        arm_stats_timer();
+    }
+    next->log_level = config_.log_level;
+    next->stats_interval_s = config_.stats_interval_s;
+    if (!(*next == config_)) spdlog::warn("reload: settings other than [log] need a restart to apply");
+    spdlog::info("reload: log level {}, stats every {} s", config_.log_level, config_.stats_interval_s);
+}
+
+void Daemon::request_stop() {
+    asio::post(main_io_, [this] {
+        stopping_ = true;
+        signals_.cancel();
+        stats_timer_.cancel();
+    });
+}
+
+void Daemon::run() {
+    std::function<void()> wait_signal = [&] {
+        signals_.async_wait([&](const boost::system::error_code& ec, int sig) {
+            if (ec) return;
+            if (sig == SIGHUP) {
+                sd_notify(0, "RELOADING=1");
+                reload();
+                sd_notify(0, "READY=1");
+                wait_signal();
+                return;
+            }
+            spdlog::info("signal {}: draining and stopping", sig);
+            stopping_ = true;
+            stats_timer_.cancel();
+        });
+    };
+    wait_signal();
+    arm_stats_timer();
+    main_io_.run();
+    shutdown();
+}
+
+void Daemon::shutdown() {
+    if (!pool_) return;
+    sd_notify(0, "STOPPING=1");
+    // Ingest first (no new samples), then the workers finish what is queued, then the
+    // assembler emits what is open, then clients get the last frames and are closed.
+    if (ingest_thread_.joinable()) {
+        asio::post(ingest_io_, [this] {
+            sink_listener_->stop();
+            for (auto& r : can_readers_) r->stop();
+            ingest_io_.stop();
+        });
+        ingest_thread_.join();
+    }
+    pool_->stop();
+    assembler_stop_.store(true, std::memory_order_release);
+    if (assembler_thread_.joinable()) assembler_thread_.join();
+    if (server_) server_->stop();
+    pool_.reset();
+    spdlog::info("mocapd stopped");
+}
+
+}  // namespace mocap::daemon

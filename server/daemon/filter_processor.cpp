@@ -1,0 +1,30 @@
+#include "daemon/filter_processor.hpp"
+
+#include <cmath>
+
+namespace mocap::daemon {
+namespace {
+
+bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+}  // namespace
+
+bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
+    if (reset_.exchange(false, std::memory_order_relaxed)) filter_->reset();
+    if (in.has_node_quat) {
+        const auto& q = in.node_q_wxyz;
+        const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        if (!std::isfinite(n) || n < 0.5) return false;
+        for (std::size_t i = 0; i < 4; ++i) out.q_earth_sensor_wxyz[i] = q[i] / n;
+        out.flags |= kSegmentFromNode;
+        return true;
+    }
+    const ImuSample& s = in.imu;
+    if (!finite(s.gyro_rad_s) || !finite(s.accel_m_s2) || (s.has_mag() && !finite(s.mag_ut))) return false;
+    filter_->update(s);
+    const filter::Quat q = filter_->orientation();
+    out.q_earth_sensor_wxyz = {q.w(), q.x(), q.y(), q.z()};
+    return true;
+}
+
+}  // namespace mocap::daemon

@@ -1,0 +1,38 @@
+// filter_processor.hpp — one segment's orientation filter behind the pipeline's
+// SegmentProcessor seam (core/segment_processor.hpp).
+//
+// Raw samples go through the segment's OrientationFilter; samples that carry the node's
+// own quaternion (on-node attitude mode) pass through, flagged kSegmentFromNode.
+// A sample with non-finite values is rejected (returns false: the pool counts it) and never
+// reaches the filter, so one bad frame cannot poison a segment's state.
+// Threading: called only from the segment's worker thread. reset_requested() may be set
+// from any thread (reload): the worker resets the filter before its next sample.
+// Cost: the filter's update; no allocation.
+#pragma once
+
+#include <atomic>
+#include <memory>
+
+#include "core/segment_processor.hpp"
+#include "filter/orientation_filter.hpp"
+
+namespace mocap::daemon {
+
+class FilterProcessor final : public SegmentProcessor {
+public:
+    explicit FilterProcessor(std::unique_ptr<filter::OrientationFilter> filter)
+        : filter_(std::move(filter)) {}
+
+    bool process(const SegmentSample& in, SegmentPose& out) override;
+
+    /// Any thread: the filter restarts (re-initialises from its next sample).
+    void request_reset() { reset_.store(true, std::memory_order_relaxed); }
+
+    [[nodiscard]] const filter::OrientationFilter& filter() const { return *filter_; }
+
+private:
+    std::unique_ptr<filter::OrientationFilter> filter_;
+    std::atomic<bool> reset_{false};
+};
+
+}  // namespace mocap::daemon
