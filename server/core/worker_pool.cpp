@@ -131,6 +131,7 @@ void WorkerPool::wake_workers() noexcept {
 bool WorkerPool::spin_until_input(const Worker& w) const noexcept {
     for (std::uint32_t i = 0; i < config_.spin_iterations; ++i) {
         if (w.input.size_approx() != 0) return true;
+        if (stopping_.load(std::memory_order_relaxed)) return false;  // stop() waits on us
         cpu_relax();
     }
     return false;
