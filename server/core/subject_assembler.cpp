@@ -256,6 +256,12 @@ std::int64_t AssemblerSet::next_deadline_us() const noexcept {
     return next;
 }
 
+void AssemblerSet::set_deadline_us(std::int64_t deadline_us) noexcept {
+    config_.deadline_us = deadline_us;
+    for (auto& s : subjects_)
+        s->set_deadline_us(deadline_us);
+}
+
 const SubjectAssembler* AssemblerSet::find(std::uint32_t subject_id) const noexcept {
     return lookup(subject_id);
 }

@@ -2,9 +2,18 @@
 // SubjectFrame, in SYNC order, and never waits forever for a missing segment.
 //
 // Threads: everything here runs on ONE thread, the assembler thread (the one that drains the
-// WorkerPool), except counters(), find()/counters() getters' CounterGroup and
-// assembly_snapshot(), which any thread may read. Time is injected: every call takes now_us
-// (the caller's clock, µs; the same clock as the stage stamps).
+// WorkerPool), except stats(), counters() and assembly_snapshot(), which any thread may read.
+// Time is injected: every call takes now_us (the caller's clock, µs; the same clock as the
+// stage stamps).
+//
+// The assembler thread's loop (the daemon owns it; `clock` is its Clock):
+//     while (running) {
+//         pool.drain([&](const PoseUpdate& u) { set.on_pose(u, clock.now_us()); });
+//         set.advance(clock.now_us());                 // deadlines, even with no input
+//         const std::int64_t next = set.next_deadline_us();
+//         pool.wait_for_output(next == kNoDeadline ? idle_us : next - clock.now_us());
+//     }
+//     // shutdown: pool.stop(); drain until drain() returns 0; set.flush(clock.now_us());
 //
 // Rules for one subject
 // - An instant (SYNC value) opens when its first segment pose arrives; now_us of that arrival
@@ -94,6 +103,8 @@ class SubjectAssembler {
     void flush(std::int64_t now_us);
     /// When advance() must next be called (the oldest open instant's deadline), or kNoDeadline.
     [[nodiscard]] std::int64_t next_deadline_us() const noexcept;
+    /// Changes the deadline (config reload); applies to open instants too. deadline_us >= 0.
+    void set_deadline_us(std::int64_t deadline_us) noexcept { config_.deadline_us = deadline_us; }
 
     [[nodiscard]] std::uint32_t subject_id() const noexcept { return subject_id_; }
     [[nodiscard]] std::uint16_t segment_count() const noexcept { return segment_count_; }
@@ -155,6 +166,8 @@ class AssemblerSet {
     void flush(std::int64_t now_us);
     /// Earliest deadline over all subjects, or kNoDeadline. O(subjects).
     [[nodiscard]] std::int64_t next_deadline_us() const noexcept;
+    /// Assembler thread: new deadline for every subject (config reload).
+    void set_deadline_us(std::int64_t deadline_us) noexcept;
 
     [[nodiscard]] const SubjectAssembler* find(std::uint32_t subject_id) const noexcept;
     [[nodiscard]] std::size_t subject_count() const noexcept { return subjects_.size(); }

@@ -273,6 +273,21 @@ TEST(SubjectAssembler, FlushEmitsEverythingInOrder) {
     EXPECT_EQ(a.open_instants(), 0u);
 }
 
+TEST(AssemblerSet, DeadlineCanChangeAtRunTime) {
+    RecordingSink sink;
+    AssemblerSet set(config(), sink);
+    set.add_subject(1, 2);
+    set.on_pose(pose(1, 0, 1), 0);
+    set.set_deadline_us(5'000);  // applies to the open instant as well
+    EXPECT_EQ(set.next_deadline_us(), 5'000);
+    set.advance(5'000);
+    ASSERT_EQ(sink.frames.size(), 1u);
+    set.on_pose(pose(1, 0, 2), 10'000);  // segment 1 is dead now: no wait at all
+    EXPECT_EQ(sink.frames.size(), 2u);
+    set.on_pose(pose(1, 1, 3), 20'000);  // segment 1 is back and waited for again
+    EXPECT_EQ(set.next_deadline_us(), 25'000);
+}
+
 TEST(AssemblerSet, RoutesBySubjectAndSumsCounters) {
     RecordingSink sink;
     AssemblerSet set(config(), sink);

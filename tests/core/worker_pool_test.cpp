@@ -330,6 +330,22 @@ TEST(WorkerPool, BatchSubmitWakesOncePerWorker) {
     pool.stop();
 }
 
+TEST(WorkerPool, StopIsPromptEvenWithALongSpinAndPinnedWorkers) {
+    WorkerPoolConfig cfg;
+    cfg.workers = 2;
+    cfg.spin_iterations = 4'000'000'000u;  // would spin for minutes without the stop check
+    cfg.pin_cpus = true;
+    WorkerPool pool(cfg);
+    OrderCheckingProcessor p;
+    pool.add_segment(0, 0, p);
+    pool.start();
+    ASSERT_EQ(pool.submit(sample(0, 0, 1)), SubmitResult::kQueued);
+    const auto t0 = std::chrono::steady_clock::now();
+    pool.stop();
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(2));
+    EXPECT_EQ(counter(pool, "samples_processed"), 1u);
+}
+
 TEST(WorkerPool, StopProcessesEverythingQueued) {
     WorkerPoolConfig cfg;
     cfg.workers = 2;
