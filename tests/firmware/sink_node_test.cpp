@@ -155,6 +155,7 @@ protected:
         config.sink_id = 3;
         config.status_period_s = 0;
         config.config_period_s = 0;
+        config.early_close = 0; // the tests below that want it turn it on
     }
 
     void start()
@@ -267,6 +268,92 @@ TEST_F(SinkNodeTest, NodeLossLeavesItsFramesOutButPacketsContinue)
             EXPECT_NE(mw_can_id_node(packets[n]->frames[i].frame.id), 2u);
         }
     }
+}
+
+TEST_F(SinkNodeTest, EarlyCloseSendsThePacketAsSoonAsEveryNodeDelivered)
+{
+    fake.nodes = {1, 2};
+    config.early_close = 1;
+    start();
+    const uint64_t t0 = fake.now_us;
+    run(11'000); // polls at 0..10 ms: SYNC 0, its frames at 1 ms, SYNC 1 at 10 ms closes instant 0
+    EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 1u) << "nothing learnt yet: closed by SYNC 1";
+    run(1'000); // 11 ms: instant 1's six frames arrive; the count of instant 0 says it is complete
+    const auto packets = decode_all(fake.connections.at(0));
+    ASSERT_EQ(packets.size(), 2u) << "instant 1 left 1 ms after its SYNC, not at SYNC 2";
+    EXPECT_EQ(packets[1]->header.timestamp_us, t0 + 10'000);
+    EXPECT_EQ(packets[1]->frame_count, 7u);
+    EXPECT_EQ(mw_can_id_function(packets[1]->frames[0].frame.id), MW_FN_SYNC);
+    EXPECT_EQ(sink->counters.early_closes, 1u);
+    run(8'000); // up to 19 ms: no SYNC yet, no further packet (no empty continuation)
+    EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 2u);
+    run(2'000); // SYNC 2 at 20 ms, its frames at 21 ms
+    EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 3u);
+    EXPECT_EQ(sink->counters.early_closes, 2u);
+}
+
+TEST_F(SinkNodeTest, EarlyCloseWithNodeLossDeliversAtTheNextSyncThenLearns)
+{
+    fake.nodes = {1, 2, 3};
+    config.early_close = 1;
+    start();
+    run(20'000);             // instants 0 (closed by SYNC 1) and 1 (early, 9 frames)
+    fake.nodes = {1, 3};     // node 2 falls silent from instant 2 on
+    run(10'000);             // SYNC 2 at 20 ms, 6 frames at 21 ms: short of 9, so it waits
+    EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 2u);
+    run(2'000);              // 31 ms: SYNC 3 at 30 ms closed instant 2; instant 3 learnt 6
+    const auto packets = decode_all(fake.connections.at(0));
+    ASSERT_EQ(packets.size(), 4u);
+    EXPECT_EQ(packets[2]->frame_count, 7u);
+    mw_sync sync{};
+    ASSERT_EQ(mw_sync_decode(&packets[2]->frames[0].frame, &sync), MW_OK);
+    EXPECT_EQ(sync.counter, 2u);
+    ASSERT_EQ(mw_sync_decode(&packets[3]->frames[0].frame, &sync), MW_OK);
+    EXPECT_EQ(sync.counter, 3u) << "instant 3 closed early with the learnt count";
+    EXPECT_EQ(sink->counters.early_closes, 2u);
+}
+
+TEST_F(SinkNodeTest, EarlyCloseReturningNodeGoesIntoAContinuation)
+{
+    fake.nodes = {1, 3};
+    config.early_close = 1;
+    start();
+    run(20'000);          // instant 0 (SYNC close), instant 1 early with 6 frames
+    fake.nodes = {1, 2, 3};
+    run(20'000);          // instant 2: closes after 6 frames, node 3's three follow in a
+                          // continuation closed by SYNC 3; instant 3 learnt 9 and closes early
+    const auto packets = decode_all(fake.connections.at(0));
+    ASSERT_EQ(packets.size(), 5u);
+    EXPECT_EQ(packets[2]->frame_count, 7u);
+    EXPECT_EQ(packets[3]->frame_count, 3u);
+    EXPECT_EQ(packets[3]->header.timestamp_us, packets[2]->header.timestamp_us);
+    EXPECT_EQ(packets[3]->frames[0].frame.id, MW_CAN_ID(MW_FN_ACCEL, 3)) << "no SYNC record";
+    EXPECT_EQ(packets[4]->frame_count, 10u);
+    EXPECT_EQ(sink->counters.early_closes, 3u);
+    EXPECT_EQ(sink->counters.frames_in, 6u + 6u + 9u + 9u);
+}
+
+TEST_F(SinkNodeTest, EarlyCloseIgnoresStatusFrames)
+{
+    fake.nodes = {1};
+    config.early_close = 1;
+    start();
+    run(20'000); // instants 0 and 1 (early, 3 frames)
+    mw_status status{};
+    status.node_id = 1;
+    status.state = MW_NODE_RUNNING;
+    status.accel_range = MW_ACCEL_16G;
+    status.gyro_range = MW_GYRO_2000DPS;
+    status.protocol_version = MW_CAN_PROTOCOL_VERSION;
+    mw_can_frame f{};
+    ASSERT_EQ(mw_status_encode(&status, &f), MW_OK);
+    fake.rx.push_back(f); // a node STATUS during instant 1's remainder
+    run(12'000);          // instants 2 and 3 still close early: STATUS is not a sample
+    const auto packets = decode_all(fake.connections.at(0));
+    ASSERT_EQ(packets.size(), 5u) << "0, 1, STATUS continuation of 1, 2, 3";
+    EXPECT_EQ(packets[2]->frame_count, 1u);
+    EXPECT_EQ(mw_can_id_function(packets[2]->frames[0].frame.id), MW_FN_STATUS);
+    EXPECT_EQ(sink->counters.early_closes, 3u);
 }
 
 TEST_F(SinkNodeTest, SyncCounterWrapsAt32Bits)

@@ -4,6 +4,10 @@
  * - A batch is closed by the next SYNC rather than by a timer: the nodes answer each SYNC
  *   within a fraction of a period, so "everything until the next SYNC" is one instant, and
  *   a missing node can never hold a packet back.
+ * - Early close (header): the previous instant's sample-frame count predicts this one's, so
+ *   a complete instant leaves at once instead of one period later; a short instant (node
+ *   loss) still ends at the next SYNC, so a missing node never holds a packet back longer
+ *   than before.
  * - Packets are built in place with the wire library's builder as frames arrive, so closing
  *   a batch costs only the CRC; the uplink takes the finished bytes or refuses them whole. */
 #include "sink_node/sink_node.h"
@@ -31,6 +35,7 @@ void sink_node_default_config(sink_node_config *config)
     config->node_config.gyro_range = MW_GYRO_2000DPS;
     config->node_config.mode = MW_MODE_RAW;
     config->node_config.status_period_s = 1;
+    config->early_close = 1;
 }
 
 /* ---- CAN transmit queue ------------------------------------------------------------------ */
@@ -177,7 +182,8 @@ static void close_batch(sink_node *sink, uint64_t now)
 static void add_to_batch(sink_node *sink, const mw_can_frame *frame, uint64_t at_us, int node_frame)
 {
     if (!sink->batch_open) {
-        open_batch(sink, at_us);
+        /* After an early close, later frames of the instant continue it (same timestamp). */
+        open_batch(sink, sink->instant_started ? sink->batch_timestamp_us : at_us);
     }
     if (sink->builder.frame_count >= sink->config.max_batch_frames) {
         const uint64_t timestamp = sink->batch_timestamp_us;
@@ -207,11 +213,39 @@ static uint64_t sync_due_us(const sink_node *sink, uint64_t index)
     return sink->start_us + index * US_PER_S / sink->config.rate_hz;
 }
 
+static int is_sample_frame(const mw_can_frame *frame)
+{
+    const mw_function fn = mw_can_id_function(frame->id);
+    return fn == MW_FN_ACCEL || fn == MW_FN_GYRO || fn == MW_FN_MAG || fn == MW_FN_ATTITUDE;
+}
+
+/* A received node frame: batch it, and close the packet when the instant is complete. */
+static void receive_frame(sink_node *sink, const mw_can_frame *frame, uint64_t at_us)
+{
+    add_to_batch(sink, frame, at_us, 1);
+    if (!sink->instant_started || !is_sample_frame(frame)) {
+        return;
+    }
+    ++sink->instant_sample_frames;
+    if (sink->config.early_close && !sink->instant_closed_early && sink->expected_sample_frames > 0u &&
+        sink->instant_sample_frames == sink->expected_sample_frames) {
+        sink->instant_closed_early = 1;
+        ++sink->counters.early_closes;
+        close_batch(sink, at_us);
+    }
+}
+
 static void send_sync(sink_node *sink, uint64_t now)
 {
     const mw_sync sync = {sink->next_counter};
     mw_can_frame frame;
     close_batch(sink, now);
+    if (sink->instant_started) {
+        sink->expected_sample_frames = sink->instant_sample_frames;
+    }
+    sink->instant_started = 1;
+    sink->instant_closed_early = 0;
+    sink->instant_sample_frames = 0;
     (void)mw_sync_encode(&sync, &frame);
     queue_can(sink, &frame);
     ++sink->counters.syncs_sent;
@@ -299,6 +333,10 @@ int sink_node_init(sink_node *sink, const sink_node_hal *hal, const sink_node_co
     sink->batch_open = 0;
     sink->batch_timestamp_us = 0;
     sink->batch_node_frames = 0;
+    sink->instant_started = 0;
+    sink->instant_closed_early = 0;
+    sink->instant_sample_frames = 0;
+    sink->expected_sample_frames = 0;
     sink->can_tx_head = 0;
     sink->can_tx_count = 0;
     sink->can_tx_overflow_event = 0;
@@ -314,7 +352,7 @@ void sink_node_poll(sink_node *sink)
     mw_can_frame frame;
     while (sink->hal.can_receive(sink->hal.user, &frame) == 1) {
         ++sink->counters.frames_in;
-        add_to_batch(sink, &frame, now_us(sink), 1);
+        receive_frame(sink, &frame, now_us(sink));
     }
 
     now = now_us(sink);

@@ -17,6 +17,17 @@
  *   more than 65535 us after the timestamp (the continuation is stamped with that frame's
  *   time; only at rates below ~16 Hz). A packet goes out even if some nodes sent nothing
  *   (node loss is the host's to see).
+ * - Early close: waiting for SYNC n+1 adds a whole sample period of latency. The core
+ *   therefore remembers how many sample frames (ACCEL, GYRO, MAG, ATT; not STATUS) arrived
+ *   during the previous complete instant and closes the packet of instant n as soon as
+ *   instant n holds that many (counted in early_closes). Anything else that arrives before
+ *   SYNC n+1 goes into a continuation packet (same timestamp, no SYNC record) closed by
+ *   SYNC n+1. A node that drops out makes the instant fall short, so its packet waits for
+ *   SYNC n+1 as before, and the next instant learns the smaller count; a node that comes
+ *   back adds a continuation for one instant, then the larger count is learnt. The first
+ *   instant after init has nothing to learn from and closes at the next SYNC. Deterministic:
+ *   it depends only on the frames received. config.early_close = 0 restores the plain
+ *   close-at-next-SYNC behaviour.
  *   Every status_period_s the sink's own STATUS (node id 0) is appended to the batch.
  * - Uplink: packets are written whole through the HAL. The packet sequence is per connection
  *   (0 for the first packet after a connect); a packet the uplink refused as busy still uses
@@ -99,6 +110,7 @@ typedef struct sink_node_config {
     uint8_t status_period_s;    /* sink STATUS into the stream every N s, 0 = never */
     uint8_t config_period_s;    /* CONFIG broadcast every N s, 0 = only at start */
     mw_config node_config;      /* what the nodes are told (node_id is forced to 0) */
+    uint8_t early_close;        /* 1 = close an instant's packet once it is complete (above) */
 } sink_node_config;
 
 /* Counters only go up (wrap at 2^32). */
@@ -118,6 +130,7 @@ typedef struct sink_node_counters {
     uint32_t connects;          /* attempts that reached UP */
     uint32_t reconnects;        /* connects after the first one */
     uint32_t disconnects;       /* UP -> DOWN transitions (peer drop or write error) */
+    uint32_t early_closes;      /* packets closed before the next SYNC: instant complete */
 } sink_node_counters;
 
 typedef struct sink_node {
@@ -140,6 +153,10 @@ typedef struct sink_node {
     uint8_t batch_open;
     uint64_t batch_timestamp_us;
     uint32_t batch_node_frames; /* received frames in the open batch (not SYNC/STATUS) */
+    uint8_t instant_started;    /* a SYNC has been sent: later frames belong to its instant */
+    uint8_t instant_closed_early; /* this instant's packet has been closed early */
+    uint32_t instant_sample_frames;  /* sample frames received since the last SYNC */
+    uint32_t expected_sample_frames; /* sample frames of the previous complete instant */
     mw_packet_builder builder;
     uint8_t packet[SINK_NODE_PACKET_CAPACITY];
     /* CAN TX */
@@ -151,7 +168,8 @@ typedef struct sink_node {
 } sink_node;
 
 /* Defaults: 100 Hz, 128 frames per packet, back-off 100 ms .. 5 s, connect timeout 10 s,
- * STATUS every 1 s, CONFIG every 1 s, nodes at +-16 g, +-2000 dps, raw mode, STATUS 1 s. */
+ * STATUS every 1 s, CONFIG every 1 s, nodes at +-16 g, +-2000 dps, raw mode, STATUS 1 s,
+ * early close on. */
 void sink_node_default_config(sink_node_config *config);
 
 /* Validates the config, copies the HAL, starts the schedule (the first SYNC is due at once)
