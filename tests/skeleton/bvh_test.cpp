@@ -411,3 +411,56 @@ TEST(BvhMotionLine, ParsesExactCounts) {
 
 }  // namespace
 }  // namespace mocap::skeleton
+
+namespace mocap::skeleton {
+namespace {
+
+// Random edits of a valid file: the parser must return (clip or error) without crashing,
+// and every clip it accepts must be internally consistent and evaluate to finite poses.
+TEST(BvhMalformed, RandomMutationsAreRejectedOrConsistent) {
+    const std::string base = kHead + "MOTION\nFrames: 3\nFrame Time: 0.01\n1 2 3 4 5 6 7 8 9\n"
+                                     "-1 -2 -3 -4 -5 -6 -7 -8 -9\n0.5 0.5 0.5 90 90 90 0 0 0\n";
+    const std::string alphabet = "0123456789-.e+ \t\n{}XYZrotainpsJOINTEnd SiteFrames:Time";
+    std::mt19937 rng(11);
+    std::size_t accepted = 0;
+    for (int k = 0; k < 20000; ++k) {
+        std::string t = base;
+        const int edits = 1 + static_cast<int>(rng() % 3);
+        for (int e = 0; e < edits && !t.empty(); ++e) {
+            const std::size_t at = rng() % t.size();
+            switch (rng() % 4) {
+                case 0: t[at] = alphabet[rng() % alphabet.size()]; break;
+                case 1: t.erase(at, 1 + rng() % 8); break;
+                case 2: t.insert(at, t.substr(rng() % t.size(), 1 + rng() % 16)); break;
+                default: t.resize(at); break;
+            }
+        }
+        const auto r = parse_bvh(t);
+        if (!r) {
+            EXPECT_FALSE(r.error.empty());
+            continue;
+        }
+        ++accepted;
+        const BvhClip& c = *r.clip;
+        std::size_t channels = 0;
+        for (std::size_t j = 0; j < c.joints.size(); ++j) {
+            ASSERT_LT(c.joints[j].parent, static_cast<int>(j));
+            ASSERT_EQ(c.joints[j].first_channel, channels);
+            channels += c.joints[j].channel_count;
+        }
+        ASSERT_EQ(c.channels_per_frame, channels);
+        ASSERT_EQ(c.values.size(), c.frame_count * c.channels_per_frame);
+        std::vector<Quat> q(c.joints.size());
+        std::vector<Vec3> p(c.joints.size());
+        for (std::size_t f = 0; f < c.frame_count; ++f) {
+            bvh_global_pose(c, c.frame(f), 1.0, q, p);
+            for (std::size_t j = 0; j < c.joints.size(); ++j) {
+                ASSERT_TRUE(q[j].coeffs().allFinite() && p[j].allFinite());
+            }
+        }
+    }
+    EXPECT_GT(accepted, 0u);  // some edits (digits in numbers) leave a valid file
+}
+
+}  // namespace
+}  // namespace mocap::skeleton
