@@ -579,8 +579,8 @@ std::vector<BvhSegmentSource> cmu_segment_sources() {
         const std::string l = left ? "Left" : "Right";
         const std::string c = left ? "L" : "R";
         const std::string lc = left ? "l" : "r";
-        add(left ? seg::kLeftUpperArm : seg::kRightUpperArm, {l + "Shoulder", l + "Arm"}, {l + "Elbow", l + "ForeArm"});
-        // In the second naming "LeftShoulder" is the collar, so its forearm name decides.
+        // "LeftArm" first: in the second naming "LeftShoulder" is the collar.
+        add(left ? seg::kLeftUpperArm : seg::kRightUpperArm, {l + "Arm", l + "Shoulder"}, {l + "Elbow", l + "ForeArm"});
         add(left ? seg::kLeftForearm : seg::kRightForearm, {l + "Elbow", l + "ForeArm"}, {l + "Wrist", l + "Hand"});
         add(left ? seg::kLeftHand : seg::kRightHand, {lc + "hand", l + "Hand"},
             {c + "Fingers", l + "HandIndex1", l + "FingerBase", "End Site"});
@@ -590,6 +590,35 @@ std::vector<BvhSegmentSource> cmu_segment_sources() {
     }
     return s;
 }
+
+namespace {
+
+/// Rest-pose direction from joint `j` to the first resolvable tip: "End Site" (the
+/// joint's own End Site) or a descendant joint (the sum of the offsets on the way down).
+bool resolve_tip(const BvhClip& clip, int j, const std::vector<std::string>& tips, Vec3& dir) {
+    for (const std::string& tip : tips) {
+        if (tip == "End Site") {
+            const BvhJoint& joint = clip.joints[static_cast<std::size_t>(j)];
+            if (!joint.has_end_site) continue;
+            dir = joint.end_offset;
+            return true;
+        }
+        int k = clip.index_of(tip);
+        if (k == j) continue;
+        Vec3 d = Vec3::Zero();
+        while (k >= 0 && k != j) {
+            d += clip.joints[static_cast<std::size_t>(k)].offset;
+            k = clip.joints[static_cast<std::size_t>(k)].parent;
+        }
+        if (k == j) {
+            dir = d;
+            return true;
+        }
+    }
+    return false;
+}
+
+}  // namespace
 
 BvhMappingResult map_bvh_to_model(const BvhClip& clip, const BodyModel& model,
                                   std::span<const BvhSegmentSource> sources) {
@@ -608,51 +637,24 @@ BvhMappingResult map_bvh_to_model(const BvhClip& clip, const BodyModel& model,
             r.error = "no BVH source listed for segment '" + s.name + "'";
             return r;
         }
+        // The first listed joint present in the file whose tip resolves (any present one
+        // when no tips are listed) drives the segment.
         int joint = -1;
-        for (const std::string& name : src->joints) {
-            joint = clip.index_of(name);
-            if (joint >= 0) break;
-        }
-        if (joint < 0) {
-            r.error = "segment '" + s.name + "': none of its BVH joints is in the file";
-            return r;
-        }
-        // In the second CMU naming "LeftShoulder" is the collar: prefer a later candidate
-        // whose tip exists when the first one's tip does not.
         Vec3 rest_dir = Vec3::Zero();
-        bool tip_found = src->tips.empty();
+        bool any_present = false;
         for (const std::string& cand : src->joints) {
             const int jc = clip.index_of(cand);
             if (jc < 0) continue;
-            for (const std::string& tip : src->tips) {
-                if (tip == "End Site") {
-                    if (clip.joints[static_cast<std::size_t>(jc)].has_end_site) {
-                        rest_dir = clip.joints[static_cast<std::size_t>(jc)].end_offset;
-                        tip_found = true;
-                    }
-                } else {
-                    int k = clip.index_of(tip);
-                    Vec3 d = Vec3::Zero();
-                    // Walk up from the tip; it must be a descendant of the joint.
-                    while (k >= 0 && k != jc) {
-                        d += clip.joints[static_cast<std::size_t>(k)].offset;
-                        k = clip.joints[static_cast<std::size_t>(k)].parent;
-                    }
-                    if (k == jc && clip.index_of(tip) != jc) {
-                        rest_dir = d;
-                        tip_found = true;
-                    }
-                }
-                if (tip_found) break;
-            }
-            if (tip_found) {
+            any_present = true;
+            if (src->tips.empty() || resolve_tip(clip, jc, src->tips, rest_dir)) {
                 joint = jc;
                 break;
             }
         }
-        if (!tip_found) {
-            r.error = "segment '" + s.name + "': no tip joint of '" + clip.joints[static_cast<std::size_t>(joint)].name +
-                      "' found for its long axis";
+        if (joint < 0) {
+            r.error = "segment '" + s.name + "': " +
+                      (any_present ? std::string("no tip joint found below its BVH joint for the long axis")
+                                   : std::string("none of its BVH joints is in the file"));
             return r;
         }
         const Vec3 d_rest = enu_from_bvh(rest_dir);

@@ -160,7 +160,8 @@ struct BvhSegmentSource {
 /// other common CMU conversion (Hips, Spine1, Head, LeftArm, LeftForeArm, LeftHand,
 /// LeftUpLeg, LeftLeg, LeftFoot, LeftToeBase, ...) as fallbacks:
 ///   pelvis <- Hips;  trunk <- Chest2 (the joint the arms hang from, tip Neck);
-///   head <- Head;  upper arm <- LeftShoulder|LeftArm;  forearm <- LeftElbow|LeftForeArm;
+///   head <- Head;  upper arm <- LeftArm|LeftShoulder (LeftArm first: in the second naming
+///   LeftShoulder is the collar);  forearm <- LeftElbow|LeftForeArm;
 ///   hand <- lhand|LeftHand;  thigh <- LeftHip|LeftUpLeg;  calf <- LeftKnee|LeftLeg;
 ///   foot <- LeftAnkle|LeftFoot;  and the same on the right.
 std::vector<BvhSegmentSource> cmu_segment_sources();

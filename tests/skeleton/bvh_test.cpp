@@ -464,3 +464,56 @@ TEST(BvhMalformed, RandomMutationsAreRejectedOrConsistent) {
 
 }  // namespace
 }  // namespace mocap::skeleton
+
+namespace mocap::skeleton {
+namespace {
+
+// The other common CMU conversion names the collar "LeftShoulder" and the upper arm
+// "LeftArm"; the mapping must pick the upper arm, not the collar.
+TEST(Bvh, SecondCmuNamingMapsToTheRightJoints) {
+    struct J {
+        const char* name;
+        const char* parent;
+        double x, y, z;
+    };
+    const std::vector<J> joints{
+        {"Hips", "", 0, 0, 0},          {"LowerBack", "Hips", 0, 0.1, 0},   {"Spine", "LowerBack", 0, 0.1, 0},
+        {"Spine1", "Spine", 0, 0.1, 0}, {"Neck", "Spine1", 0, 0.1, 0},      {"Head", "Neck", 0, 0.1, 0},
+        {"LeftShoulder", "Spine1", 0.05, 0.05, 0}, {"LeftArm", "LeftShoulder", 0.15, 0, 0},
+        {"LeftForeArm", "LeftArm", 0, -0.3, 0},    {"LeftHand", "LeftForeArm", 0, -0.25, 0},
+        {"RightShoulder", "Spine1", -0.05, 0.05, 0}, {"RightArm", "RightShoulder", -0.15, 0, 0},
+        {"RightForeArm", "RightArm", 0, -0.3, 0},    {"RightHand", "RightForeArm", 0, -0.25, 0},
+        {"LHipJoint", "Hips", 0.1, 0, 0},  {"LeftUpLeg", "LHipJoint", 0, -0.05, 0},  {"LeftLeg", "LeftUpLeg", 0, -0.4, 0},
+        {"LeftFoot", "LeftLeg", 0, -0.4, 0}, {"LeftToeBase", "LeftFoot", 0, -0.05, 0.12},
+        {"RHipJoint", "Hips", -0.1, 0, 0}, {"RightUpLeg", "RHipJoint", 0, -0.05, 0}, {"RightLeg", "RightUpLeg", 0, -0.4, 0},
+        {"RightFoot", "RightLeg", 0, -0.4, 0}, {"RightToeBase", "RightFoot", 0, -0.05, 0.12},
+    };
+    BvhClip clip;
+    for (const J& j : joints) {
+        BvhJoint b;
+        b.name = j.name;
+        b.parent = clip.index_of(j.parent);
+        b.offset = Vec3(j.x, j.y, j.z);
+        b.has_end_site = std::string(j.name) == "Head" || std::string(j.name).find("Hand") != std::string::npos ||
+                         std::string(j.name).find("Toe") != std::string::npos;
+        b.end_offset = std::string(j.name) == "Head" ? Vec3(0, 0.2, 0) : Vec3(0, -0.1, 0);
+        clip.joints.push_back(b);
+    }
+    const BodyModel model = default_body_model();
+    const auto sources = cmu_segment_sources();
+    const auto m = map_bvh_to_model(clip, model, sources);
+    ASSERT_TRUE(m) << m.error;
+    const auto name = [&](std::string_view seg) {
+        return clip.joints[static_cast<std::size_t>(m.mapping->joint[static_cast<std::size_t>(model.index_of(seg))])].name;
+    };
+    EXPECT_EQ(name("trunk"), "Spine1");
+    EXPECT_EQ(name("left_upper_arm"), "LeftArm");
+    EXPECT_EQ(name("right_forearm"), "RightForeArm");
+    EXPECT_EQ(name("left_hand"), "LeftHand");
+    EXPECT_EQ(name("right_thigh"), "RightUpLeg");
+    EXPECT_EQ(name("left_calf"), "LeftLeg");
+    EXPECT_EQ(name("right_foot"), "RightFoot");
+}
+
+}  // namespace
+}  // namespace mocap::skeleton
