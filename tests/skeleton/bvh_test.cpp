@@ -202,6 +202,16 @@ TEST(Bvh, ModelHierarchyHasEndSitesAtLeavesOnly) {
 }
 
 // Mapping CMU joints onto the 15 segments: each segment's long axis follows the clip's bone.
+/// Each (segment, BVH joint) pair: the segment is driven by that joint.
+void expect_mapped(const BvhClip& clip, const BodyModel& model, const BvhSegmentMapping& m,
+                   const std::vector<std::pair<std::string, std::string>>& expected) {
+    for (const auto& [seg, joint] : expected) {
+        const int i = model.index_of(seg);
+        ASSERT_GE(i, 0) << seg;
+        EXPECT_EQ(clip.joints[static_cast<std::size_t>(m.joint[static_cast<std::size_t>(i)])].name, joint) << seg;
+    }
+}
+
 struct MappedClip {
     BvhClip clip;
     BodyModel model = default_body_model();
@@ -224,18 +234,10 @@ TEST(Bvh, CmuMappingFollowsTheBones) {
     const BvhClip& clip = mc.clip;
     const BodyModel& model = mc.model;
     const auto& m = mc.m;
-    const auto joint_name = [&](std::string_view seg) {
-        return clip.joints[static_cast<std::size_t>(m.mapping->joint[static_cast<std::size_t>(model.index_of(seg))])].name;
-    };
-    EXPECT_EQ(joint_name("pelvis"), "Hips");
-    EXPECT_EQ(joint_name("trunk"), "Chest2");
-    EXPECT_EQ(joint_name("head"), "Head");
-    EXPECT_EQ(joint_name("left_upper_arm"), "LeftShoulder");
-    EXPECT_EQ(joint_name("right_forearm"), "RightElbow");
-    EXPECT_EQ(joint_name("left_hand"), "lhand");
-    EXPECT_EQ(joint_name("right_thigh"), "RightHip");
-    EXPECT_EQ(joint_name("left_calf"), "LeftKnee");
-    EXPECT_EQ(joint_name("right_foot"), "RightAnkle");
+    expect_mapped(clip, model, *m.mapping,
+                  {{"pelvis", "Hips"}, {"trunk", "Chest2"}, {"head", "Head"}, {"left_upper_arm", "LeftShoulder"},
+                   {"right_forearm", "RightElbow"}, {"left_hand", "lhand"}, {"right_thigh", "RightHip"},
+                   {"left_calf", "LeftKnee"}, {"right_foot", "RightAnkle"}});
 
     const std::vector<std::pair<std::string, std::string>> bones{
         {"left_upper_arm", "LeftElbow"}, {"right_forearm", "RightWrist"}, {"left_thigh", "LeftKnee"},
@@ -503,16 +505,10 @@ TEST(Bvh, SecondCmuNamingMapsToTheRightJoints) {
     const auto sources = cmu_segment_sources();
     const auto m = map_bvh_to_model(clip, model, sources);
     ASSERT_TRUE(m) << m.error;
-    const auto name = [&](std::string_view seg) {
-        return clip.joints[static_cast<std::size_t>(m.mapping->joint[static_cast<std::size_t>(model.index_of(seg))])].name;
-    };
-    EXPECT_EQ(name("trunk"), "Spine1");
-    EXPECT_EQ(name("left_upper_arm"), "LeftArm");
-    EXPECT_EQ(name("right_forearm"), "RightForeArm");
-    EXPECT_EQ(name("left_hand"), "LeftHand");
-    EXPECT_EQ(name("right_thigh"), "RightUpLeg");
-    EXPECT_EQ(name("left_calf"), "LeftLeg");
-    EXPECT_EQ(name("right_foot"), "RightFoot");
+    expect_mapped(clip, model, *m.mapping,
+                  {{"trunk", "Spine1"}, {"left_upper_arm", "LeftArm"}, {"right_forearm", "RightForeArm"},
+                   {"left_hand", "LeftHand"}, {"right_thigh", "RightUpLeg"}, {"left_calf", "LeftLeg"},
+                   {"right_foot", "RightFoot"}});
 }
 
 }  // namespace
