@@ -662,9 +662,46 @@ BvhMappingResult map_bvh_to_model(const BvhClip& clip, const BodyModel& model,
         if (d_rest.norm() > 1e-9 && s.end_m.norm() > 1e-9) q_c = Quat::FromTwoVectors(s.end_m, d_rest).normalized();
         m.joint[i] = joint;
         m.q_joint_segment[i] = q_c;
+        m.rest_tip_enu[i] = d_rest;
     }
     r.mapping = m;
     return r;
+}
+
+BodyModel body_model_from_bvh(const BvhClip& clip, const BvhSegmentMapping& mapping, const BodyModel& base,
+                              double unit_m) {
+    BodyModel out = base;
+    const std::size_t n = std::min(base.size(), mapping.segment_count);
+    if (n == 0) return out;
+    // Rest pose: all channels zero.
+    std::vector<double> zeros(clip.channels_per_frame, 0.0);
+    std::vector<Quat> q(clip.joints.size());
+    std::vector<Vec3> p(clip.joints.size());
+    bvh_global_pose(clip, zeros, unit_m, q, p);
+    double lowest = 0.0;
+    bool first = true;
+    for (std::size_t j = 0; j < clip.joints.size(); ++j) {
+        const double z = clip.joints[j].has_end_site
+                             ? std::min(p[j].z(), p[j].z() + enu_from_bvh(clip.joints[j].end_offset).z() * unit_m)
+                             : p[j].z();
+        if (first || z < lowest) lowest = z;
+        first = false;
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        SegmentDef& s = out.segments[i];
+        const Vec3 here = p[static_cast<std::size_t>(mapping.joint[i])];
+        if (s.parent >= 0) {
+            const auto par = static_cast<std::size_t>(s.parent);
+            s.offset_m = mapping.q_joint_segment[par].conjugate()._transformVector(
+                here - p[static_cast<std::size_t>(mapping.joint[par])]);
+        } else {
+            s.offset_m = Vec3::Zero();
+            out.root_height_m = here.z() - lowest;
+        }
+        const double len = mapping.rest_tip_enu[i].norm() * unit_m;
+        if (len > 1e-9 && s.end_m.norm() > 1e-9) s.end_m = s.end_m.normalized() * len;
+    }
+    return out;
 }
 
 void bvh_segment_pose(const BvhSegmentMapping& mapping, std::span<const Quat> q_enu_joint,

@@ -175,6 +175,7 @@ struct BvhSegmentMapping {
     std::size_t segment_count = 0;
     std::array<int, kMaxSegments> joint{};
     std::array<Quat, kMaxSegments> q_joint_segment = identity_quats();
+    std::array<Vec3, kMaxSegments> rest_tip_enu = zero_vec3s();  ///< joint -> tip at rest, file units
 };
 
 struct BvhMappingResult {
@@ -186,6 +187,17 @@ struct BvhMappingResult {
 /// Every model segment must have a source whose joint exists in the clip.
 BvhMappingResult map_bvh_to_model(const BvhClip& clip, const BodyModel& model,
                                   std::span<const BvhSegmentSource> sources);
+
+/// The model `base` (names, hierarchy, node ids, filters) with the clip's dimensions: each
+/// segment's offset is its driving joint's rest position relative to the parent's driving
+/// joint, turned into the parent's T-pose frame (conj(q_joint_segment) of the parent); each
+/// end_m keeps the base direction with the clip's rest bone length (segments without a
+/// tip keep base.end_m); root_height_m is the root joint's rest height above the lowest
+/// rest point of the clip. Forward kinematics of the result with bvh_segment_pose()
+/// orientations then reproduces the clip's limb joint positions (see the tests).
+/// unit_m = metres per file unit. No validation beyond the mapping's.
+BodyModel body_model_from_bvh(const BvhClip& clip, const BvhSegmentMapping& mapping, const BodyModel& base,
+                              double unit_m);
 
 /// Segment orientations (ENU) and segment origins (the driving joint's position, metres)
 /// from one frame's global joint pose (bvh_global_pose). No allocation.

@@ -14,6 +14,9 @@
 // Limits (stated, not hidden): no flight phase (during a jump the lowest foot is pinned
 // to the floor), flat level floor, no slipping; travel scales with the model's leg
 // lengths, so a model whose legs differ from the subject's walks too far or too short.
+// Measured on the CMU walk (tests/skeleton/root_motion_test.cpp): 2.595 m for the clip's
+// 2.589 m with the subject's own segment lengths (body_model_from_bvh), 1.98 m with the
+// default 1.75 m body; on the CMU hop (flight phases) 2.93 m for 3.27 m.
 //
 // Fixed arrays, no allocation, O(segments) per frame. One per subject; not thread-safe.
 #pragma once

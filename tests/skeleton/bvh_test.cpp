@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "skeleton/body_model.hpp"
+#include "skeleton/forward_kinematics.hpp"
 
 namespace mocap::skeleton {
 namespace {
@@ -509,6 +510,53 @@ TEST(Bvh, SecondCmuNamingMapsToTheRightJoints) {
                   {{"trunk", "Spine1"}, {"left_upper_arm", "LeftArm"}, {"right_forearm", "RightForeArm"},
                    {"left_hand", "LeftHand"}, {"right_thigh", "RightUpLeg"}, {"left_calf", "LeftLeg"},
                    {"right_foot", "RightFoot"}});
+}
+
+}  // namespace
+}  // namespace mocap::skeleton
+
+namespace mocap::skeleton {
+namespace {
+
+// A model with the clip's own dimensions: forward kinematics with the mapped segment
+// orientations lands on the clip's leg joints; the arms hang from the clip's collar
+// joints, which rotate (up to 16 cm shoulder travel in this clip) while the model's
+// shoulders are rigid with the trunk, so for the arms the bone vectors are compared.
+TEST(Bvh, ModelFromClipReproducesLimbPositions) {
+    const MappedClip mc = load_mapped("cmu_131_01_walk.bvh");
+    ASSERT_TRUE(mc.m);
+    const BodyModel model = body_model_from_bvh(mc.clip, *mc.m.mapping, mc.model, 1.0);
+    EXPECT_TRUE(validate(model).empty());
+    EXPECT_NEAR(model.segments[static_cast<std::size_t>(model.index_of("left_calf"))].offset_m.norm(), 0.411471, 1e-5);
+    const std::vector<std::pair<std::string, std::string>> legs{
+        {"left_thigh", "LeftHip"}, {"left_calf", "LeftKnee"}, {"left_foot", "LeftAnkle"},
+        {"right_thigh", "RightHip"}, {"right_calf", "RightKnee"}, {"right_foot", "RightAnkle"}};
+    const std::vector<std::pair<std::string, std::string>> arm_bones{
+        {"left_upper_arm", "LeftShoulder"}, {"left_forearm", "LeftElbow"}, {"left_hand", "LeftWrist"},
+        {"right_upper_arm", "RightShoulder"}, {"right_forearm", "RightElbow"}, {"right_hand", "RightWrist"}};
+    std::vector<Quat> qj(mc.clip.joints.size());
+    std::vector<Vec3> pj(mc.clip.joints.size());
+    auto qs = identity_quats();
+    auto ps = zero_vec3s();
+    SkeletonPose pose;
+    double worst_leg_m = 0;
+    double worst_arm_m = 0;
+    const auto at = [&](std::string_view seg) { return pose.joint_position_m[static_cast<std::size_t>(model.index_of(seg))]; };
+    const auto clip_at = [&](const std::string& joint) { return pj[static_cast<std::size_t>(mc.clip.index_of(joint))]; };
+    for (std::size_t f = 0; f < mc.clip.frame_count; f += 5) {
+        bvh_global_pose(mc.clip, mc.clip.frame(f), 1.0, qj, pj);
+        bvh_segment_pose(*mc.m.mapping, qj, pj, qs, ps);
+        forward_kinematics(model, qs, ps[0], pose);
+        for (const auto& [seg, joint] : legs) worst_leg_m = std::max(worst_leg_m, (at(seg) - clip_at(joint)).norm());
+        for (std::size_t k = 0; k + 1 < arm_bones.size(); ++k) {
+            if (k == 2) continue;  // the hand's end is not a listed joint
+            const Vec3 ours = at(arm_bones[k + 1].first) - at(arm_bones[k].first);
+            const Vec3 clip = clip_at(arm_bones[k + 1].second) - clip_at(arm_bones[k].second);
+            worst_arm_m = std::max(worst_arm_m, (ours - clip).norm());
+        }
+    }
+    EXPECT_LT(worst_leg_m, 1e-4);
+    EXPECT_LT(worst_arm_m, 1e-4);
 }
 
 }  // namespace
