@@ -1,0 +1,284 @@
+#include "filter/filter_factory.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <sstream>
+#include <variant>
+
+#include "filter/csmo.hpp"
+#include "filter/madgwick.hpp"
+#include "filter/mahony.hpp"
+#include "filter/mocap_filter.hpp"
+#include "filter/particle_filter.hpp"
+
+namespace mocap::filter {
+namespace {
+
+// One key of a Params struct: its name and the member it sets.
+template <class P>
+struct Field {
+    std::string_view key;
+    std::variant<double P::*, bool P::*, int P::*, std::uint64_t P::*> member;
+};
+
+bool parse_value(std::string_view text, double& out) {
+    const char* end = text.data() + text.size();
+    const auto r = std::from_chars(text.data(), end, out);
+    return r.ec == std::errc() && r.ptr == end;
+}
+
+bool parse_value(std::string_view text, bool& out) {
+    for (std::string_view t : {"true", "1", "yes", "on"}) {
+        if (text == t) return out = true, true;
+    }
+    for (std::string_view f : {"false", "0", "no", "off"}) {
+        if (text == f) return out = false, true;
+    }
+    return false;
+}
+
+template <class Int>
+bool parse_value(std::string_view text, Int& out) {
+    const char* end = text.data() + text.size();
+    const auto r = std::from_chars(text.data(), end, out);
+    return r.ec == std::errc() && r.ptr == end;
+}
+
+std::string format_value(double v) {
+    std::ostringstream os;
+    os.precision(17);
+    os << v;
+    return os.str();
+}
+std::string format_value(bool v) { return v ? "true" : "false"; }
+template <class Int>
+std::string format_value(Int v) {
+    return std::to_string(v);
+}
+
+// Everything the factory needs to know about one filter type.
+template <class P, class F>
+struct Entry {
+    std::vector<Field<P>> fields;
+    std::function<std::string(const P&)> check;  // empty string: valid
+
+    std::unique_ptr<OrientationFilter> make(std::string_view name, const FilterParamList& params,
+                                            std::string* error) const {
+        P p{};
+        for (const auto& [key, value] : params) {
+            const Field<P>* field = nullptr;
+            for (const Field<P>& f : fields) {
+                if (f.key == key) field = &f;
+            }
+            if (field == nullptr) {
+                if (error) *error = "filter \"" + std::string(name) + "\" has no parameter \"" + key + "\"";
+                return nullptr;
+            }
+            const bool ok = std::visit([&](auto member) { return parse_value(value, p.*member); },
+                                       field->member);
+            if (!ok) {
+                if (error) *error = "parameter \"" + key + "\" of filter \"" + std::string(name) +
+                                    "\": cannot parse \"" + value + "\"";
+                return nullptr;
+            }
+        }
+        if (const std::string msg = check(p); !msg.empty()) {
+            if (error) *error = "filter \"" + std::string(name) + "\": " + msg;
+            return nullptr;
+        }
+        return std::make_unique<F>(p);
+    }
+
+    std::vector<FilterKey> keys() const {
+        const P p{};
+        std::vector<FilterKey> out;
+        for (const Field<P>& f : fields) {
+            out.push_back({f.key, std::visit([&](auto member) { return format_value(p.*member); },
+                                             f.member)});
+        }
+        return out;
+    }
+};
+
+const Entry<MocapFilterParams, MocapFilter>& mocap_entry() {
+    using P = MocapFilterParams;
+    static const Entry<P, MocapFilter> e{
+        {{"tau_acc_s", &P::tau_acc_s},
+         {"tau_mag_s", &P::tau_mag_s},
+         {"rest_bias", &P::rest_bias},
+         {"motion_bias", &P::motion_bias},
+         {"bias_sigma_init_deg_s", &P::bias_sigma_init_deg_s},
+         {"bias_forgetting_time_s", &P::bias_forgetting_time_s},
+         {"bias_clip_deg_s", &P::bias_clip_deg_s},
+         {"bias_sigma_motion_deg_s", &P::bias_sigma_motion_deg_s},
+         {"bias_vertical_forgetting", &P::bias_vertical_forgetting},
+         {"bias_sigma_rest_deg_s", &P::bias_sigma_rest_deg_s},
+         {"rest_min_time_s", &P::rest_min_time_s},
+         {"rest_filter_tau_s", &P::rest_filter_tau_s},
+         {"rest_th_gyro_deg_s", &P::rest_th_gyro_deg_s},
+         {"rest_th_acc_m_s2", &P::rest_th_acc_m_s2},
+         {"gyro_noise_ref_deg_s", &P::gyro_noise_ref_deg_s},
+         {"mag_guard", &P::mag_guard},
+         {"mag_current_tau_s", &P::mag_current_tau_s},
+         {"mag_ref_tau_s", &P::mag_ref_tau_s},
+         {"mag_norm_th", &P::mag_norm_th},
+         {"mag_dip_th_deg", &P::mag_dip_th_deg},
+         {"mag_noise_margin", &P::mag_noise_margin},
+         {"mag_heading_th_deg", &P::mag_heading_th_deg},
+         {"mag_heading_tau_s", &P::mag_heading_tau_s},
+         {"mag_new_time_s", &P::mag_new_time_s},
+         {"mag_new_first_time_s", &P::mag_new_first_time_s},
+         {"mag_new_min_gyro_deg_s", &P::mag_new_min_gyro_deg_s},
+         {"mag_min_undisturbed_time_s", &P::mag_min_undisturbed_time_s},
+         {"mag_max_rejection_time_s", &P::mag_max_rejection_time_s},
+         {"mag_rejection_factor", &P::mag_rejection_factor},
+         {"max_step_s", &P::max_step_s}},
+        [](const P& p) { return p.check(); }};
+    return e;
+}
+
+const Entry<MadgwickParams, MadgwickFilter>& madgwick_entry() {
+    using P = MadgwickParams;
+    static const Entry<P, MadgwickFilter> e{{{"beta", &P::beta},
+                                             {"init_from_first_sample", &P::init_from_first_sample},
+                                             {"max_step_s", &P::max_step_s}},
+                                            [](const P& p) { return p.check(); }};
+    return e;
+}
+
+const Entry<MahonyParams, MahonyFilter>& mahony_entry() {
+    using P = MahonyParams;
+    static const Entry<P, MahonyFilter> e{{{"kp", &P::kp},
+                                           {"ki", &P::ki},
+                                           {"bias_clip_rad_s", &P::bias_clip_rad_s},
+                                           {"init_from_first_sample", &P::init_from_first_sample},
+                                           {"max_step_s", &P::max_step_s}},
+                                          [](const P& p) { return p.check(); }};
+    return e;
+}
+
+const Entry<CsmoParams, Csmo>& csmo_entry() {
+    using P = CsmoParams;
+    static const Entry<P, Csmo> e{
+        {{"k1", &P::k1},
+         {"k2", &P::k2},
+         {"k3", &P::k3},
+         {"k4", &P::k4},
+         {"k5", &P::k5},
+         {"k6", &P::k6},
+         {"rho", &P::rho},
+         {"gain_rate_hz", &P::gain_rate_hz},
+         {"q0w", &P::q0w},
+         {"q0x", &P::q0x},
+         {"q0y", &P::q0y},
+         {"q0z", &P::q0z},
+         {"init_meas", &P::init_from_measurement},
+         {"dip_deg", &P::dip_deg},
+         {"lm_lambda", &P::lm_lambda},
+         {"lm_alpha", &P::lm_alpha},
+         {"lm_iterations", &P::lm_iterations},
+         {"max_step_s", &P::max_step_s}},
+        // CsmoParams has no check of its own: the ranges its code relies on.
+        [](const P& p) -> std::string {
+            for (const double k : {p.k1, p.k2, p.k3, p.k4, p.k5, p.k6}) {
+                if (!(k >= 0.0)) return "gains k1..k6 must be >= 0";
+            }
+            if (!(p.rho > 0.0)) return "rho must be > 0";
+            if (!(p.gain_rate_hz > 0.0)) return "gain_rate_hz must be > 0";
+            if (!(std::hypot(p.q0w, p.q0x, p.q0y) + std::abs(p.q0z) > 0.0))
+                return "q0w..q0z must not all be zero";
+            if (!std::isnan(p.dip_deg) && !(std::abs(p.dip_deg) < 90.0))
+                return "dip_deg must be NaN or in (-90, 90)";
+            if (!(p.lm_lambda >= 0.0)) return "lm_lambda must be >= 0";
+            if (!(p.lm_alpha > 0.0)) return "lm_alpha must be > 0";
+            if (p.lm_iterations < 1) return "lm_iterations must be >= 1";
+            if (!(p.max_step_s > 0.0)) return "max_step_s must be > 0";
+            return {};
+        }};
+    return e;
+}
+
+const Entry<ParticleFilterParams, ParticleFilter>& pf_entry() {
+    using P = ParticleFilterParams;
+    static const Entry<P, ParticleFilter> e{
+        {{"particles", &P::particles},
+         {"seed", &P::seed},
+         {"gyro_noise", &P::gyro_noise_rad_s},
+         {"bias_walk", &P::bias_walk_rad_s2},
+         {"bias_init", &P::bias_init_rad_s},
+         {"meas_tilt", &P::meas_tilt_rad},
+         {"meas_heading", &P::meas_heading_rad},
+         {"resample_frac", &P::resample_frac},
+         {"reg_h", &P::reg_h},
+         {"min_jitter", &P::min_jitter_rad},
+         {"min_bias_jitter", &P::min_bias_jitter_rad_s},
+         {"bias_shrink", &P::bias_shrink},
+         {"init_tilt", &P::init_tilt_rad},
+         {"init_heading", &P::init_heading_rad},
+         {"accel_gate", &P::accel_gate},
+         {"gravity", &P::gravity_m_s2},
+         {"dip_deg", &P::dip_deg},
+         {"lm_iterations", &P::lm_iterations},
+         {"max_step_s", &P::max_step_s}},
+        // ParticleFilterParams has no check of its own: the documented ranges (the
+        // constructor would silently clamp the particle count).
+        [](const P& p) -> std::string {
+            if (p.particles < 1 || p.particles > 65536) return "particles must be in 1..65536";
+            for (const double sigma : {p.gyro_noise_rad_s, p.bias_walk_rad_s2, p.bias_init_rad_s,
+                                       p.min_jitter_rad, p.min_bias_jitter_rad_s, p.init_tilt_rad,
+                                       p.init_heading_rad, p.reg_h}) {
+                if (!(sigma >= 0.0))
+                    return "noise, jitter, init and reg_h values must be >= 0";
+            }
+            if (!(p.meas_tilt_rad > 0.0)) return "meas_tilt must be > 0";
+            if (!(p.meas_heading_rad > 0.0)) return "meas_heading must be > 0";
+            if (!(p.resample_frac >= 0.0 && p.resample_frac <= 1.0))
+                return "resample_frac must be in [0, 1]";
+            if (!(p.bias_shrink > 0.0 && p.bias_shrink <= 1.0)) return "bias_shrink must be in (0, 1]";
+            if (!(p.accel_gate > 0.0)) return "accel_gate must be > 0";
+            if (!(p.gravity_m_s2 > 0.0)) return "gravity must be > 0";
+            if (!std::isnan(p.dip_deg) && !(std::abs(p.dip_deg) < 90.0))
+                return "dip_deg must be NaN or in (-90, 90)";
+            if (p.lm_iterations < 1) return "lm_iterations must be >= 1";
+            if (!(p.max_step_s > 0.0)) return "max_step_s must be > 0";
+            return {};
+        }};
+    return e;
+}
+
+// Dispatch on the name; Fn is called with the matching entry.
+template <class Fn>
+bool with_entry(std::string_view name, Fn&& fn) {
+    if (name == "mocap") return fn(mocap_entry()), true;
+    if (name == "madgwick") return fn(madgwick_entry()), true;
+    if (name == "mahony") return fn(mahony_entry()), true;
+    if (name == "csmo") return fn(csmo_entry()), true;
+    if (name == "pf") return fn(pf_entry()), true;
+    return false;
+}
+
+}  // namespace
+
+std::unique_ptr<OrientationFilter> make_filter(std::string_view name, const FilterParamList& params,
+                                               std::string* error) {
+    std::unique_ptr<OrientationFilter> out;
+    const bool known = with_entry(name, [&](const auto& e) { out = e.make(name, params, error); });
+    if (!known && error) {
+        std::string list;
+        for (std::string_view n : filter_names()) list += (list.empty() ? "" : ", ") + std::string(n);
+        *error = "unknown filter \"" + std::string(name) + "\" (known: " + list + ")";
+    }
+    return out;
+}
+
+std::vector<std::string_view> filter_names() { return {"mocap", "madgwick", "mahony", "csmo", "pf"}; }
+
+std::vector<FilterKey> filter_keys(std::string_view name) {
+    std::vector<FilterKey> out;
+    with_entry(name, [&](const auto& e) { out = e.keys(); });
+    return out;
+}
+
+}  // namespace mocap::filter

@@ -1,0 +1,45 @@
+// filter_factory.hpp — builds orientation filters by name from textual key=value parameters
+// (command lines, config files).
+//
+// Names: filter_names(). Keys: the `key "..."` named in each filter's Params header, listed
+// with their defaults by filter_keys(). Values: numbers as written by C++ (from_chars, no
+// trailing characters), booleans as true/false/1/0/yes/no/on/off. Keys not given keep their
+// defaults. Untrusted input: a bad name, key or value never throws, it returns nullptr and
+// a message naming the offending item.
+//
+// Thread-safety: all functions are pure (the tables are constant). Cost: allocation, call
+// only at start-up.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "filter/orientation_filter.hpp"
+
+namespace mocap::filter {
+
+/// Ordered (key, value) pairs; a key given twice takes its last value.
+using FilterParamList = std::vector<std::pair<std::string, std::string>>;
+
+/// Builds the filter `name` with `params` applied over its defaults. On failure returns
+/// nullptr and, if error is non-null, sets *error to a message naming the unknown filter,
+/// the unknown key, or the key whose value is malformed or out of range.
+std::unique_ptr<OrientationFilter> make_filter(std::string_view name, const FilterParamList& params,
+                                               std::string* error = nullptr);
+
+/// Every name make_filter accepts, the product default ("mocap") first.
+std::vector<std::string_view> filter_names();
+
+/// One documented parameter of a filter.
+struct FilterKey {
+    std::string_view key;
+    std::string default_value;  ///< the default, written so that make_filter accepts it
+};
+
+/// The parameters of filter `name` (empty for an unknown name).
+std::vector<FilterKey> filter_keys(std::string_view name);
+
+}  // namespace mocap::filter

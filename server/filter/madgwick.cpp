@@ -1,0 +1,78 @@
+#include "filter/madgwick.hpp"
+
+#include <cmath>
+#include <numbers>
+
+#include "filter/mocap_filter.hpp"
+
+namespace mocap::filter {
+namespace {
+
+// Gradient J^T f of ½|f|², f(q) = q* ⊗ d ⊗ q − s, with respect to the four components of q
+// (d: earth reference, s: measurement, both unit). Expanding ½|f|² gives
+// ½|d|²|q|⁴ − ⟨d, q ⊗ s ⊗ q*⟩ + const, whose gradient is 2|q|²q + 2 d ⊗ q ⊗ s; this is the
+// same vector as the paper's hand-expanded Jacobian products, in a form valid for any d.
+Vec4 alignment_gradient(const Quat& q, const Vec3& d, const Vec3& s) {
+    const Quat dq = Quat(0.0, d.x(), d.y(), d.z()) * q * Quat(0.0, s.x(), s.y(), s.z());
+    return 2.0 * q.squaredNorm() * to_wxyz(q) + 2.0 * to_wxyz(dq);
+}
+
+}  // namespace
+
+Quat q_enu_nwu() { return Quat(std::numbers::sqrt2 / 2.0, 0.0, 0.0, std::numbers::sqrt2 / 2.0); }
+
+Quat nwu_initial_attitude(const MargReading& r, bool from_reading) {
+    const Quat q_enu_sensor = from_reading && r.accel_ok
+                                  ? attitude_from_accel_mag(r.accel_m_s2, r.mag_ut, r.mag_ok)
+                                  : Quat::Identity();
+    return q_enu_nwu().conjugate() * q_enu_sensor;
+}
+
+Vec3 nwu_field_reference(const Quat& q_nwu_sensor, const Vec3& mag_unit) {
+    const Vec3 h = rotate(q_nwu_sensor, mag_unit);
+    return {std::hypot(h.x(), h.y()), 0.0, h.z()};
+}
+
+std::string MadgwickParams::check() const {
+    if (!(beta >= 0.0)) return "beta must be >= 0";
+    if (!(max_step_s > 0.0)) return "max_step_s must be > 0";
+    return {};
+}
+
+MadgwickFilter::MadgwickFilter(const MadgwickParams& params) : params_(params) { reset(); }
+
+void MadgwickFilter::reset() {
+    state_ = MadgwickState{};
+    state_.clock = SampleClock(params_.max_step_s);
+    state_.q_nwu_sensor = nwu_initial_attitude(MargReading{}, false);  // ENU identity
+}
+
+void MadgwickFilter::update(const ImuSample& sample) {
+    MadgwickState& st = state_;
+    const double dt = st.clock.step_s(sample.t_us);
+    const MargReading m = read_marg(sample);
+    if (!st.initialised) {
+        st.initialised = true;
+        st.q_nwu_sensor = nwu_initial_attitude(m, params_.init_from_first_sample);
+        return;
+    }
+    if (dt <= 0.0) return;
+
+    Quat& q = st.q_nwu_sensor;
+    const Vec3 w = to_vec3(sample.gyro_rad_s);
+    Vec4 q_dot = 0.5 * to_wxyz(q * Quat(0.0, w.x(), w.y(), w.z()));
+    if (m.accel_ok) {
+        Vec4 grad = alignment_gradient(q, Vec3::UnitZ(), m.accel_m_s2.normalized());
+        if (m.mag_ok) {
+            const Vec3 mag = m.mag_ut.normalized();
+            grad += alignment_gradient(q, nwu_field_reference(q, mag), mag);
+        }
+        const double n = grad.norm();
+        if (n > 0.0) q_dot -= params_.beta * grad / n;
+    }
+    q = from_wxyz(to_wxyz(q) + q_dot * dt).normalized();
+}
+
+Quat MadgwickFilter::orientation() const { return (q_enu_nwu() * state_.q_nwu_sensor).normalized(); }
+
+}  // namespace mocap::filter

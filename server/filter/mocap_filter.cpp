@@ -1,0 +1,495 @@
+#include "filter/mocap_filter.hpp"
+
+#include "filter/attitude_solver.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace mocap::filter {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+// Butterworth cut-off chosen so the non-oscillating part of the step response has time
+// constant tau (as in VQF). tau <= 0 means "no filtering".
+LowPassCoeffs butterworth(double tau_s, double ts_s) {
+    LowPassCoeffs c;
+    if (tau_s <= 0.0) return c;
+    const double fc = (std::numbers::sqrt2 / (2.0 * std::numbers::pi)) / tau_s;
+    const double k = std::tan(std::numbers::pi * fc * ts_s);
+    const double d = k * k + std::numbers::sqrt2 * k + 1.0;
+    const double b0 = k * k / d;
+    c.b = {b0, 2.0 * b0, b0};
+    c.a = {2.0 * (k * k - 1.0) / d, (1.0 - std::numbers::sqrt2 * k + k * k) / d};
+    return c;
+}
+
+// One step of the N-channel filter. During the first tau seconds the output is the mean
+// of the inputs so far; then the filter starts in steady state on that mean. Until the
+// sample period is known (ts_s == 0) it keeps averaging.
+template <int N>
+void low_pass(LowPassState<N>& s, const double* x, const LowPassCoeffs& c, double tau_s,
+              double ts_s) {
+    if (!s.running) {
+        ++s.count;
+        for (int i = 0; i < N; ++i) {
+            s.sum[i] += x[i];
+            s.out[i] = s.sum[i] / s.count;
+        }
+        if (ts_s > 0.0 && s.count * ts_s >= tau_s) {
+            s.running = true;
+            for (int i = 0; i < N; ++i) {
+                s.z[2 * i] = s.out[i] * (1.0 - c.b[0]);
+                s.z[2 * i + 1] = s.out[i] * (c.b[2] - c.a[1]);
+            }
+        }
+        return;
+    }
+    for (int i = 0; i < N; ++i) {
+        double* z = &s.z[2 * i];
+        const double y = c.b[0] * x[i] + z[0];
+        z[0] = c.b[1] * x[i] - c.a[0] * y + z[1];
+        z[1] = c.b[2] * x[i] - c.a[1] * y;
+        s.out[i] = y;
+    }
+}
+
+Vec3 out3(const LowPassState<3>& s) { return {s.out[0], s.out[1], s.out[2]}; }
+
+double gain_from_tau(double tau_s, double ts_s) {
+    if (tau_s < 0.0) return 0.0;  // disabled
+    if (tau_s == 0.0) return 1.0;
+    return 1.0 - std::exp(-ts_s / tau_s);
+}
+
+// Shortest rotation taking the unit vector u onto earth z (no rotation about z).
+Quat tilt_to_vertical(const Vec3& u) {
+    const double qw = std::sqrt((u.z() + 1.0) / 2.0);
+    if (qw > 1e-6) return Quat(qw, 0.5 * u.y() / qw, -0.5 * u.x() / qw, 0.0);
+    return Quat(0.0, 1.0, 0.0, 0.0);  // u points down: any horizontal axis, 180°
+}
+
+}  // namespace
+
+Quat attitude_from_accel_mag(const Vec3& accel_m_s2, const Vec3& mag_ut, bool use_mag) {
+    if (use_mag) {
+        // Only the horizontal direction of the reference matters to TRIAD: north.
+        const AttitudeSolution sol = solve_triad(accel_m_s2, mag_ut, Vec3::UnitY());
+        if (sol.ok()) return sol.q_earth_sensor;
+    }
+    // Shortest rotation taking the measured up direction to earth z: zero heading.
+    return tilt_to_vertical(accel_m_s2.normalized());
+}
+
+MargReading read_marg(const ImuSample& sample) {
+    MargReading r;
+    r.accel_m_s2 = to_vec3(sample.accel_m_s2);
+    r.mag_ut = to_vec3(sample.mag_ut);
+    r.accel_ok = r.accel_m_s2.squaredNorm() > 0.0 && r.accel_m_s2.allFinite();
+    r.mag_ok = sample.has_mag() && r.mag_ut.squaredNorm() > 0.0 && r.mag_ut.allFinite();
+    return r;
+}
+
+std::string MocapFilterParams::check() const {
+    if (!(tau_acc_s > 0.0)) return "tau_acc_s must be > 0";
+    if (!(tau_mag_s > 0.0)) return "tau_mag_s must be > 0";
+    if (!(bias_sigma_init_deg_s > 0.0)) return "bias_sigma_init_deg_s must be > 0";
+    if (!(bias_forgetting_time_s > 0.0)) return "bias_forgetting_time_s must be > 0";
+    if (!(bias_clip_deg_s > 0.0)) return "bias_clip_deg_s must be > 0";
+    if (!(bias_sigma_motion_deg_s > 0.0)) return "bias_sigma_motion_deg_s must be > 0";
+    if (!(bias_vertical_forgetting >= 0.0 && bias_vertical_forgetting <= 1.0))
+        return "bias_vertical_forgetting must be in [0, 1]";
+    if (!(bias_sigma_rest_deg_s > 0.0)) return "bias_sigma_rest_deg_s must be > 0";
+    if (!(rest_min_time_s >= 0.0)) return "rest_min_time_s must be >= 0";
+    if (!(rest_filter_tau_s > 0.0)) return "rest_filter_tau_s must be > 0";
+    if (!(rest_th_gyro_deg_s > 0.0)) return "rest_th_gyro_deg_s must be > 0";
+    if (!(rest_th_acc_m_s2 > 0.0)) return "rest_th_acc_m_s2 must be > 0";
+    if (!(mag_current_tau_s >= 0.0)) return "mag_current_tau_s must be >= 0";
+    if (!(mag_ref_tau_s > 0.0)) return "mag_ref_tau_s must be > 0";
+    if (!(mag_norm_th > 0.0)) return "mag_norm_th must be > 0";
+    if (!(mag_dip_th_deg > 0.0)) return "mag_dip_th_deg must be > 0";
+    if (!(mag_noise_margin >= 0.0)) return "mag_noise_margin must be >= 0";
+    if (!(mag_heading_th_deg >= 0.0)) return "mag_heading_th_deg must be >= 0";
+    if (!(mag_heading_tau_s > 0.0)) return "mag_heading_tau_s must be > 0";
+    if (!(mag_new_time_s >= 0.0)) return "mag_new_time_s must be >= 0";
+    if (!(mag_new_first_time_s >= 0.0)) return "mag_new_first_time_s must be >= 0";
+    if (!(mag_new_min_gyro_deg_s >= 0.0)) return "mag_new_min_gyro_deg_s must be >= 0";
+    if (!(mag_min_undisturbed_time_s >= 0.0)) return "mag_min_undisturbed_time_s must be >= 0";
+    if (!(mag_max_rejection_time_s >= 0.0)) return "mag_max_rejection_time_s must be >= 0";
+    if (!(mag_rejection_factor >= 1.0)) return "mag_rejection_factor must be >= 1";
+    if (!(gyro_noise_ref_deg_s >= 0.0)) return "gyro_noise_ref_deg_s must be >= 0";
+    if (!(max_step_s > 0.0)) return "max_step_s must be > 0";
+    return {};
+}
+
+MocapFilter::MocapFilter(const MocapFilterParams& params) : params_(params) { reset(); }
+
+void MocapFilter::reset() {
+    state_ = MocapFilterState{};
+    state_.clock = SampleClock(params_.max_step_s);
+    const double p0 = std::pow(params_.bias_sigma_init_deg_s * 100.0, 2);
+    state_.bias_p = p0 * Mat3::Identity();
+    state_.tau_acc_eff_s = params_.tau_acc_s;
+    state_.tau_mag_eff_s = params_.tau_mag_s;
+}
+
+// The time constants trade gyro noise against accelerometer / magnetometer errors. The
+// defaults assume a MEMS-class gyro; a gyro whose white-noise floor is far above
+// gyro_noise_ref_deg_s is trusted for proportionally less time (tau_acc), and the heading
+// time constant moves towards its noise-optimal value σ_heading / σ_gyro (the steady-state
+// error of a first-order complementary filter with white noise on both sides is smallest at
+// tau = σ_measurement / σ_rate).
+void MocapFilter::adapt_time_constants() {
+    MocapFilterState& s = state_;
+    const MocapFilterParams& p = params_;
+    const double ref = p.gyro_noise_ref_deg_s * kDeg;
+    const double sigma_g = std::sqrt(s.gyro_noise_floor_var);
+    double tau_acc = p.tau_acc_s, tau_mag = p.tau_mag_s;
+    if (ref > 0.0 && s.gyro_noise_count > 0 && sigma_g > ref) {
+        tau_acc = p.tau_acc_s * ref / sigma_g;
+        const double h_ref2 = s.mag_horizontal_lp.squaredNorm();
+        if (h_ref2 > 0.0 && s.mag_noise_var > 0.0) {
+            const double sigma_heading = std::sqrt(s.mag_noise_var / h_ref2);
+            tau_mag = std::clamp(sigma_heading / sigma_g, std::min(tau_acc, p.tau_mag_s), p.tau_mag_s);
+        }
+    }
+    const auto moved = [](double a, double b) { return std::abs(a - b) > 0.1 * b; };
+    if (moved(tau_acc, s.tau_acc_eff_s) || moved(tau_mag, s.tau_mag_eff_s)) {
+        s.tau_acc_eff_s = tau_acc;
+        s.tau_mag_eff_s = tau_mag;
+        compute_coeffs(s.ts_s);
+    }
+}
+
+void MocapFilter::compute_coeffs(double ts_s) {
+    const MocapFilterParams& p = params_;
+    state_.ts_s = ts_s;
+    acc_lp_ = butterworth(state_.tau_acc_eff_s, ts_s);
+    rest_lp_ = butterworth(p.rest_filter_tau_s, ts_s);
+    mag_current_lp_ = butterworth(p.mag_current_tau_s, ts_s);
+    k_mag_ = gain_from_tau(state_.tau_mag_eff_s, ts_s);
+    k_mag_ref_ = gain_from_tau(p.mag_ref_tau_s, ts_s);
+    k_mag_noise_ = k_mag_ref_;
+    k_dis_ = gain_from_tau(p.mag_heading_tau_s, ts_s);
+    k_noise_fast_ = gain_from_tau(1.0, ts_s);
+    k_noise_floor_ = gain_from_tau(20.0, ts_s);
+    // Bias Kalman filter in units of 0.01 °/s, which keeps the numbers near 1.
+    bias_p0_ = std::pow(p.bias_sigma_init_deg_s * 100.0, 2);
+    bias_v_ = std::pow(0.1 * p.bias_sigma_init_deg_s * 100.0, 2) * ts_s / p.bias_forgetting_time_s;
+    const double p_motion = std::pow(p.bias_sigma_motion_deg_s * 100.0, 2);
+    bias_motion_w_ = p_motion * p_motion / bias_v_ + p_motion;
+    bias_vertical_w_ = bias_motion_w_ / std::max(p.bias_vertical_forgetting, 1e-10);
+    const double p_rest = std::pow(p.bias_sigma_rest_deg_s * 100.0, 2);
+    bias_rest_w_ = p_rest * p_rest / bias_v_ + p_rest;
+}
+
+void MocapFilter::update(const ImuSample& sample) {
+    MocapFilterState& s = state_;
+    const double dt = s.clock.step_s(sample.t_us);
+    ++s.samples;
+    if (!s.initialised) {
+        s.initialised = true;  // dt == 0: the first sample sets attitude, not motion
+    } else if (dt > 0.0) {
+        if (s.ts_s == 0.0) {
+            s.ts_lp_s = dt;
+            compute_coeffs(dt);
+        } else {
+            s.ts_lp_s += 0.01 * (dt - s.ts_lp_s);
+            if (std::abs(s.ts_lp_s - s.ts_s) > 0.02 * s.ts_s) compute_coeffs(s.ts_lp_s);
+        }
+        update_gyro(to_vec3(sample.gyro_rad_s), dt);
+        adapt_time_constants();
+    }
+    const MargReading m = read_marg(sample);
+    if (m.accel_ok) {
+        update_acc(m.accel_m_s2);
+    } else {
+        ++s.zero_acc_samples;
+    }
+    if (m.mag_ok) {
+        update_mag(m.mag_ut);
+    } else {
+        ++s.no_mag_samples;
+    }
+}
+
+void MocapFilter::update_gyro(const Vec3& gyro, double dt_s) {
+    MocapFilterState& s = state_;
+    if (params_.rest_bias || params_.mag_guard) {
+        low_pass(s.rest_gyro_lp, gyro.data(), rest_lp_, params_.rest_filter_tau_s, s.ts_s);
+        const Vec3 lp = out3(s.rest_gyro_lp);
+        const double th = params_.rest_th_gyro_deg_s * kDeg;
+        const double clip = params_.bias_clip_deg_s * kDeg;
+        if ((gyro - lp).squaredNorm() >= th * th || lp.cwiseAbs().maxCoeff() > clip) {
+            s.rest_time_s = 0.0;
+            s.rest_detected = false;
+        }
+    }
+    // White-noise floor of the gyro: second differences cancel smooth motion and keep
+    // 6σ² of white noise; their low-pass is tracked downwards at once and upwards slowly,
+    // so the floor comes from the quietest recent stretch, not from vigorous motion.
+    if (s.gyro_history >= 2) {
+        const Vec3 d2 = gyro - 2.0 * s.gyro_prev[0] + s.gyro_prev[1];
+        const double v = d2.squaredNorm() / 18.0;  // per axis: 3 axes × 6σ²
+        ++s.gyro_noise_count;
+        const double k_fast = std::max(k_noise_fast_, 1.0 / static_cast<double>(s.gyro_noise_count));
+        s.gyro_noise_var_lp += k_fast * (v - s.gyro_noise_var_lp);
+        if (s.gyro_noise_count == 1 || s.gyro_noise_var_lp < s.gyro_noise_floor_var) {
+            s.gyro_noise_floor_var = s.gyro_noise_var_lp;
+        } else {
+            s.gyro_noise_floor_var += k_noise_floor_ * (s.gyro_noise_var_lp - s.gyro_noise_floor_var);
+        }
+    }
+    s.gyro_prev[1] = s.gyro_prev[0];
+    s.gyro_prev[0] = gyro;
+    s.gyro_history = std::min(s.gyro_history + 1, 2);
+
+    const Vec3 w = gyro - s.bias_rad_s;
+    s.q_i_sensor = (s.q_i_sensor * quat_from_rotvec(w * dt_s)).normalized();
+}
+
+void MocapFilter::update_acc(const Vec3& acc) {
+    MocapFilterState& s = state_;
+    if (params_.rest_bias && s.ts_s > 0.0) {
+        low_pass(s.rest_acc_lp, acc.data(), rest_lp_, params_.rest_filter_tau_s, s.ts_s);
+        const double th = params_.rest_th_acc_m_s2;
+        if ((acc - out3(s.rest_acc_lp)).squaredNorm() >= th * th) {
+            s.rest_time_s = 0.0;
+            s.rest_detected = false;
+        } else {
+            s.rest_time_s += s.ts_s;
+            if (s.rest_time_s >= params_.rest_min_time_s) s.rest_detected = true;
+        }
+    }
+    // Low-pass in the almost-inertial frame: while the sensor turns, linear acceleration
+    // averages out there, gravity does not.
+    const Vec3 acc_i = rotate(s.q_i_sensor, acc);
+    low_pass(s.acc_lp, acc_i.data(), acc_lp_, s.tau_acc_eff_s, s.ts_s);
+    const Vec3 acc_e = rotate(s.q_e6_i, out3(s.acc_lp)).normalized();
+
+    // Rotate the filtered vector onto the vertical (inclination only, no heading change).
+    s.q_e6_i = (tilt_to_vertical(acc_e) * s.q_e6_i).normalized();
+
+    if (s.ts_s > 0.0 && (params_.rest_bias || params_.motion_bias)) update_bias(acc_e);
+}
+
+void MocapFilter::update_bias(const Vec3& acc_e) {
+    MocapFilterState& s = state_;
+    const MocapFilterParams& p = params_;
+    const double clip = p.bias_clip_deg_s * kDeg;
+
+    // R maps sensor to the 6D earth frame. R and R·bias are low-passed like the
+    // accelerometer so the motion measurement compares quantities with the same delay.
+    const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> r = (s.q_e6_i * s.q_i_sensor).toRotationMatrix();
+    const double rb[2] = {r.row(0).dot(s.bias_rad_s), r.row(1).dot(s.bias_rad_s)};
+    low_pass(s.bias_r_lp, r.data(), acc_lp_, s.tau_acc_eff_s, s.ts_s);
+    low_pass(s.bias_b_lp, rb, acc_lp_, s.tau_acc_eff_s, s.ts_s);
+    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r_lp(s.bias_r_lp.out.data());
+
+    // Prediction: the bias may wander, so its uncertainty grows back slowly.
+    for (int i = 0; i < 3; ++i) {
+        if (s.bias_p(i, i) < bias_p0_) s.bias_p(i, i) += bias_v_;
+    }
+
+    Vec3 e;
+    Mat3 h;
+    Vec3 w;
+    if (s.rest_detected && p.rest_bias) {
+        e = out3(s.rest_gyro_lp) - s.bias_rad_s;
+        h = Mat3::Identity();
+        w = Vec3::Constant(bias_rest_w_);
+    } else if (p.motion_bias) {
+        // The accelerometer's correction this step is the rotation vector (acc_e.y, -acc_e.x)
+        // in earth axes; in steady state it cancels R·(bias error)·ts.
+        h = r_lp;
+        e.x() = -acc_e.y() / s.ts_s + s.bias_b_lp.out[0] - h.row(0).dot(s.bias_rad_s);
+        e.y() = acc_e.x() / s.ts_s + s.bias_b_lp.out[1] - h.row(1).dot(s.bias_rad_s);
+        e.z() = -h.row(2).dot(s.bias_rad_s);
+        w = Vec3(bias_motion_w_, bias_motion_w_, bias_vertical_w_);
+    } else {
+        return;
+    }
+    e = e.cwiseMax(-clip).cwiseMin(clip);
+    const Mat3 ph = s.bias_p * h.transpose();
+    const Mat3 k = ph * (Mat3(w.asDiagonal()) + h * ph).inverse();
+    s.bias_rad_s += k * e;
+    s.bias_p -= k * h * s.bias_p;
+    s.bias_rad_s = s.bias_rad_s.cwiseMax(-clip).cwiseMin(clip);
+}
+
+void MocapFilter::update_mag_guard(const Vec3& mag_e) {
+    MocapFilterState& s = state_;
+    const MocapFilterParams& p = params_;
+    low_pass(s.mag_lp, mag_e.data(), mag_current_lp_, p.mag_current_tau_s, s.ts_s);
+    if (s.ts_s == 0.0) return;  // timers need the sample period
+    const Vec3 m = out3(s.mag_lp);
+    ++s.mag_stat_count;
+    const double k_noise = std::max(k_mag_noise_, 1.0 / static_cast<double>(s.mag_stat_count));
+    s.mag_noise_var += k_noise * ((mag_e - m).squaredNorm() / 3.0 - s.mag_noise_var);
+    s.mag_norm = m.norm();
+    if (s.mag_norm <= 0.0) return;
+    s.mag_dip_rad = -std::asin(std::clamp(m.z() / s.mag_norm, -1.0, 1.0));
+
+    // Thresholds: the configured ones, widened when the sensor's own noise (after the
+    // low-pass, variance ratio 0.5·ts/tau for this Butterworth) would cross them. When the
+    // noise needs more than twice the configured width, no disturbance of the configured
+    // size can be told from noise: the guard stands aside (mag_guard_blind) rather than
+    // rejecting at random.
+    const double var_ratio =
+        p.mag_current_tau_s > 0.0 ? std::min(1.0, 0.5 * s.ts_s / p.mag_current_tau_s) : 1.0;
+    const double noise = p.mag_noise_margin * std::sqrt(s.mag_noise_var * var_ratio);
+    s.mag_guard_blind = s.mag_ref_norm > 0.0 && noise > 2.0 * p.mag_norm_th * s.mag_ref_norm;
+    const auto agrees = [&](double ref_norm, double ref_dip) {
+        const double norm_th = std::max(p.mag_norm_th * ref_norm, noise);
+        const double dip_th = std::max(p.mag_dip_th_deg * kDeg, noise / s.mag_norm);
+        return std::abs(s.mag_norm - ref_norm) < norm_th &&
+               std::abs(s.mag_dip_rad - ref_dip) < dip_th;
+    };
+    if (s.mag_guard_blind) {
+        s.mag_disturbed = false;
+        s.mag_heading_disturbed = false;
+        s.mag_undisturbed_time_s = 0.0;
+        return;
+    }
+
+    if (s.mag_ref_norm > 0.0 && agrees(s.mag_ref_norm, s.mag_ref_dip_rad)) {
+        s.mag_undisturbed_time_s += s.ts_s;
+        if (s.mag_undisturbed_time_s >= p.mag_min_undisturbed_time_s) {
+            s.mag_disturbed = false;
+            s.mag_ref_norm += k_mag_ref_ * (s.mag_norm - s.mag_ref_norm);
+            s.mag_ref_dip_rad += k_mag_ref_ * (s.mag_dip_rad - s.mag_ref_dip_rad);
+        }
+    } else {
+        if (!mag_rejected() && s.mag_ref_norm > 0.0) ++s.mag_disturbances;
+        s.mag_undisturbed_time_s = 0.0;
+        s.mag_disturbed = true;
+    }
+
+    // A new field that stays self-consistent replaces the reference: after
+    // mag_new_time_s of motion (a still sensor beside a magnet is also consistent), or
+    // for the very first field after mag_new_first_time_s.
+    if (s.mag_candidate_norm > 0.0 && agrees(s.mag_candidate_norm, s.mag_candidate_dip_rad)) {
+        const bool first = s.mag_ref_norm == 0.0;
+        if (first || out3(s.rest_gyro_lp).norm() >= p.mag_new_min_gyro_deg_s * kDeg) {
+            s.mag_candidate_time_s += s.ts_s;
+        }
+        s.mag_candidate_norm += k_mag_ref_ * (s.mag_norm - s.mag_candidate_norm);
+        s.mag_candidate_dip_rad += k_mag_ref_ * (s.mag_dip_rad - s.mag_candidate_dip_rad);
+        const double need = first ? p.mag_new_first_time_s : p.mag_new_time_s;
+        if (mag_rejected() && s.mag_candidate_time_s >= need) accept_candidate_field();
+    } else {
+        s.mag_candidate_time_s = 0.0;
+        s.mag_candidate_norm = s.mag_norm;
+        s.mag_candidate_dip_rad = s.mag_dip_rad;
+    }
+}
+
+void MocapFilter::accept_candidate_field() {
+    MocapFilterState& s = state_;
+    s.mag_ref_norm = s.mag_candidate_norm;
+    s.mag_ref_dip_rad = s.mag_candidate_dip_rad;
+    s.mag_disturbed = false;
+    s.mag_heading_disturbed = false;
+    // The new field may point elsewhere: let the heading converge to it before the
+    // disagreement test applies again.
+    s.mag_heading_converging = true;
+    s.mag_undisturbed_time_s = params_.mag_min_undisturbed_time_s;
+    ++s.mag_fields_accepted;
+}
+
+// A disturbance that turns the horizontal field with little change of norm and dip shows up
+// only as heading disagreement between magnetometer and gyro-propagated estimate. In
+// normal operation that disagreement is gyro drift over ~tau_mag_s plus noise; its low-pass
+// leaving that band (threshold widened to mag_noise_margin standard deviations of the
+// low-passed noise) marks the field as disturbed until it comes back within half.
+void MocapFilter::update_heading_guard() {
+    MocapFilterState& s = state_;
+    const MocapFilterParams& p = params_;
+    if (p.mag_heading_th_deg <= 0.0 || s.ts_s == 0.0 || s.mag_stat_count == 0) return;
+    const double d = wrap_pi(s.last_mag_disagreement_rad - s.mag_dis_lp_rad);
+    s.mag_dis_lp_rad = wrap_pi(s.mag_dis_lp_rad + k_dis_ * d);
+    const double k_noise = std::max(k_mag_noise_, 1.0 / static_cast<double>(s.mag_stat_count));
+    s.mag_dis_var += k_noise * (d * d - s.mag_dis_var);
+    const double lp_sigma = std::sqrt(s.mag_dis_var * 0.5 * s.ts_s / p.mag_heading_tau_s);
+    const double th_cfg = p.mag_heading_th_deg * kDeg;
+    const double th = std::max(th_cfg, p.mag_noise_margin * lp_sigma);
+    if (s.mag_guard_blind || th > 2.0 * th_cfg) {  // noise hides a disturbance of that size
+        s.mag_heading_disturbed = false;
+        return;
+    }
+    const double dis = std::abs(s.mag_dis_lp_rad);
+    if (s.k_mag_init != 0.0) return;  // still converging from the first readings
+    if (s.mag_heading_converging) {     // following a newly accepted field
+        if (dis < 0.5 * th) s.mag_heading_converging = false;
+        return;
+    }
+    if (!s.mag_heading_disturbed && dis > th) {
+        if (!mag_rejected()) ++s.mag_disturbances;
+        s.mag_heading_disturbed = true;
+        s.mag_candidate_time_s = 0.0;  // a new field must prove itself from now on
+    } else if (s.mag_heading_disturbed && dis < 0.5 * th) {
+        s.mag_heading_disturbed = false;
+    }
+}
+
+void MocapFilter::update_mag(const Vec3& mag) {
+    MocapFilterState& s = state_;
+    const MocapFilterParams& p = params_;
+    const Vec3 mag_e = rotate(s.q_e6_i * s.q_i_sensor, mag);
+    if (p.mag_guard) update_mag_guard(mag_e);
+
+    // Heading disagreement from the horizontal component only, measured as the cross
+    // product with the expected direction over the mean horizontal field strength. Unlike
+    // the angle of each reading, this is unbiased under noise as large as the field itself
+    // (the per-reading angle wraps around and pulls the average towards zero).
+    const Vec3 h(mag_e.x(), mag_e.y(), 0.0);
+    const double u_x = std::sin(s.delta_rad), u_y = std::cos(s.delta_rad);
+    const double h_ref = s.mag_horizontal_lp.norm();
+    const double dot = h.x() * u_x + h.y() * u_y;
+    s.last_mag_disagreement_rad = dot > 0.0 && h_ref > 0.0
+                                      ? std::clamp((h.x() * u_y - h.y() * u_x) / h_ref,
+                                                   -0.5 * std::numbers::pi, 0.5 * std::numbers::pi)
+                                      : wrap_pi(std::atan2(h.x(), h.y()) - s.delta_rad);
+    if (p.mag_guard) update_heading_guard();
+    double k = k_mag_;
+    if (p.mag_guard && s.ts_s > 0.0) {
+        if (mag_rejected()) {
+            if (s.mag_reject_time_s <= p.mag_max_rejection_time_s) {
+                s.mag_reject_time_s += s.ts_s;
+                k = 0.0;
+            } else {
+                k /= p.mag_rejection_factor;
+            }
+        } else {
+            s.mag_reject_time_s =
+                std::max(s.mag_reject_time_s - p.mag_rejection_factor * s.ts_s, 0.0);
+        }
+    }
+    // Fast start: for the N-th reading the heading is that of the vector mean of the first
+    // N horizontal fields, until 1/N falls below the steady-state gain.
+    if (s.k_mag_init != 0.0) {
+        s.mag_horizontal_lp += s.k_mag_init * (h - s.mag_horizontal_lp);
+        if (s.mag_horizontal_lp.squaredNorm() > 0.0) {
+            s.delta_rad = std::atan2(s.mag_horizontal_lp.x(), s.mag_horizontal_lp.y());
+        }
+        s.k_mag_init = s.k_mag_init / (s.k_mag_init + 1.0);
+        if (s.ts_s > 0.0 && s.k_mag_init * s.tau_mag_eff_s < s.ts_s) s.k_mag_init = 0.0;
+        return;
+    }
+    if (k == 0.0) {
+        ++s.mag_samples_rejected;
+        return;
+    }
+    s.mag_horizontal_lp += k_mag_ * (h - s.mag_horizontal_lp);
+    s.delta_rad = wrap_pi(s.delta_rad + k * s.last_mag_disagreement_rad);
+}
+
+Quat MocapFilter::orientation_6d() const { return (state_.q_e6_i * state_.q_i_sensor).normalized(); }
+
+Quat MocapFilter::orientation() const {
+    const Quat rz(std::cos(0.5 * state_.delta_rad), 0.0, 0.0, std::sin(0.5 * state_.delta_rad));
+    return (rz * orientation_6d()).normalized();
+}
+
+}  // namespace mocap::filter

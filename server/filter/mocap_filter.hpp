@@ -1,0 +1,244 @@
+// mocap_filter.hpp — the product's default orientation filter ("mocap").
+//
+// Design (after VQF, Laidig & Seel 2022, re-derived for this interface):
+//  * strapdown integration of the bias-corrected gyro rate into q_I_sensor, where I is an
+//    "almost inertial" frame that drifts only with the gyro error;
+//  * inclination: the specific force is rotated into I and low-pass filtered there
+//    (2nd-order Butterworth, time constant tau_acc_s), so bursts of linear acceleration
+//    average out while the sensor turns; the filtered vector is then aligned with the
+//    vertical by a correction q_E'_I that touches inclination only;
+//  * heading: one angle delta about the vertical, corrected by a first-order filter
+//    (tau_mag_s) from the horizontal direction of the magnetometer only, so a magnetic
+//    error can never tilt the inclination;
+//  * gyro bias: a 3-state Kalman filter fed at rest (rest detection from gyro + accel
+//    deviations) and in motion (from the inclination corrections the accelerometer asks for);
+//  * magnetic-disturbance guard: running references of field norm and dip angle; a field
+//    that departs from them, or whose heading disagrees with the gyro-propagated heading by
+//    more than its noise explains, is rejected (gyro-only heading) for up to
+//    mag_max_rejection_time_s, after which it is used with a reduced gain; a new field
+//    that stays consistent for mag_new_time_s while the sensor moves becomes the reference
+//    (the user walked into another room).
+//
+// Output: q_earth_sensor = Rz(delta) ⊗ q_E'_I ⊗ q_I_sensor, ENU.
+//
+// Time: filter coefficients are computed from the sample period measured on the samples'
+// own timestamps and recomputed when it drifts by more than 2 %.
+//
+// Trade-off of tau_mag_s: heading noise from the magnetometer falls as 1/sqrt(tau_mag_s),
+// gyro drift grows with it. 9 s suits MEMS magnetometers (noise ~1 % of the field); the
+// Fourati benchmark's magnetometer (noise 80 % of the field) prefers ~3–10 s as well
+// because its gyro is equally noisy. Large tau_acc_s rejects longer accelerations but lets
+// gyro noise tilt the estimate longer.
+//
+// Thread-safety: none (one instance per worker). Cost: ~0.5 µs per update, no allocation.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "filter/orientation_filter.hpp"
+
+namespace mocap::filter {
+
+/// Closed-form attitude q_enu_sensor from one specific-force reading (a level sensor at
+/// rest reads +9.81 on its up axis) and, if use_mag, one magnetometer reading: gravity fixes
+/// the inclination exactly, the magnetometer's component perpendicular to it fixes the
+/// heading (TRIAD with the accelerometer as primary vector). Without the magnetometer (or
+/// when it is parallel to gravity) the heading is zero. accel must be non-zero.
+Quat attitude_from_accel_mag(const Vec3& accel_m_s2, const Vec3& mag_ut, bool use_mag);
+
+/// One sample's accelerometer and magnetometer with their usability: non-zero and finite,
+/// and for the magnetometer also present (no kImuNoMag flag). Shared by the filters here.
+struct MargReading {
+    Vec3 accel_m_s2 = Vec3::Zero();
+    Vec3 mag_ut = Vec3::Zero();
+    bool accel_ok = false;
+    bool mag_ok = false;
+};
+MargReading read_marg(const ImuSample& sample);
+
+struct MocapFilterParams {
+    double tau_acc_s = 3.0;   ///< key "tau_acc_s": inclination correction time constant, s
+    double tau_mag_s = 9.0;   ///< key "tau_mag_s": heading correction time constant, s
+
+    bool rest_bias = true;    ///< key "rest_bias": estimate gyro bias while at rest
+    bool motion_bias = true;  ///< key "motion_bias": estimate gyro bias (horizontal axes) in motion
+    double bias_sigma_init_deg_s = 0.5;     ///< key "bias_sigma_init_deg_s": initial bias std, °/s
+    double bias_forgetting_time_s = 100.0;  ///< key "bias_forgetting_time_s": time for the bias
+                                            ///< uncertainty to grow back by 0.1·init, s
+    double bias_clip_deg_s = 2.0;           ///< key "bias_clip_deg_s": |bias| limit per axis, °/s
+    double bias_sigma_motion_deg_s = 0.1;   ///< key "bias_sigma_motion_deg_s": motion bias
+                                            ///< measurement std, °/s
+    double bias_vertical_forgetting = 1e-4; ///< key "bias_vertical_forgetting": relative weight of
+                                            ///< the (unobservable) vertical axis in motion, 0..1
+    double bias_sigma_rest_deg_s = 0.03;    ///< key "bias_sigma_rest_deg_s": rest bias
+                                            ///< measurement std, °/s
+    double rest_min_time_s = 1.5;     ///< key "rest_min_time_s": stillness needed to declare rest, s
+    double rest_filter_tau_s = 0.5;   ///< key "rest_filter_tau_s": rest detection low-pass, s
+    double rest_th_gyro_deg_s = 2.0;  ///< key "rest_th_gyro_deg_s": gyro deviation threshold, °/s
+    double rest_th_acc_m_s2 = 0.5;    ///< key "rest_th_acc_m_s2": accel deviation threshold, m/s²
+
+    double gyro_noise_ref_deg_s = 2.0;  ///< key "gyro_noise_ref_deg_s": per-sample gyro white noise
+                                        ///< the taus are meant for; a measured noise floor above it
+                                        ///< shortens tau_acc_s in proportion and moves tau_mag_s
+                                        ///< towards its noise-optimal value. 0 disables, °/s
+
+    bool mag_guard = true;  ///< key "mag_guard": reject magnetometer readings that disagree with
+                            ///< the reference field norm / dip
+    double mag_current_tau_s = 0.05;  ///< key "mag_current_tau_s": low-pass of the field vector
+                                      ///< (earth frame) before norm / dip are compared, s
+    double mag_ref_tau_s = 20.0;      ///< key "mag_ref_tau_s": adaptation of the reference, s
+    double mag_norm_th = 0.1;         ///< key "mag_norm_th": relative norm deviation threshold
+    double mag_dip_th_deg = 10.0;     ///< key "mag_dip_th_deg": dip deviation threshold, °
+    double mag_noise_margin = 4.0;    ///< key "mag_noise_margin": thresholds are widened to this
+                                      ///< many standard deviations of the filtered field noise
+    double mag_heading_th_deg = 10.0;  ///< key "mag_heading_th_deg": a heading disagreement (low-passed)
+                                       ///< beyond this flags a disturbance even when norm and dip
+                                       ///< look normal; it clears below half of it. 0 disables, °
+    double mag_heading_tau_s = 1.0;    ///< key "mag_heading_tau_s": low-pass of that disagreement, s
+    double mag_new_time_s = 20.0;     ///< key "mag_new_time_s": a consistent new field is accepted
+                                      ///< after this much time in motion, s
+    double mag_new_first_time_s = 5.0;   ///< key "mag_new_first_time_s": same, for the first field, s
+    double mag_new_min_gyro_deg_s = 20.0;  ///< key "mag_new_min_gyro_deg_s": motion needed for the
+                                           ///< new-field timer to run, °/s
+    double mag_min_undisturbed_time_s = 0.5;  ///< key "mag_min_undisturbed_time_s": agreement time
+                                              ///< before the field counts as undisturbed, s
+    double mag_max_rejection_time_s = 60.0;   ///< key "mag_max_rejection_time_s": longest full
+                                              ///< rejection, s
+    double mag_rejection_factor = 2.0;  ///< key "mag_rejection_factor": gain divisor after the
+                                        ///< rejection time, and the recovery rate of that time
+    double max_step_s = 0.5;  ///< key "max_step_s": larger timestamp steps restart the time base, s
+
+    /// Empty if every value is usable, else a message naming the first bad key.
+    [[nodiscard]] std::string check() const;
+};
+
+/// Coefficients of a second-order Butterworth low-pass (a0 = 1).
+struct LowPassCoeffs {
+    std::array<double, 3> b{1.0, 0.0, 0.0};
+    std::array<double, 2> a{0.0, 0.0};
+};
+
+/// Second-order Butterworth low-pass over N channels (direct form II transposed). The first
+/// tau seconds are averaged and the filter starts in steady state on that average, so its
+/// output never depends on one sample. Part of MocapFilterState.
+template <int N>
+struct LowPassState {
+    std::array<double, 2 * N> z{};    ///< filter memory
+    std::array<double, N> sum{};      ///< running sum during the initial averaging
+    std::array<double, N> out{};      ///< last output
+    int count = 0;                    ///< samples averaged so far
+    bool running = false;             ///< initial averaging done
+};
+
+struct MocapFilterState {
+    Quat q_i_sensor = Quat::Identity();  ///< gyro strapdown (almost inertial frame I)
+    Quat q_e6_i = Quat::Identity();      ///< inclination correction (I -> 6D earth frame)
+    double delta_rad = 0.0;              ///< heading correction about the vertical
+    Vec3 bias_rad_s = Vec3::Zero();      ///< gyro bias estimate, sensor frame
+    Mat3 bias_p = Mat3::Zero();          ///< bias covariance, (0.01 °/s)²
+    bool initialised = false;            ///< first sample seen
+
+    double ts_s = 0.0;          ///< sample period the coefficients were computed for (0: unknown)
+    double ts_lp_s = 0.0;       ///< smoothed measured sample period
+    double tau_acc_eff_s = 0.0; ///< tau_acc_s in use (see gyro_noise_ref_deg_s)
+    double tau_mag_eff_s = 0.0; ///< tau_mag_s in use
+
+    // Gyro white-noise floor (second differences)
+    std::array<Vec3, 2> gyro_prev{Vec3::Zero(), Vec3::Zero()};
+    int gyro_history = 0;
+    std::uint64_t gyro_noise_count = 0;
+    double gyro_noise_var_lp = 0.0;     ///< per-axis noise variance, low-passed over 1 s, (rad/s)²
+    double gyro_noise_floor_var = 0.0;  ///< its floor (falls at once, rises over 20 s)
+
+    LowPassState<3> acc_lp;     ///< specific force in I
+    LowPassState<9> bias_r_lp;  ///< rotation matrix for motion bias estimation
+    LowPassState<2> bias_b_lp;  ///< R·bias (horizontal components)
+
+    // Rest detection
+    LowPassState<3> rest_gyro_lp;
+    LowPassState<3> rest_acc_lp;
+    double rest_time_s = 0.0;
+    bool rest_detected = false;
+
+    // Magnetic disturbance guard
+    LowPassState<3> mag_lp;               ///< field in the 6D earth frame
+    double mag_noise_var = 0.0;           ///< per-axis variance of the raw field around mag_lp
+    double mag_dis_lp_rad = 0.0;          ///< low-passed heading disagreement
+    double mag_dis_var = 0.0;             ///< variance of the raw disagreement around it, rad²
+    std::uint64_t mag_stat_count = 0;     ///< samples in the noise statistics (fast start)
+    bool mag_heading_disturbed = false;   ///< flagged by the heading disagreement
+    bool mag_heading_converging = false;  ///< heading still converging to a newly accepted field
+                                          ///< (disagreement test suspended)
+    bool mag_guard_blind = false;         ///< field noise too large to detect a disturbance of
+                                          ///< the configured size: guard not applied
+    double mag_norm = 0.0;                ///< filtered field norm
+    double mag_dip_rad = 0.0;             ///< filtered dip angle (positive: field points down)
+    double mag_ref_norm = 0.0;            ///< reference norm (0: none yet)
+    double mag_ref_dip_rad = 0.0;
+    double mag_candidate_norm = -1.0;     ///< candidate new field (-1: none)
+    double mag_candidate_dip_rad = 0.0;
+    double mag_candidate_time_s = 0.0;
+    double mag_undisturbed_time_s = 0.0;
+    double mag_reject_time_s = 0.0;
+    bool mag_disturbed = true;            ///< norm / dip off the reference (true until one exists)
+    double k_mag_init = 1.0;              ///< initial-convergence gain 1/N (0 when done)
+    double last_mag_disagreement_rad = 0.0;
+    Vec3 mag_horizontal_lp = Vec3::Zero();  ///< horizontal field in the 6D earth frame, averaged
+                                            ///< over tau_mag_s (vector mean at the start)
+
+    // Counters (only go up until reset())
+    std::uint64_t samples = 0;
+    std::uint64_t mag_samples_rejected = 0;  ///< mag readings not used (disturbed, gain 0)
+    std::uint64_t mag_disturbances = 0;      ///< transitions undisturbed -> disturbed (either test)
+    std::uint64_t mag_fields_accepted = 0;   ///< new reference fields adopted
+    std::uint64_t no_mag_samples = 0;        ///< samples without a magnetometer reading
+    std::uint64_t zero_acc_samples = 0;      ///< samples with a zero accelerometer reading
+
+    SampleClock clock = SampleClock(0.5);  ///< time base (max step set from Params)
+};
+
+class MocapFilter final : public OrientationFilter {
+public:
+    explicit MocapFilter(const MocapFilterParams& params = {});
+
+    void update(const ImuSample& sample) override;
+    [[nodiscard]] Quat orientation() const override;
+    [[nodiscard]] Vec3 gyro_bias_rad_s() const override { return state_.bias_rad_s; }
+    void reset() override;
+    [[nodiscard]] std::string_view name() const override { return "mocap"; }
+    [[nodiscard]] std::uint64_t gaps() const override { return state_.clock.gaps(); }
+
+    [[nodiscard]] const MocapFilterParams& params() const { return params_; }
+    [[nodiscard]] const MocapFilterState& state() const { return state_; }
+    /// Inclination-only estimate q_E'_sensor (no heading correction).
+    [[nodiscard]] Quat orientation_6d() const;
+    /// True while magnetometer readings are being rejected or down-weighted.
+    [[nodiscard]] bool mag_rejected() const {
+        return state_.mag_disturbed || state_.mag_heading_disturbed;
+    }
+
+private:
+    void compute_coeffs(double ts_s);
+    void update_gyro(const Vec3& gyro, double dt_s);
+    void update_acc(const Vec3& acc);
+    void update_mag(const Vec3& mag);
+    void update_mag_guard(const Vec3& mag_earth);
+    void update_bias(const Vec3& acc_earth_unit);
+    void update_heading_guard();
+    void adapt_time_constants();
+    void accept_candidate_field();
+
+    MocapFilterParams params_;
+    MocapFilterState state_;
+    // Derived coefficients, functions of params_ and state_.ts_s.
+    LowPassCoeffs acc_lp_, rest_lp_, mag_current_lp_;
+    double k_mag_ = 0.0, k_mag_ref_ = 0.0, k_mag_noise_ = 0.0, k_dis_ = 0.0;
+    double k_noise_fast_ = 0.0, k_noise_floor_ = 0.0;
+    double bias_p0_ = 0.0, bias_v_ = 0.0, bias_motion_w_ = 0.0, bias_vertical_w_ = 0.0,
+           bias_rest_w_ = 0.0;
+};
+
+}  // namespace mocap::filter
