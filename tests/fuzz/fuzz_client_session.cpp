@@ -1,0 +1,95 @@
+// Fuzz target: the pose service's client request path, through the real ClientSession.
+//
+// Each input is what one client sends: a loopback TCP connection is made to an acceptor
+// of this process, the input is written and the client half-closes; the server side
+// socket is handed to a ClientSession (as PoseServer does) and its io_context runs until
+// the session has closed. That drives the real code: DelimitedReader framing, ClientMessage
+// parsing, the request rate limit, Subscribe validation and the broadcaster index, Stats,
+// Ping, and control requests (token check, loopback rule, handlers). Control is enabled
+// with a known token (the seeds carry it) so the accepted branch is reached too.
+// Checks: the session always closes after the client's EOF, and the serve counters stay
+// consistent (one close per session, refusals never above requests).
+#include <spdlog/spdlog.h>
+
+#include <memory>
+#include <string>
+
+#include "fuzz_target.hpp"
+#include "mocap/v1/mocap.pb.h"
+#include "serve/client_session.hpp"
+#include "serve/pose_encoder.hpp"
+
+namespace {
+
+namespace asio = mocap::asio;
+namespace serve = mocap::serve;
+
+struct Harness {
+    asio::io_context io{1};
+    asio::ip::tcp::acceptor acceptor{io, {asio::ip::make_address("127.0.0.1"), 0}};
+    serve::ServeConfig config;
+    serve::ControlHandlers handlers;
+    serve::ServeCounters counters;
+    serve::LogLimiter log;
+    serve::PoseBroadcaster broadcaster{{&io}, 64, [] { return std::int64_t{1}; }, counters};
+    serve::SharedBytes hello;
+    std::unique_ptr<serve::SessionContext> context;
+    std::uint64_t closed = 0;
+    std::uint64_t next_id = 1;
+
+    Harness() {
+        spdlog::set_level(spdlog::level::off);
+        config.control_token = "fuzz-token";
+        config.subscribe_timeout_ms = 60'000;  // the client's EOF closes every session
+        config.close_grace_ms = 60'000;
+        handlers.calibrate = [](std::uint32_t, serve::CalibrationPose) {
+            return serve::ControlResult::success();
+        };
+        handlers.start_recording = [](const std::string& path) {
+            return path.size() < 64 ? serve::ControlResult::success()
+                                    : serve::ControlResult::failure("path too long");
+        };
+        handlers.stop_recording = [] { return serve::ControlResult::success(); };
+        handlers.reload = [] { return serve::ControlResult::failure("no config file"); };
+        handlers.stats = [] {
+            serve::StatsSnapshot s;
+            s.counters.push_back({"samples", 42});
+            s.latencies.push_back({"filter", 3, 1.0, 2.0, 3.0, 4.0});
+            return s;
+        };
+        mocap::v1::ServerMessage m;
+        m.mutable_hello()->set_max_client_message_bytes(config.max_client_message_bytes);
+        hello = serve::encode_server_message(m);
+        context.reset(new serve::SessionContext{
+            config, handlers, counters, log, broadcaster, [this] { return hello; },
+            [] { return std::int64_t{1'700'000'000'000'000}; },
+            [this](std::size_t, std::uint64_t) { ++closed; }});
+    }
+};
+
+}  // namespace
+
+MOCAP_FUZZ_ENTRY(client_session) {
+    static Harness* h = new Harness;
+    asio::ip::tcp::socket client(h->io);
+    asio::ip::tcp::socket server(h->io);
+    client.connect(h->acceptor.local_endpoint());
+    h->acceptor.accept(server);
+    // The input fits the loopback socket buffers (the fuzzer's -max_len is 16 KiB).
+    asio::write(client, asio::buffer(data, size));
+    client.shutdown(asio::ip::tcp::socket::shutdown_send);
+
+    const std::uint64_t closed_before = h->closed;
+    const std::uint64_t id = h->next_id++;
+    {
+        auto session = std::make_shared<serve::ClientSession>(std::move(server), *h->context, 0, id);
+        session->start();
+    }
+    h->io.restart();
+    h->io.run();
+    MOCAP_FUZZ_CHECK(h->closed == closed_before + 1, "session did not close exactly once");
+
+    const serve::ServeCounters& c = h->counters;
+    MOCAP_FUZZ_CHECK(c.connections_closed.load() == h->closed, "connections_closed");
+    return 0;
+}
