@@ -266,6 +266,43 @@ void read_control(TableReader& r, DaemonConfig& c) {
     }
 }
 
+void read_outputs(TableReader& r, DaemonConfig& c) {
+    r.read("bvh_listen", c.bvh_listen);
+    if (const auto* n = r.take("bvh_live")) {
+        if (!n->is_boolean()) r.fail("bvh_live", n, "expected true or false");
+        c.bvh_live = n->value<bool>().value();
+    }
+    r.read("bvh_max_clients", c.bvh_max_clients, 1, 10000);
+    r.read("bvh_subject", c.bvh_subject, 0, 65535);
+    if (const auto* n = r.take("bvh_unit")) {
+        const auto unit = n->value<std::string>();
+        if (unit == "cm") c.bvh_units_per_m = 100.0;
+        else if (unit == "m") c.bvh_units_per_m = 1.0;
+        else if (unit == "mm") c.bvh_units_per_m = 1000.0;
+        else r.fail("bvh_unit", n, "must be \"cm\", \"m\" or \"mm\"");
+    }
+    r.read("bvh_rotation_order", c.bvh_rotation_order);
+    {
+        const std::string& o = c.bvh_rotation_order;
+        const bool ok = o.size() == 3 && o.find_first_not_of("XYZ") == std::string::npos && o[0] != o[1] &&
+                        o[1] != o[2] && o[0] != o[2];
+        if (!ok) r.fail("bvh_rotation_order", r.take("bvh_rotation_order"), "must be three distinct letters of XYZ, e.g. \"ZXY\"");
+    }
+    r.read("bvh_frame_time_s", c.bvh_frame_time_s, 0.0001, 10.0);
+    r.read("record_dir", c.record_dir);
+    r.read("record_flush_interval_s", c.record_flush_interval_s, 0.01, 60.0);
+    if (const auto* n = r.take("raw_record")) {
+        if (!n->is_boolean()) r.fail("raw_record", n, "expected true or false");
+        c.raw_record = n->value<bool>().value();
+    }
+    r.read("raw_rotate_mb", c.raw_rotate_mb, 0.0, 1e6);
+    r.read("raw_rotate_s", c.raw_rotate_s, 0.0, 1e7);
+    r.read("raw_ring_capacity", c.raw_ring_capacity, 16, 1 << 24);
+    if ((c.raw_ring_capacity & (c.raw_ring_capacity - 1)) != 0) {
+        r.fail("raw_ring_capacity", r.take("raw_ring_capacity"), "must be a power of two");
+    }
+}
+
 }  // namespace
 
 std::string Endpoint::str() const {
@@ -312,7 +349,7 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
         const std::pair<const char*, Section> sections[] = {
             {"log", read_log},           {"ingest", read_ingest}, {"pipeline", read_pipeline},
             {"filter", read_filter},     {"skeleton", read_skeleton}, {"serve", read_serve},
-            {"control", read_control},
+            {"control", read_control},   {"outputs", read_outputs},
         };
         for (const auto& [name, fn] : sections) {
             if (const auto* t = top.sub_table(name)) {

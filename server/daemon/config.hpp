@@ -77,6 +77,20 @@ struct DaemonConfig {
     // [control]
     std::string control_token;
     bool control_loopback_only = true;
+    // [outputs] (docs/outputs.md)
+    Endpoint bvh_listen{"0.0.0.0", 7002};
+    bool bvh_live = true;                    ///< serve live BVH on bvh_listen
+    std::uint32_t bvh_max_clients = 64;
+    std::uint32_t bvh_subject = 0;           ///< 0 = first subject with a frame
+    double bvh_units_per_m = 100.0;          ///< "cm" = 100, "m" = 1, "mm" = 1000
+    std::string bvh_rotation_order = "ZXY";
+    double bvh_frame_time_s = 0.01;
+    std::string record_dir = ".";
+    double record_flush_interval_s = 1.0;
+    bool raw_record = false;                 ///< record every raw sample from start
+    double raw_rotate_mb = 256.0;            ///< 0 = never by size
+    double raw_rotate_s = 3600.0;            ///< 0 = never by time
+    std::uint32_t raw_ring_capacity = 16384;
 
     bool operator==(const DaemonConfig&) const = default;
 };

@@ -126,3 +126,55 @@ TEST(Config, EndpointParsing) {
 
 }  // namespace
 }  // namespace mocap::daemon
+
+namespace mocap::daemon {
+namespace {
+
+TEST(ConfigOutputs, DefaultsAndValues) {
+    std::string err;
+    const auto d = parse_config(embedded_default_config(), "mocapd.toml", &err);
+    ASSERT_TRUE(d) << err;
+    const DaemonConfig s;
+    EXPECT_EQ(d->bvh_listen.str(), "0.0.0.0:7002");
+    EXPECT_EQ(d->bvh_live, s.bvh_live);
+    EXPECT_EQ(d->bvh_subject, s.bvh_subject);
+    EXPECT_DOUBLE_EQ(d->bvh_units_per_m, s.bvh_units_per_m);
+    EXPECT_EQ(d->bvh_rotation_order, s.bvh_rotation_order);
+    EXPECT_DOUBLE_EQ(d->bvh_frame_time_s, s.bvh_frame_time_s);
+    EXPECT_EQ(d->record_dir, s.record_dir);
+    EXPECT_EQ(d->raw_record, s.raw_record);
+    EXPECT_DOUBLE_EQ(d->raw_rotate_mb, s.raw_rotate_mb);
+    EXPECT_DOUBLE_EQ(d->raw_rotate_s, s.raw_rotate_s);
+    EXPECT_EQ(d->raw_ring_capacity, s.raw_ring_capacity);
+
+    const auto c = parse_config("[outputs]\nbvh_live = false\nbvh_listen = \"127.0.0.1:9002\"\nbvh_unit = \"m\"\n"
+                                "bvh_rotation_order = \"XYZ\"\nbvh_subject = 3\nraw_record = true\n"
+                                "raw_rotate_mb = 1.5\nrecord_dir = \"/tmp/x\"\n",
+                                "t.toml", &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_FALSE(c->bvh_live);
+    EXPECT_EQ(c->bvh_listen.port, 9002);
+    EXPECT_DOUBLE_EQ(c->bvh_units_per_m, 1.0);
+    EXPECT_EQ(c->bvh_rotation_order, "XYZ");
+    EXPECT_EQ(c->bvh_subject, 3u);
+    EXPECT_TRUE(c->raw_record);
+    EXPECT_DOUBLE_EQ(c->raw_rotate_mb, 1.5);
+    EXPECT_EQ(c->record_dir, "/tmp/x");
+}
+
+TEST(ConfigOutputs, ErrorsNameKeyAndLine) {
+    std::string err;
+    EXPECT_FALSE(parse_config("[outputs]\nbvh_unit = \"inch\"\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:2: outputs.bvh_unit: must be \"cm\", \"m\" or \"mm\"");
+    EXPECT_FALSE(parse_config("[outputs]\n\nbvh_rotation_order = \"ZZY\"\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:3: outputs.bvh_rotation_order: must be three distinct letters of XYZ, e.g. \"ZXY\"");
+    EXPECT_FALSE(parse_config("[outputs]\nraw_ring_capacity = 1000\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:2: outputs.raw_ring_capacity: must be a power of two");
+    EXPECT_FALSE(parse_config("[outputs]\nraw_record = 1\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:2: outputs.raw_record: expected true or false");
+    EXPECT_FALSE(parse_config("[outputs]\nbvh_frame_time_s = 0\n", "t.toml", &err));
+    EXPECT_NE(err.find("outputs.bvh_frame_time_s"), std::string::npos) << err;
+}
+
+}  // namespace
+}  // namespace mocap::daemon

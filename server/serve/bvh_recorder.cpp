@@ -1,0 +1,284 @@
+#include "serve/bvh_recorder.hpp"
+
+#include <fcntl.h>
+#include <spdlog/spdlog.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "skeleton/bvh.hpp"
+
+namespace mocap::serve {
+
+namespace {
+
+bool write_all_at(int fd, const char* data, std::size_t n, off_t offset) {
+    while (n > 0) {
+        const ssize_t w = ::pwrite(fd, data, n, offset);
+        if (w < 0) {
+            if (errno == EINTR) continue;
+            return false;
+        }
+        data += w;
+        n -= static_cast<std::size_t>(w);
+        offset += w;
+    }
+    return true;
+}
+
+std::string count_digits(std::uint64_t frames) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%0*llu", kBvhCountDigits, static_cast<unsigned long long>(frames));
+    return buf;
+}
+
+}  // namespace
+
+BvhRecorder::BvhRecorder(BvhRecorderConfig config, const BvhFrameEncoder& encoder)
+    : config_(std::move(config)), encoder_(encoder) {
+    group_.add("recordings_started", started_);
+    group_.add("frames_recorded", recorded_);
+    group_.add("frames_dropped", dropped_);
+    group_.add("write_errors", write_errors_);
+    line_.reserve(16 * encoder_.values_per_frame());
+}
+
+BvhRecorder::~BvhRecorder() {
+    std::string ignored;
+    if (recording()) stop(&ignored);
+}
+
+bool BvhRecorder::start(const std::string& requested, std::string* error, std::string* opened_path) {
+    std::lock_guard control(control_mutex_);
+    if (recording()) {
+        *error = "a BVH recording is already running";
+        return false;
+    }
+    std::string path = requested;
+    int fd = -1;
+    if (path.empty()) {
+        // First free mocap-<n>.bvh: O_EXCL makes the choice race-free.
+        for (int n = 1; n < 100000 && fd < 0; ++n) {
+            path = config_.directory + "/mocap-" + std::to_string(n) + ".bvh";
+            fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+            if (fd < 0 && errno != EEXIST) break;
+        }
+    } else {
+        fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    }
+    if (fd < 0) {
+        *error = "cannot create " + path + ": " + std::strerror(errno);
+        return false;
+    }
+    const std::string head = encoder_.hierarchy() + "MOTION\nFrames: ";
+    const std::string header = head + count_digits(0) + "\n" + encoder_.frame_time_line();
+    if (!write_all_at(fd, header.data(), header.size(), 0)) {
+        *error = "cannot write " + path + ": " + std::strerror(errno);
+        ::close(fd);
+        return false;
+    }
+    fd_ = fd;
+    count_offset_ = head.size();
+    frames_written_ = 0;
+    {
+        std::lock_guard lock(mutex_);
+        pending_.clear();
+        pending_frames_ = 0;
+        stop_writer_ = false;
+        subject_ = config_.subject;
+    }
+    writer_ = std::thread([this] {
+        pthread_setname_np(pthread_self(), "mocap-bvhrec");
+        writer_loop();
+    });
+    started_.add();
+    recording_.store(true, std::memory_order_release);
+    spdlog::info("bvh record: writing {}", path);
+    if (opened_path) *opened_path = path;
+    return true;
+}
+
+bool BvhRecorder::stop(std::string* error, std::uint64_t* frames) {
+    std::lock_guard control(control_mutex_);
+    if (!recording()) {
+        *error = "no BVH recording is running";
+        return false;
+    }
+    recording_.store(false, std::memory_order_release);
+    {
+        std::lock_guard lock(mutex_);
+        stop_writer_ = true;
+    }
+    wake_.notify_one();
+    writer_.join();
+    ::close(fd_);
+    fd_ = -1;
+    spdlog::info("bvh record: closed after {} frames", frames_written_);
+    if (frames) *frames = frames_written_;
+    return true;
+}
+
+void BvhRecorder::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
+    if (!recording_.load(std::memory_order_acquire)) return;
+    std::lock_guard lock(mutex_);
+    if (subject_ == 0) subject_ = frame.subject_id;
+    if (frame.subject_id != subject_) return;
+    line_.clear();
+    encoder_.append_motion_line(pose, line_);
+    if (pending_.size() + line_.size() > config_.max_buffer_bytes) {
+        dropped_.add();
+        return;
+    }
+    pending_ += line_;
+    ++pending_frames_;
+    recorded_.add();
+}
+
+bool BvhRecorder::write_pending(std::string& scratch, std::uint64_t& frames_in_file) {
+    std::uint64_t frames = 0;
+    {
+        std::lock_guard lock(mutex_);
+        scratch.swap(pending_);
+        frames = pending_frames_;
+        pending_frames_ = 0;
+    }
+    if (scratch.empty()) return true;
+    struct stat st {};
+    bool ok = ::fstat(fd_, &st) == 0 && write_all_at(fd_, scratch.data(), scratch.size(), st.st_size);
+    if (ok) {
+        frames_in_file += frames;
+        const std::string digits = count_digits(frames_in_file);
+        ok = write_all_at(fd_, digits.data(), digits.size(), static_cast<off_t>(count_offset_));
+    }
+    if (!ok) write_errors_.add();
+    scratch.clear();
+    return ok;
+}
+
+void BvhRecorder::writer_loop() {
+    std::string scratch;
+    const auto interval = std::chrono::microseconds(static_cast<std::int64_t>(config_.flush_interval_s * 1e6));
+    for (;;) {
+        bool stopping = false;
+        {
+            std::unique_lock lock(mutex_);
+            wake_.wait_for(lock, interval, [this] { return stop_writer_; });
+            stopping = stop_writer_;
+        }
+        write_pending(scratch, frames_written_);
+        if (stopping) return;
+    }
+}
+
+BvhRepairResult repair_bvh_file(const std::string& path) {
+    BvhRepairResult r;
+    std::string text;
+    {
+        std::ifstream in(path, std::ios::binary);
+        if (!in) {
+            r.error = path + ": " + std::strerror(errno);
+            return r;
+        }
+        std::ostringstream ss;
+        ss << in.rdbuf();
+        text = ss.str();
+    }
+    std::size_t consumed = 0;
+    const auto hierarchy = skeleton::parse_bvh_hierarchy(text, {}, &consumed);
+    if (!hierarchy) {
+        r.error = path + ": " + hierarchy.error;
+        return r;
+    }
+    const std::size_t values = hierarchy.clip->channels_per_frame;
+    // After the hierarchy: MOTION, Frames: N, Frame Time: T, then the lines.
+    std::size_t pos = consumed;
+    auto next_line = [&](std::string_view& line) {
+        if (pos >= text.size()) return false;
+        const std::size_t nl = text.find('\n', pos);
+        if (nl == std::string::npos) {
+            line = std::string_view(text).substr(pos);
+            pos = text.size();
+            return true;
+        }
+        line = std::string_view(text).substr(pos, nl - pos);
+        pos = nl + 1;
+        return true;
+    };
+    std::string_view line;
+    do {
+        if (!next_line(line)) {
+            r.error = path + ": no MOTION section";
+            return r;
+        }
+    } while (line.find_first_not_of(" \t\r") == std::string_view::npos);
+    if (line.substr(0, 6) != "MOTION") {
+        r.error = path + ": expected MOTION after the hierarchy";
+        return r;
+    }
+    if (!next_line(line) || line.substr(0, 7) != "Frames:") {
+        r.error = path + ": expected \"Frames:\" after MOTION";
+        return r;
+    }
+    r.frames_before = std::strtoull(std::string(line.substr(7)).c_str(), nullptr, 10);
+    if (!next_line(line) || line.substr(0, 11) != "Frame Time:") {
+        r.error = path + ": expected \"Frame Time:\" after Frames";
+        return r;
+    }
+    const std::string frame_time(line);
+    const std::size_t body = pos;
+    std::size_t keep_end = body;
+    std::vector<double> scratch(values);
+    std::size_t line_no = 0;
+    while (pos < text.size()) {
+        const std::size_t start = pos;
+        const bool terminated = text.find('\n', pos) != std::string::npos;
+        next_line(line);
+        ++line_no;
+        std::string_view trimmed = line;
+        if (!trimmed.empty() && trimmed.back() == '\r') trimmed.remove_suffix(1);
+        const bool blank = trimmed.find_first_not_of(" \t") == std::string_view::npos;
+        const bool good = !blank && skeleton::parse_bvh_motion_line(trimmed, scratch).empty();
+        if (good && terminated) {
+            ++r.frames;
+            keep_end = pos;
+            continue;
+        }
+        if (pos >= text.size()) {  // the last line: partial or blank, cut it
+            if (!blank) r.bytes_cut = text.size() - start;
+            break;
+        }
+        if (blank) continue;
+        r.error = path + ": MOTION line " + std::to_string(line_no) + " is malformed (not the last line)";
+        return r;
+    }
+    const std::string head = text.substr(0, consumed);
+    std::string out;
+    out.reserve(text.size());
+    out += head;
+    if (!out.empty() && out.back() != '\n') out += '\n';
+    out += "MOTION\nFrames: " + count_digits(r.frames) + "\n" + frame_time + "\n";
+    out.append(text, body, keep_end - body);
+    const std::string tmp = path + ".repair-tmp";
+    {
+        std::ofstream o(tmp, std::ios::binary | std::ios::trunc);
+        o.write(out.data(), static_cast<std::streamsize>(out.size()));
+        if (!o) {
+            r.error = tmp + ": write failed";
+            return r;
+        }
+    }
+    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+        r.error = "rename " + tmp + ": " + std::strerror(errno);
+        return r;
+    }
+    r.ok = true;
+    return r;
+}
+
+}  // namespace mocap::serve

@@ -1,0 +1,108 @@
+// bvh_recorder.hpp — daemon-side BVH file recorder, started and stopped by the control
+// request (StartRecording / StopRecording), and the repair of a file a crash left behind.
+//
+// File layout: BvhFrameEncoder::hierarchy(), "MOTION\n", "Frames: NNNNNNNNNN\n" (ten
+// digits, zero-padded, so the count can be rewritten in place), "Frame Time: T\n", then
+// one MOTION line per frame of ONE subject (the configured `subject`, or with 0 the first
+// subject that delivers a frame after start). Every importer reads the zero-padded count
+// as a number (checked with assimp, Blender and three.js: docs/outputs.md).
+// Crash safety: lines are written by a writer thread every flush_interval_s, and after
+// each write the count is patched to the number of whole lines written, so a killed
+// daemon leaves a file that loads (up to the last flush). If it was killed between the
+// write and the patch, `mocap-bvh-repair FILE` (repair_bvh_file) counts the complete
+// MOTION lines, cuts a partial last line and rewrites the count.
+//
+// Threads: publish() on the assembler thread (cheap when not recording: one atomic load;
+// recording: encode one line, append it to a buffer under a short lock, never I/O).
+// start()/stop() on any thread (a control request); they open/close the file and start/join
+// the writer thread, so they take milliseconds.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "core/counters.hpp"
+#include "core/frame.hpp"
+#include "serve/bvh_frame_encoder.hpp"
+#include "serve/pose_frame.hpp"
+
+namespace mocap::serve {
+
+struct BvhRecorderConfig {
+    std::string directory = ".";      ///< where "" paths go: mocap-<n>.bvh
+    std::uint32_t subject = 0;        ///< 0 = first subject with a frame
+    double flush_interval_s = 1.0;    ///< write + patch the count this often
+    std::size_t max_buffer_bytes = 16u << 20;  ///< beyond this frames are dropped (counted)
+};
+
+class BvhRecorder {
+public:
+    /// `encoder` must outlive the recorder.
+    BvhRecorder(BvhRecorderConfig config, const BvhFrameEncoder& encoder);
+    ~BvhRecorder();
+    BvhRecorder(const BvhRecorder&) = delete;
+    BvhRecorder& operator=(const BvhRecorder&) = delete;
+
+    /// Any thread. Starts a recording to `path` ("" = <directory>/mocap-<first free n>.bvh).
+    /// Fails if one is running or the file cannot be created (an existing file is not
+    /// overwritten). On success *opened_path (if given) is the file.
+    bool start(const std::string& path, std::string* error, std::string* opened_path = nullptr);
+    /// Any thread. Writes the rest, patches the count, closes. False if none is running.
+    bool stop(std::string* error, std::uint64_t* frames = nullptr);
+
+    /// Assembler thread.
+    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+
+    [[nodiscard]] bool recording() const { return recording_.load(std::memory_order_acquire); }
+    /// Component "bvh_record": recordings_started, frames_recorded, frames_dropped,
+    /// write_errors.
+    [[nodiscard]] const CounterGroup& counters() const { return group_; }
+
+private:
+    void writer_loop();
+    bool write_pending(std::string& scratch, std::uint64_t& frames_in_file);
+
+    BvhRecorderConfig config_;
+    const BvhFrameEncoder& encoder_;
+    std::mutex control_mutex_;  // serialises start/stop
+
+    std::atomic<bool> recording_{false};
+    std::mutex mutex_;               // guards the fields below
+    std::condition_variable wake_;
+    std::string pending_;            // whole lines not yet written
+    std::uint64_t pending_frames_ = 0;
+    std::uint32_t subject_ = 0;      // assembler thread once recording (set at start)
+    bool stop_writer_ = false;
+
+    int fd_ = -1;
+    std::uint64_t count_offset_ = 0;  // file offset of the ten count digits
+    std::uint64_t frames_written_ = 0;
+    std::thread writer_;
+    std::string line_;  // assembler thread scratch
+
+    Counter started_, recorded_, dropped_, write_errors_;
+    CounterGroup group_{"bvh_record"};
+};
+
+/// Width of the zero-padded frame count in files this recorder writes.
+inline constexpr int kBvhCountDigits = 10;
+
+struct BvhRepairResult {
+    bool ok = false;
+    std::string error;
+    std::uint64_t frames = 0;          ///< complete MOTION lines kept
+    std::uint64_t bytes_cut = 0;       ///< partial last line removed
+    std::uint64_t frames_before = 0;   ///< the count the header claimed
+};
+
+/// Repairs a BVH file in place: the count becomes the number of complete MOTION lines
+/// (each must hold the values the HIERARCHY declares; a short/partial LAST line is cut;
+/// a bad line elsewhere is an error). Works on any BVH whose "Frames:" field is wide
+/// enough for the new count (always true for files this recorder wrote).
+BvhRepairResult repair_bvh_file(const std::string& path);
+
+}  // namespace mocap::serve

@@ -1,0 +1,122 @@
+// raw_recorder.hpp — append-only recording of every decoded sample (proto/mocap/v1/
+// recording.proto), and the reader that replay uses.
+//
+// Writing. push() is called by the ingest thread (the ONE producer) for every sample it
+// routes; it copies the sample into a bounded SPSC ring (core/spsc_ring.hpp) and returns:
+// no lock, no allocation, no I/O on the pipeline. When the ring is full the sample is
+// dropped and counted (samples_dropped). A writer thread owned by the recorder drains the
+// ring, encodes each sample as a length-delimited RawRecord into a buffer and write()s the
+// buffer every flush_interval_s. What write() returned is in the kernel's page cache, so a
+// killed daemon loses at most the last flush interval (plus what was still in the ring);
+// a power cut additionally loses what the kernel had not written back (fsync_on_rotate
+// syncs only at rotation).
+// Rotation: a new file when the current one reaches rotate_bytes or has been open
+// rotate_s (0 = never). Files are named <directory>/raw-YYYYmmdd-HHMMSS-<index>.mocapraw
+// (UTC time of the recording's start, index 0, 1, 2... per rotation).
+//
+// Reading. RawRecordingReader reads one file record by record; a truncated last record
+// (the file of a killed daemon) ends the file cleanly (truncated() tells).
+//
+// Threads: push() on the producer thread; start()/stop() on the owner's thread (the
+// daemon, before ingest starts / after it stopped); counters() on any thread.
+// Memory: ring_capacity × sizeof(SegmentSample) (~200 B) allocated at construction.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "core/clock.hpp"
+#include "core/counters.hpp"
+#include "core/frame.hpp"
+#include "core/spsc_ring.hpp"
+
+namespace mocap::serve {
+
+struct RawRecorderConfig {
+    std::string directory = ".";
+    double flush_interval_s = 1.0;          ///< write() at least this often
+    std::uint64_t rotate_bytes = 256u << 20;  ///< start a new file beyond this size; 0 = never
+    double rotate_s = 3600.0;               ///< start a new file after this long; 0 = never
+    std::size_t ring_capacity = 16384;      ///< samples between ingest and the writer (power of 2)
+    bool fsync_on_rotate = true;            ///< fsync a file when it is closed
+};
+
+class RawRecorder {
+public:
+    /// `clock`: wall clock for file names and the flush/rotation timers (not owned).
+    RawRecorder(RawRecorderConfig config, const Clock& clock);
+    ~RawRecorder();
+    RawRecorder(const RawRecorder&) = delete;
+    RawRecorder& operator=(const RawRecorder&) = delete;
+
+    /// Opens the first file and starts the writer thread. False + error if the directory
+    /// is not writable.
+    [[nodiscard]] bool start(std::string* error);
+    /// Writes everything pushed so far, closes the file, joins the thread. Idempotent.
+    void stop();
+
+    /// Producer thread only. Never blocks; false when the ring was full (counted).
+    bool push(const SegmentSample& sample) noexcept;
+
+    /// Path of the file being written ("" before start / after stop). Writer-thread value,
+    /// read under a lock.
+    [[nodiscard]] std::string current_path() const;
+    /// Component "raw_record": samples_recorded, samples_dropped, bytes_written,
+    /// files_opened, write_errors.
+    [[nodiscard]] const CounterGroup& counters() const { return group_; }
+
+private:
+    bool open_next(std::string* error);
+    void close_file();
+    void writer_loop();
+    void flush_buffer();
+
+    RawRecorderConfig config_;
+    const Clock& clock_;
+    SpscRing<SegmentSample> ring_;
+    std::thread writer_;
+    std::atomic<bool> stop_{false};
+
+    // Writer thread (and start/stop before/after it runs).
+    int fd_ = -1;
+    std::uint32_t file_index_ = 0;
+    std::string series_stamp_;
+    std::uint64_t file_bytes_ = 0;
+    std::int64_t file_opened_us_ = 0;
+    std::string buffer_;
+    mutable std::mutex path_mutex_;
+    std::string path_;
+
+    Counter recorded_, dropped_, bytes_, files_, write_errors_;
+    CounterGroup group_{"raw_record"};
+};
+
+/// Encodes one sample as a length-delimited RawRecord, appended to `out`.
+void append_raw_sample_record(const SegmentSample& sample, std::string& out);
+
+/// Reads a raw recording file record by record. Not thread-safe; one per file.
+class RawRecordingReader {
+public:
+    /// Opens and checks the magic. False + error otherwise.
+    bool open(const std::string& path, std::string* error);
+    /// Next sample: 1 = got one, 0 = end of file, -1 = corrupt record (error set).
+    /// A truncated final record counts as the end of the file (truncated() = true).
+    int next(SegmentSample& out, std::string* error);
+    [[nodiscard]] bool truncated() const { return truncated_; }
+    [[nodiscard]] std::uint64_t samples_read() const { return samples_; }
+
+private:
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_{nullptr, &std::fclose};
+    std::string record_;
+    bool truncated_ = false;
+    std::uint64_t samples_ = 0;
+};
+
+inline constexpr char kRawMagic[8] = {'M', 'O', 'C', 'A', 'P', 'R', 'A', 'W'};
+
+}  // namespace mocap::serve
