@@ -104,8 +104,12 @@ void compute_joint_angles(std::span<const JointSpec> specs, std::span<const Quat
     assert(out.size() >= specs.size());
     for (std::size_t i = 0; i < specs.size(); ++i) {
         const JointSpec& s = specs[i];
-        out[i] = joint_angles(s.kind, s.side, q_world_segment[static_cast<std::size_t>(s.parent_segment)],
-                              q_world_segment[static_cast<std::size_t>(s.child_segment)]);
+        const auto p = static_cast<std::size_t>(s.parent_segment);
+        const auto c = static_cast<std::size_t>(s.child_segment);
+        // A frame with fewer segments than the model: the joint is not measured.
+        out[i] = (p < q_world_segment.size() && c < q_world_segment.size())
+                     ? joint_angles(s.kind, s.side, q_world_segment[p], q_world_segment[c])
+                     : JointAngles{};
     }
 }
 

@@ -73,7 +73,8 @@ JointAngles joint_angles(JointKind kind, Side side, const Quat& q_world_parent, 
 /// and simulators).
 Quat child_orientation(JointKind kind, Side side, const Quat& q_world_parent, const JointAngles& angles);
 
-/// Angles of every spec (out.size() >= specs.size()). No allocation.
+/// Angles of every spec (out.size() >= specs.size()); a spec whose segments lie beyond
+/// q_world_segment.size() gets zeros. No allocation.
 void compute_joint_angles(std::span<const JointSpec> specs, std::span<const Quat> q_world_segment,
                           std::span<JointAngles> out);
 

@@ -115,3 +115,19 @@ TEST(JointAngles, DefaultSpecsCoverTenJoints) {
 
 }  // namespace
 }  // namespace mocap::skeleton
+
+namespace mocap::skeleton {
+namespace {
+
+TEST(JointAngles, ShortFrameLeavesMissingJointsAtZero) {
+    const BodyModel m = default_body_model();
+    const auto specs = default_joint_specs(m);
+    auto q = identity_quats();
+    std::array<JointAngles, 10> out;
+    out.fill(JointAngles{1, 1, 1});
+    compute_joint_angles(specs, std::span<const Quat>(q.data(), 3), out);  // pelvis, trunk, head only
+    for (const JointAngles& a : out) EXPECT_EQ(a.flexion_rad + a.abduction_rad + a.rotation_rad, 0.0);
+}
+
+}  // namespace
+}  // namespace mocap::skeleton
