@@ -3,6 +3,7 @@
 
 #include <sys/epoll.h>
 #include <sys/resource.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -36,6 +37,13 @@ void raise_fd_limit(std::size_t needed) {
     setrlimit(RLIMIT_NOFILE, &lim);
 }
 
+/// A stalled client should stall soon: a small receive buffer fills in a fraction of a
+/// second instead of holding megabytes of frames for the server.
+bool shrink_receive_buffer(int fd) {
+    const int bytes = 4096;
+    return setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes) == 0;
+}
+
 double percentile_ms(std::vector<std::int32_t>& v, double p) {
     const auto n = v.size();
     auto rank = static_cast<std::size_t>(std::ceil(p / 100.0 * static_cast<double>(n)));
@@ -49,7 +57,7 @@ double percentile_ms(std::vector<std::int32_t>& v, double p) {
 LoadResult run_load(const LoadOptions& options) {
     LoadResult result;
     result.clients = options.clients;
-    raise_fd_limit(options.clients);
+    raise_fd_limit(options.clients + options.stalled);
     const std::uint32_t decimation = std::max<std::uint32_t>(options.decimation, 1);
 
     std::vector<ClientState> states(options.clients);
@@ -72,6 +80,20 @@ LoadResult run_load(const LoadOptions& options) {
             if (result.error.empty()) result.error = error;
             s.client.close();
             s.open = false;
+        }
+    }
+
+    // The stalled connections: subscribed, then never read until the end of the run.
+    std::vector<PoseClient> stalled(options.stalled);
+    for (PoseClient& c : stalled) {
+        std::string error;
+        if (c.connect(options.host, options.port, options.connect_timeout, error) &&
+            shrink_receive_buffer(c.fd()) &&
+            c.subscribe({options.subject_ids, decimation, options.fields}, options.connect_timeout,
+                        error)) {
+            ++result.stalled;
+        } else if (result.error.empty()) {
+            result.error = "stalled client: " + error;
         }
     }
 
@@ -181,6 +203,7 @@ std::string load_result_json(const LoadResult& r) {
     };
     key("clients"); json_uint(out, r.clients);
     key("connected"); json_uint(out, r.connected);
+    key("stalled"); json_uint(out, r.stalled);
     key("closed_early"); json_uint(out, r.closed_early);
     key("duration_s"); json_number(out, r.duration_s, 6);
     key("frames"); json_uint(out, r.frames);

@@ -26,10 +26,14 @@ struct LoadOptions {
     std::uint32_t decimation = 1;
     std::uint32_t fields = 0;
     std::chrono::milliseconds connect_timeout{3000};
+    /// Extra connections that subscribe like the others and then never read (they test
+    /// that a stalled client does not slow the measured ones); not measured themselves.
+    std::size_t stalled = 0;
 };
 
 struct LoadResult {
     std::size_t clients = 0;        ///< requested
+    std::size_t stalled = 0;        ///< never-reading connections that were subscribed
     std::size_t connected = 0;      ///< subscribed successfully
     std::size_t closed_early = 0;   ///< connections the server closed during the run
     double duration_s = 0;          ///< measured length of the read loop

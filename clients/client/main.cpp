@@ -310,6 +310,9 @@ int main(int argc, char** argv) {
     load->add_option("--subject", load_options.subject_ids, "subject id (repeatable; default all)");
     load->add_option("--decimation", load_options.decimation, "every n-th frame per subject")
         ->capture_default_str();
+    load->add_option("--stalled", load_options.stalled,
+                     "extra subscribed connections that never read (not measured)")
+        ->capture_default_str();
 
     CLI11_PARSE(app, argc, argv);
 
@@ -331,8 +334,8 @@ int main(int argc, char** argv) {
         if (load_json) {
             std::cout << mocap::client::load_result_json(r) << std::endl;
         } else {
-            std::printf("clients %zu (connected %zu, closed early %zu), %.2f s\n", r.clients,
-                        r.connected, r.closed_early, r.duration_s);
+            std::printf("clients %zu (connected %zu, closed early %zu, stalled %zu), %.2f s\n",
+                        r.clients, r.connected, r.closed_early, r.stalled, r.duration_s);
             std::printf("frames %llu (per client %llu..%llu), gaps %llu (missing %llu), drops %llu\n",
                         static_cast<unsigned long long>(r.frames),
                         static_cast<unsigned long long>(r.frames_per_client_min),
@@ -346,7 +349,7 @@ int main(int argc, char** argv) {
             }
             if (!r.error.empty()) std::printf("first error: %s\n", r.error.c_str());
         }
-        return r.connected == r.clients ? 0 : kExitConnection;
+        return r.connected == r.clients && r.stalled == load_options.stalled ? 0 : kExitConnection;
     }
 
     PoseClient client;

@@ -26,8 +26,10 @@ struct ServeConfig {
     std::uint32_t max_client_message_bytes = 4096;  ///< longer ClientMessages close the link
     double max_client_messages_per_s = 20.0;  ///< sustained request rate per client
     std::uint32_t client_message_burst = 40;  ///< requests allowed at once before the rate applies
-    std::uint32_t send_buffer_bytes = 0;  ///< SO_SNDBUF per client; 0 = kernel default. Small
-                                          ///< values keep a lagging client's data fresh.
+    /// SO_SNDBUF per client (0 = kernel default, which grows to MiBs: tens of seconds of
+    /// one subject's frames held in the kernel for a stalled client before its queue
+    /// drops anything). Bounded, a lagging client's data stays fresh.
+    std::uint32_t send_buffer_bytes = 128 * 1024;
     std::uint32_t close_grace_ms = 1000;  ///< time a closing client gets to read its Goodbye
     std::size_t publish_backlog_frames = 4096;  ///< frames waiting for one serve thread;
                                                 ///< beyond it frames are dropped (counted)

@@ -30,11 +30,12 @@ TEST(LoadClient, CountsFramesGapsAndLatency) {
     options.clients = kClients;
     options.duration = 1500ms;
     options.subject_ids = {3};
+    options.stalled = 1;  // subscribed, never read: must not disturb the measured clients
     auto run = std::async(std::launch::async, [&] { return client::run_load(options); });
 
     // Publish only once every load connection has subscribed.
     const auto deadline = std::chrono::steady_clock::now() + 3s;
-    while (server.counters().subscriptions.load() < kClients) {
+    while (server.counters().subscriptions.load() < kClients + 1) {
         ASSERT_LT(std::chrono::steady_clock::now(), deadline);
         std::this_thread::sleep_for(1ms);
     }
@@ -57,6 +58,7 @@ TEST(LoadClient, CountsFramesGapsAndLatency) {
     const client::LoadResult r = run.get();
     EXPECT_EQ(r.clients, kClients);
     EXPECT_EQ(r.connected, kClients);
+    EXPECT_EQ(r.stalled, 1u);
     EXPECT_EQ(r.closed_early, 0u);
     EXPECT_EQ(r.frames, kClients * published);
     EXPECT_EQ(r.frames_per_client_min, published);
