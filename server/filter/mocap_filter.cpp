@@ -173,7 +173,7 @@ void MocapFilter::compute_coeffs(double ts_s) {
     k_mag_noise_ = k_mag_ref_;
     k_dis_ = gain_from_tau(p.mag_heading_tau_s, ts_s);
     k_noise_fast_ = gain_from_tau(1.0, ts_s);
-    k_noise_floor_ = gain_from_tau(20.0, ts_s);
+    k_noise_floor_ = gain_from_tau(300.0, ts_s);
     // Bias Kalman filter in units of 0.01 °/s, which keeps the numbers near 1.
     bias_p0_ = std::pow(p.bias_sigma_init_deg_s * 100.0, 2);
     bias_v_ = std::pow(0.1 * p.bias_sigma_init_deg_s * 100.0, 2) * ts_s / p.bias_forgetting_time_s;
@@ -227,15 +227,18 @@ void MocapFilter::update_gyro(const Vec3& gyro, double dt_s) {
         }
     }
     // White-noise floor of the gyro: second differences cancel smooth motion and keep
-    // 6σ² of white noise; their low-pass is tracked downwards at once and upwards slowly,
-    // so the floor comes from the quietest recent stretch, not from vigorous motion.
+    // 6σ² of white noise; their 1 s low-pass is tracked downwards at once and upwards over
+    // 300 s, so the floor comes from the quietest stretch of the last minutes and minutes of
+    // vigorous motion (whose second differences are large at 100 Hz) do not raise it much.
     if (s.gyro_history >= 2) {
         const Vec3 d2 = gyro - 2.0 * s.gyro_prev[0] + s.gyro_prev[1];
         const double v = d2.squaredNorm() / 18.0;  // per axis: 3 axes × 6σ²
         ++s.gyro_noise_count;
         const double k_fast = std::max(k_noise_fast_, 1.0 / static_cast<double>(s.gyro_noise_count));
         s.gyro_noise_var_lp += k_fast * (v - s.gyro_noise_var_lp);
-        if (s.gyro_noise_count == 1 || s.gyro_noise_var_lp < s.gyro_noise_floor_var) {
+        // The first second is a plain mean: a minimum over it would catch a lucky sample.
+        const bool averaging = static_cast<double>(s.gyro_noise_count) * s.ts_s < 1.0;
+        if (averaging || s.gyro_noise_var_lp < s.gyro_noise_floor_var) {
             s.gyro_noise_floor_var = s.gyro_noise_var_lp;
         } else {
             s.gyro_noise_floor_var += k_noise_floor_ * (s.gyro_noise_var_lp - s.gyro_noise_floor_var);

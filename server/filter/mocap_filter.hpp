@@ -151,7 +151,7 @@ struct MocapFilterState {
     int gyro_history = 0;
     std::uint64_t gyro_noise_count = 0;
     double gyro_noise_var_lp = 0.0;     ///< per-axis noise variance, low-passed over 1 s, (rad/s)²
-    double gyro_noise_floor_var = 0.0;  ///< its floor (falls at once, rises over 20 s)
+    double gyro_noise_floor_var = 0.0;  ///< its floor (falls at once, rises over 300 s)
 
     LowPassState<3> acc_lp;     ///< specific force in I
     LowPassState<9> bias_r_lp;  ///< rotation matrix for motion bias estimation
