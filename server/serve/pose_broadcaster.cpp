@@ -47,6 +47,10 @@ PoseBroadcaster::~PoseBroadcaster() = default;
 void PoseBroadcaster::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
     if (stopped_.load(std::memory_order_acquire)) return;
     counters_.frames_published.fetch_add(1, std::memory_order_relaxed);
+    if (all_subject_users_.load(std::memory_order_relaxed) == 0 &&
+        subject_interest_[frame.subject_id % kInterestSlots].load(std::memory_order_relaxed) == 0) {
+        return;  // nobody watches this subject
+    }
     EncodedFrame encoded;
     encoded.subject_id = frame.subject_id;
     encoded.sync = frame.sync;
@@ -105,10 +109,14 @@ void PoseBroadcaster::subscribe(std::size_t lane_index,
     Lane& lane = *lanes_.at(lane_index);
     field_users_[normalize_fields(fields)].fetch_add(1, std::memory_order_relaxed);
     if (subjects.empty()) {
+        all_subject_users_.fetch_add(1, std::memory_order_relaxed);
         lane.all_subjects.push_back(session);
         return;
     }
-    for (std::uint32_t subject : subjects) lane.by_subject[subject].push_back(session);
+    for (std::uint32_t subject : subjects) {
+        subject_interest_[subject % kInterestSlots].fetch_add(1, std::memory_order_relaxed);
+        lane.by_subject[subject].push_back(session);
+    }
 }
 
 void PoseBroadcaster::unsubscribe(std::size_t lane_index, const ClientSession* session,
@@ -120,10 +128,12 @@ void PoseBroadcaster::unsubscribe(std::size_t lane_index, const ClientSession* s
         std::erase_if(list, [session](const auto& s) { return s.get() == session; });
     };
     if (subjects.empty()) {
+        all_subject_users_.fetch_sub(1, std::memory_order_relaxed);
         remove_from(lane.all_subjects);
         return;
     }
     for (std::uint32_t subject : subjects) {
+        subject_interest_[subject % kInterestSlots].fetch_sub(1, std::memory_order_relaxed);
         auto it = lane.by_subject.find(subject);
         if (it == lane.by_subject.end()) continue;
         remove_from(it->second);

@@ -1,7 +1,8 @@
 // pose_broadcaster.hpp — fan-out of encoded frames to the client sessions.
 //
 // publish() is called by the daemon's assembler thread(s). It encodes the frame once
-// per field selection that some client uses (nothing when nobody listens), then hands
+// per field selection that some client uses (nothing when nobody watches the subject),
+// then hands
 // the shared buffers to every serve thread ("lane") through a small mutex-guarded
 // backlog and one wake-up post. On its own thread, each lane walks its subscription
 // index and gives the frame to each subscribed session, which queues it (bounded,
@@ -77,6 +78,12 @@ private:
     ServeCounters& counters_;
     std::atomic<bool> stopped_{false};
     std::array<std::atomic<std::uint32_t>, kFieldCombinations> field_users_{};
+    /// Subscriptions per subject slot (subject_id % kInterestSlots) and for all subjects:
+    /// publish() skips encoding frames of subjects nobody watches. Slots are shared by
+    /// subject ids that collide, which only costs an unneeded encoding.
+    static constexpr std::size_t kInterestSlots = 1024;
+    std::array<std::atomic<std::uint32_t>, kInterestSlots> subject_interest_{};
+    std::atomic<std::uint32_t> all_subject_users_{0};
 
     std::mutex encode_mutex_;  ///< guards encoder_ (publishers may be several threads)
     PoseEncoder encoder_;

@@ -66,6 +66,9 @@ TEST(LoadClient, CountsFramesGapsAndLatency) {
     EXPECT_EQ(r.gaps, kClients);
     EXPECT_EQ(r.missing_frames, 2 * kClients);
     EXPECT_EQ(r.drops, 0u);
+    // Subject 4 is published too but nobody subscribed to it: never encoded.
+    EXPECT_EQ(server.counters().frames_encoded.load(), published);
+    EXPECT_EQ(server.counters().frames_published.load(), 2 * published);
     EXPECT_EQ(r.latency_samples, kClients * published);
     ASSERT_TRUE(r.p50_ms && r.p99_ms && r.max_ms);
     EXPECT_LE(*r.p50_ms, *r.p99_ms);
