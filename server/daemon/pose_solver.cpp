@@ -44,6 +44,7 @@ std::vector<std::string> PoseSolver::load_calibrations() {
         auto r = skeleton::parse_calibration(model_, text.str());
         if (r) {
             subjects_[id].calibration = *r.calibration;
+            subjects_[id].root.emplace(model_);
             log.push_back("subject " + std::to_string(id) + ": calibration loaded from " + path);
         } else {
             log.push_back("subject " + std::to_string(id) + ": ignoring " + path + ": " + r.error);
@@ -96,6 +97,8 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
     }
     s.calibration = *result.calibration;
     s.smoother.reset();
+    s.root.emplace(model_);
+    s.root->reset(skeleton::root_position(model_));
     calibrations_ok_.add();
     spdlog::info("subject {}: calibrated ({})", subject_id, skeleton::to_string(s.pose));
     if (options_.calibration_dir.empty()) return;
@@ -135,7 +138,11 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
     s.smoother.apply(frame.sample_us, world);
 
     skeleton::SkeletonPose fk;
-    skeleton::forward_kinematics(model_, world, skeleton::root_position(model_), fk);
+    if (s.root) {
+        s.root->update(model_, world, fk);
+    } else {
+        skeleton::forward_kinematics(model_, world, skeleton::root_position(model_), fk);
+    }
 
     out_.segment_count = static_cast<std::uint16_t>(n);
     for (std::size_t i = 0; i < n; ++i) {

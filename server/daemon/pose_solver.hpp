@@ -2,7 +2,9 @@
 // orientations into the calibrated skeleton pose and hands it to the pose service.
 //
 // Per frame: q_earth_sensor of every segment -> (calibration) q_world_segment -> optional
-// Slerp smoothing -> forward kinematics (positions) -> joint angles -> publish.
+// Slerp smoothing -> forward kinematics (positions; once calibrated the root travels by
+// foot contacts, skeleton/root_motion.hpp, otherwise it stays at its T-pose height) ->
+// joint angles -> publish.
 // A subject without a calibration is served with its raw sensor orientations (flags lack
 // kSegmentCalibrated), so poses stream from the first sample.
 //
@@ -32,6 +34,7 @@
 #include "skeleton/calibration.hpp"
 #include "skeleton/joint_angles.hpp"
 #include "skeleton/pose_smoother.hpp"
+#include "skeleton/root_motion.hpp"
 
 namespace mocap::daemon {
 
@@ -71,6 +74,7 @@ private:
         bool collecting = false;
         std::int64_t collect_start_us = -1;
         skeleton::CalibrationPose pose = skeleton::CalibrationPose::kTPose;
+        std::optional<skeleton::FootContactRootTracker> root;  // travel once calibrated
     };
 
     void take_requests();
