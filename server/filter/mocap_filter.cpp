@@ -342,7 +342,8 @@ void MocapFilter::update_mag_guard(const Vec3& mag_e) {
     const double var_ratio =
         p.mag_current_tau_s > 0.0 ? std::min(1.0, 0.5 * s.ts_s / p.mag_current_tau_s) : 1.0;
     const double noise = p.mag_noise_margin * std::sqrt(s.mag_noise_var * var_ratio);
-    s.mag_guard_blind = s.mag_ref_norm > 0.0 && noise > 2.0 * p.mag_norm_th * s.mag_ref_norm;
+    const double norm_for_blind = s.mag_ref_norm > 0.0 ? s.mag_ref_norm : s.mag_norm;
+    s.mag_guard_blind = noise > 2.0 * p.mag_norm_th * norm_for_blind;
     const auto agrees = [&](double ref_norm, double ref_dip) {
         const double norm_th = std::max(p.mag_norm_th * ref_norm, noise);
         const double dip_th = std::max(p.mag_dip_th_deg * kDeg, noise / s.mag_norm);
@@ -350,6 +351,11 @@ void MocapFilter::update_mag_guard(const Vec3& mag_e) {
                std::abs(s.mag_dip_rad - ref_dip) < dip_th;
     };
     if (s.mag_guard_blind) {
+        if (s.mag_ref_norm == 0.0) {  // keep a reference for when the noise drops
+            s.mag_ref_norm = s.mag_norm;
+            s.mag_ref_dip_rad = s.mag_dip_rad;
+            ++s.mag_fields_accepted;
+        }
         s.mag_disturbed = false;
         s.mag_heading_disturbed = false;
         s.mag_undisturbed_time_s = 0.0;
