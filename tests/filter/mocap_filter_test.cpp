@@ -136,6 +136,27 @@ double worst_heading_deg(OrientationFilter& f, const sim::Scenario& sc, double t
     return worst * kRadToDeg;
 }
 
+TEST(MocapFilter, AdaptsToTheFouratiNoiseAndKeepsMemsDefaults) {
+    // Fourati's gyro noise (0.4 rad/s per sample) is ~10× the 2 °/s reference: the
+    // inclination time constant shrinks in proportion (3 s -> ~0.3 s) and the guard stands
+    // aside (field noise 80 % of the field). MEMS-grade noise leaves the defaults alone.
+    const sim::Scenario fourati = sim::make_scenario(sim::ScenarioKind::fourati, 1);
+    MocapFilter f;
+    testing::run(f, fourati.rows, 5.0);
+    EXPECT_GT(f.state().tau_acc_eff_s, 0.15);
+    EXPECT_LT(f.state().tau_acc_eff_s, 0.5);
+    EXPECT_LT(f.state().tau_mag_eff_s, f.params().tau_mag_s);
+    EXPECT_TRUE(f.state().mag_guard_blind);
+    EXPECT_EQ(f.state().mag_samples_rejected, 0u);
+
+    const sim::Scenario realistic = sim::make_scenario(sim::ScenarioKind::realistic, 1);
+    MocapFilter g;
+    testing::run(g, realistic.rows, 5.0);
+    EXPECT_EQ(g.state().tau_acc_eff_s, g.params().tau_acc_s);
+    EXPECT_EQ(g.state().tau_mag_eff_s, g.params().tau_mag_s);
+    EXPECT_FALSE(g.state().mag_guard_blind);
+}
+
 TEST(MocapFilter, RejectsTheMagneticDisturbance) {
     // The disturbance turns the horizontal field by 39° for 16 s around the middle, with only
     // ~5 % norm and ~5° dip change. Madgwick follows it; the guard keeps the heading.
