@@ -14,23 +14,38 @@
 //    deviations) and in motion (from the inclination corrections the accelerometer asks for);
 //  * magnetic-disturbance guard: running references of field norm and dip angle; a field
 //    that departs from them, or whose heading disagrees with the gyro-propagated heading by
-//    more than its noise explains, is rejected (gyro-only heading) for up to
-//    mag_max_rejection_time_s, after which it is used with a reduced gain; a new field
-//    that stays consistent for mag_new_time_s while the sensor moves becomes the reference
-//    (the user walked into another room).
+//    more than mag_heading_th_deg (a disturbance that turns the field without changing
+//    its norm much), is rejected (gyro-only heading) for up to mag_max_rejection_time_s,
+//    after which it is used with a reduced gain; a new field that stays consistent for
+//    mag_new_time_s while the sensor moves becomes the reference (the user walked into
+//    another room). Thresholds widen to mag_noise_margin standard deviations of the
+//    measured field noise; when that noise is so large that no disturbance of the
+//    configured size could be seen, the guard stands aside (mag_guard_blind) rather than
+//    reject at random. Counters and flags are in MocapFilterState.
 //
 // Output: q_earth_sensor = Rz(delta) ⊗ q_E'_I ⊗ q_I_sensor, ENU.
+//
+// Start: the first sample gives the attitude in closed form (gravity + horizontal field);
+// during the first tau_acc_s / tau_mag_s the corrections are running means of the readings
+// so far (the horizontal field as a vector mean, unbiased even when the noise is as large
+// as the field), so the filter does not spend seconds converging.
 //
 // Time: filter coefficients are computed from the sample period measured on the samples'
 // own timestamps and recomputed when it drifts by more than 2 %.
 //
-// Trade-off of tau_mag_s: heading noise from the magnetometer falls as 1/sqrt(tau_mag_s),
-// gyro drift grows with it. 9 s suits MEMS magnetometers (noise ~1 % of the field); the
-// Fourati benchmark's magnetometer (noise 80 % of the field) prefers ~3–10 s as well
-// because its gyro is equally noisy. Large tau_acc_s rejects longer accelerations but lets
-// gyro noise tilt the estimate longer.
+// Time constants (trade-off): heading noise from the magnetometer falls as
+// 1/sqrt(tau_mag_s), gyro drift grows with it; a long tau_acc_s rejects longer linear
+// accelerations but lets gyro noise tilt the estimate longer. The defaults (3 s, 9 s, the
+// published VQF values) suit MEMS sensors, whose errors are linear acceleration and
+// magnetic disturbance rather than white noise. A gyro whose measured white-noise floor is
+// far above MEMS grade (gyro_noise_ref_deg_s) gets proportionally shorter time constants,
+// the heading one towards its noise-optimal value σ_heading / σ_gyro: on the Fourati
+// benchmark (gyro noise 0.4 rad/s, magnetometer noise 80 % of the field) that is ~0.3 s
+// and ~5 s. The floor is the quietest 1 s of the last minutes, so vigorous human motion is
+// not mistaken for noise.
 //
-// Thread-safety: none (one instance per worker). Cost: ~0.5 µs per update, no allocation.
+// Thread-safety: none (one instance per worker). Cost: ~0.3 µs per update (docs/
+// performance.md), no allocation.
 #pragma once
 
 #include <array>
