@@ -1,0 +1,222 @@
+// The real mocap-sim and mocap-filter binaries, end to end, through their command lines.
+// MOCAP_SIM_BIN and MOCAP_FILTER_BIN are the built executables (tests/clients/CMakeLists.txt).
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+
+#include "filter/quaternion.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct ToolRun {
+    int exit_code = -1;
+    std::string out;
+    std::string err;
+};
+
+std::string slurp(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+class ToolsEndToEnd : public ::testing::Test {
+protected:
+    void SetUp() override {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ = fs::temp_directory_path() /
+               ("mocap_tools_e2e_" + std::to_string(::getpid()) + "_" + info->name());
+        fs::create_directories(dir_);
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+
+    fs::path path(const std::string& name) const { return dir_ / name; }
+
+    ToolRun run(const std::string& args) const {
+        const fs::path o = dir_ / "stdout.txt", e = dir_ / "stderr.txt";
+        const std::string cmd = args + " > '" + o.string() + "' 2> '" + e.string() + "'";
+        const int status = std::system(cmd.c_str());
+        ToolRun r;
+        r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        r.out = slurp(o);
+        r.err = slurp(e);
+        return r;
+    }
+
+    std::string sim(const std::string& args) const { return std::string(MOCAP_SIM_BIN) + " csv " + args; }
+    std::string filt(const std::string& args) const { return std::string(MOCAP_FILTER_BIN) + " " + args; }
+
+    fs::path dir_;
+};
+
+double json_number(const std::string& json, const std::string& key) {
+    const std::regex re("\"" + key + "\":(-?[0-9.eE+-]+)");
+    std::smatch m;
+    if (!std::regex_search(json, m, re)) {
+        ADD_FAILURE() << key << " missing in " << json;
+        return NAN;
+    }
+    return std::stod(m[1].str());
+}
+
+std::size_t count_lines(const std::string& s) {
+    return static_cast<std::size_t>(std::count(s.begin(), s.end(), '\n'));
+}
+
+// First data row of t,qw,qx,qy,qz output.
+mocap::filter::Quat first_quat(const std::string& csv) {
+    std::istringstream in(csv);
+    std::string line;
+    std::getline(in, line);
+    std::getline(in, line);
+    double t, w, x, y, z;
+    char c;
+    std::istringstream row(line);
+    row >> t >> c >> w >> c >> x >> c >> y >> c >> z;
+    return mocap::filter::Quat(w, x, y, z);
+}
+
+TEST_F(ToolsEndToEnd, SimWritesTheContractFileDeterministically) {
+    ASSERT_EQ(run(sim("--scenario realistic --seed 2 --out " + path("a.csv").string())).exit_code, 0);
+    ASSERT_EQ(run(sim("--scenario realistic --seed 2 --out " + path("b.csv").string())).exit_code, 0);
+    ASSERT_EQ(run(sim("--scenario realistic --seed 3 --out " + path("c.csv").string())).exit_code, 0);
+    const std::string a = slurp(path("a.csv"));
+    EXPECT_EQ(a.rfind("t,gx,gy,gz,ax,ay,az,mx,my,mz,qw,qx,qy,qz,movement\n", 0), 0u);
+    EXPECT_EQ(count_lines(a), 9002u);  // header + 90 s at 100 Hz + 1
+    EXPECT_EQ(a, slurp(path("b.csv")));
+    EXPECT_NE(a, slurp(path("c.csv")));
+    ASSERT_EQ(run(sim("--scenario fourati --out " + path("f.csv").string())).exit_code, 0);
+    EXPECT_EQ(count_lines(slurp(path("f.csv"))), 6002u);
+
+    const ToolRun bad = run(sim("--scenario nope --out " + path("x.csv").string()));
+    EXPECT_NE(bad.exit_code, 0);
+    EXPECT_NE(run(sim("--scenario fourati --out /nonexistent-dir/x.csv")).exit_code, 0);
+}
+
+TEST_F(ToolsEndToEnd, FilterEvaluatesASimulatedRecording) {
+    const std::string in = path("in.csv").string(), out = path("out.csv").string();
+    ASSERT_EQ(run(sim("--scenario realistic --seed 4 --out " + in)).exit_code, 0);
+    const ToolRun r = run(filt("--filter madgwick --in " + in + " --out " + out + " --eval --skip-seconds 5"));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    for (const char* key : {"rmse_total_deg", "rmse_heading_deg", "rmse_inclination_deg", "rmse_roll_deg",
+                            "rmse_pitch_deg", "rmse_yaw_deg", "samples"}) {
+        EXPECT_TRUE(std::isfinite(json_number(r.out, key))) << key;
+    }
+    EXPECT_NE(r.out.find("\"filter\":\"madgwick\""), std::string::npos) << r.out;
+    EXPECT_EQ(count_lines(r.out), 1u);
+    // A working MARG filter on clean MEMS data is within a few degrees; a broken pipeline
+    // (frame, sign, time base) is tens of degrees off.
+    EXPECT_LT(json_number(r.out, "rmse_total_deg"), 10.0);
+    const double samples = json_number(r.out, "samples");
+    EXPECT_GT(samples, 4000.0);  // movement = 1 after 5 s
+    EXPECT_LT(samples, 8500.0);
+    const std::string est = slurp(out);
+    EXPECT_EQ(est.rfind("t,qw,qx,qy,qz\n", 0), 0u);
+    EXPECT_EQ(count_lines(est), 9002u);
+    // Without --eval nothing is printed.
+    const ToolRun quiet = run(filt("--filter madgwick --in " + in + " --out " + out));
+    EXPECT_EQ(quiet.exit_code, 0);
+    EXPECT_TRUE(quiet.out.empty());
+}
+
+TEST_F(ToolsEndToEnd, NedFrameGivesTheSameTotalErrorAndNedOutput) {
+    const std::string enu_in = path("enu.csv").string(), ned_in = path("ned.csv").string();
+    ASSERT_EQ(run(sim("--scenario fourati --seed 6 --out " + enu_in)).exit_code, 0);
+    ASSERT_EQ(run(sim("--scenario fourati --seed 6 --frame ned --out " + ned_in)).exit_code, 0);
+    const ToolRun a = run(filt("--filter madgwick --in " + enu_in + " --out " + path("a.csv").string() + " --eval"));
+    const ToolRun b = run(filt("--filter madgwick --frame ned --in " + ned_in + " --out " + path("b.csv").string() +
+                           " --eval"));
+    ASSERT_EQ(a.exit_code, 0) << a.err;
+    ASSERT_EQ(b.exit_code, 0) << b.err;
+    for (const char* key : {"rmse_total_deg", "rmse_heading_deg", "rmse_inclination_deg"}) {
+        EXPECT_NEAR(json_number(a.out, key), json_number(b.out, key), 1e-3 * json_number(a.out, key) + 1e-4) << key;
+    }
+    // The NED output is q_enu_ned ⊗ the ENU output.
+    const auto q_enu = first_quat(slurp(path("a.csv")));
+    const auto q_ned = first_quat(slurp(path("b.csv")));
+    EXPECT_LT(mocap::filter::angle_rad(q_ned * mocap::filter::conj(mocap::filter::q_enu_ned() * q_enu)), 1e-6);
+    // The fourati truth starts on NED's axes: the NED file's first reference is identity.
+    std::ifstream in(ned_in);
+    std::string header, row;
+    std::getline(in, header);
+    std::getline(in, row);
+    std::replace(row.begin(), row.end(), ',', ' ');
+    std::istringstream fields(row);
+    double v[15] = {};
+    for (double& x : v) fields >> x;
+    ASSERT_TRUE(fields) << row;
+    EXPECT_LT(mocap::filter::angle_rad(mocap::filter::Quat(v[10], v[11], v[12], v[13])), 1e-9) << row;
+}
+
+TEST_F(ToolsEndToEnd, MalformedInputIsRejectedWithTheLine) {
+    const std::string in = path("bad.csv").string(), out = path("out.csv").string();
+    {
+        std::ofstream f(in);
+        f << "t,gx,gy,gz,ax,ay,az,mx,my,mz\n"
+          << "0,0,0,0,0,0,9.81,0,20,-40\n"
+          << "0.01,0,0,0,0,0,9.81,0,20\n";
+    }
+    ToolRun r = run(filt("--filter madgwick --in " + in + " --out " + out));
+    EXPECT_EQ(r.exit_code, 1);
+    EXPECT_NE(r.err.find("line 3"), std::string::npos) << r.err;
+    {
+        std::ofstream f(in);
+        f << "t,gx,gy,gz,ax,ay,az,mx,my,mz\n"
+          << "0.02,0,0,0,0,0,9.81,0,20,-40\n"
+          << "0.01,0,0,0,0,0,9.81,0,20,-40\n";
+    }
+    r = run(filt("--filter madgwick --in " + in + " --out " + out));
+    EXPECT_EQ(r.exit_code, 1);
+    EXPECT_NE(r.err.find("line 3"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("time does not increase"), std::string::npos) << r.err;
+    {
+        std::ofstream f(in);
+        f << "t,gx,gy,gz,ax,ay,az,mx,my,mz\n"
+          << "0,0,0,0,0,0,9.81,0,20,-40\n";
+    }
+    // Runs without a reference, but cannot evaluate.
+    EXPECT_EQ(run(filt("--filter madgwick --in " + in + " --out " + out)).exit_code, 0);
+    r = run(filt("--filter madgwick --in " + in + " --out " + out + " --eval"));
+    EXPECT_NE(r.exit_code, 0);
+    EXPECT_NE(r.err.find("qw,qx,qy,qz"), std::string::npos) << r.err;
+    EXPECT_NE(run(filt("--filter madgwick --in " + path("missing.csv").string() + " --out " + out)).exit_code, 0);
+}
+
+TEST_F(ToolsEndToEnd, BadFilterNameOrParamsAreCommandLineErrors) {
+    const std::string in = path("in.csv").string(), out = path("out.csv").string();
+    ASSERT_EQ(run(sim("--scenario fourati --out " + in)).exit_code, 0);
+    EXPECT_EQ(run(filt("--filter no-such-filter --in " + in + " --out " + out)).exit_code, 2);
+    EXPECT_EQ(run(filt("--filter madgwick --param beta --in " + in + " --out " + out)).exit_code, 2);
+    EXPECT_EQ(run(filt("--filter madgwick --param no_such_key=1 --in " + in + " --out " + out)).exit_code, 2);
+    EXPECT_EQ(run(filt("--filter madgwick --param beta=abc --in " + in + " --out " + out)).exit_code, 2);
+    EXPECT_NE(run(filt("--filter madgwick --frame nwu --in " + in + " --out " + out)).exit_code, 0);
+    EXPECT_NE(run(filt("--filter madgwick --in " + in)).exit_code, 0);
+    // --list names every filter the contract requires, with its keys.
+    const ToolRun list = run(filt("--list"));
+    ASSERT_EQ(list.exit_code, 0);
+    for (const char* name : {"\ncsmo ", "\npf ", "\nmadgwick ", "\nmahony "}) {
+        EXPECT_NE(("\n" + list.out).find(name), std::string::npos) << name << " in " << list.out;
+    }
+    EXPECT_NE(list.out.find(" beta="), std::string::npos);
+    // A valid parameter changes the result.
+    const ToolRun a = run(filt("--filter madgwick --in " + in + " --out " + out + " --eval"));
+    const ToolRun b = run(filt("--filter madgwick --param beta=0.2 --in " + in + " --out " + out + " --eval"));
+    ASSERT_EQ(a.exit_code, 0) << a.err;
+    ASSERT_EQ(b.exit_code, 0) << b.err;
+    EXPECT_NE(json_number(a.out, "rmse_total_deg"), json_number(b.out, "rmse_total_deg"));
+}
+
+}  // namespace
