@@ -167,7 +167,7 @@ Vec3 plan_lin_acc_m_s2(const MotionPlan& plan, double t_s) {
 
 /// Field added near a steel object: at full strength the horizontal field turns by 39°
 /// (direction drawn from the seed) and grows by 10%, and the vertical field weakens by
-/// 4 µT (norm 50 -> ~47.6 µT, dip 60° -> ~54.6°), over a window of 16 s (1.5 s ramps)
+/// 4 µT (norm 50 -> ~48.0 µT, dip 60° -> ~55.0°), over a window of 16 s (1.5 s ramps)
 /// centred in the recording.
 struct Disturbance {
     Vec3 delta_ut = Vec3::Zero();

@@ -397,7 +397,7 @@ z axis back to up) with bursts of linear acceleration of 2–6 m/s² lasting 0.3
     "magnetic": """`realistic` (same motion, bias and noise for the same seed) plus a magnetic disturbance
 as near a steel object: for 16 s in the middle (37–53 s, 1.5 s ramps) the horizontal field turns
 by 39° (direction from the seed) and grows by 10%, and the vertical field weakens by 4 µT (norm
-50 → ~47.6 µT, dip 60° → ~54.6°). A filter that trusts the magnetometer follows the 39°.""",
+50 → ~48.0 µT, dip 60° → ~55.0°). A filter that trusts the magnetometer follows the 39°.""",
 }
 
 FOURATI_EXPLANATION = """**Why heading suffers.** Table II's magnetometer noise is 0.4 G per axis on a 0.5 G field at 60°

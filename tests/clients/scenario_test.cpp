@@ -202,6 +202,10 @@ TEST(Scenario, RealisticHasBiasRestsBurstsAndDisturbanceOnlyInMagnetic) {
         }
     }
     EXPECT_NEAR(max_turn_deg, 39.0, 1e-6);
+    // Plateau (t = 45 s): norm 50 -> 48.0 µT, dip 60° -> 55.0° (the figures docs/accuracy.md states).
+    const Vec3 h = m.rows[4500].mag_earth_ut;
+    EXPECT_NEAR(h.norm(), 47.97, 0.01);
+    EXPECT_NEAR(std::atan2(-h.z(), h.head<2>().norm()) * kRadToDeg, 55.02, 0.01);
 }
 
 }  // namespace
