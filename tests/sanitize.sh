@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# sanitize.sh [asan|tsan|all] — builds the project with g++ sanitizers and runs the tests.
+#
+#   asan  -DMOCAP_SANITIZE=address,undefined, whole project; the whole ctest suite except the
+#         SocketCAN VM test and the ARM cross-compiles (they run no host code of ours).
+#         The fuzz replay test runs here too, so every seed and regression input is
+#         replayed under ASan/UBSan built by g++ as well.
+#   tsan  -DMOCAP_SANITIZE=thread; only the threaded code's tests: core (rings, worker pool,
+#         assembler), ingest (sink listener), serve (pose server, broadcaster, clients) and
+#         daemon (the wired pipeline). ctest -R selects their test suites by name.
+#   all   both (default).
+#
+# Environment: MOCAP_SANITIZE_BUILD_ROOT (default: the repository root) holds build-asan/ and
+# build-tsan/; MOCAP_SANITIZE_JOBS (default 2) is the build and ctest parallelism.
+# Prints the time each phase took; exits non-zero if a build or a test failed.
+set -euo pipefail
+
+root="$(cd "$(dirname "$0")/.." && pwd)"
+what="${1:-all}"
+out="${MOCAP_SANITIZE_BUILD_ROOT:-$root}"
+jobs="${MOCAP_SANITIZE_JOBS:-2}"
+# Fail on the first report; leaks are errors; symbolised stacks.
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}"
+export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
+export TSAN_OPTIONS="${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}"
+
+tsan_executables=(core_tests ingest_tests serve_tests daemon_tests)
+
+status=0
+phase() {  # phase NAME COMMAND... — runs, times and reports one step
+    local name="$1"; shift
+    local t0=$(date +%s) rc=0
+    "$@" || rc=$?
+    echo "sanitize: $name: $(( $(date +%s) - t0 )) s, exit $rc"
+    [[ $rc -eq 0 ]] || status=1
+    return 0
+}
+
+configure() {  # configure DIR SANITIZERS
+    cmake -S "$root" -B "$1" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMOCAP_SANITIZE="$2" >/dev/null
+}
+
+# Suite names of the given test executables as one ctest regex: ^(A|B)\.
+suite_regex() {
+    local dir="$1"; shift
+    local suites=()
+    for exe in "$@"; do
+        local path
+        path=$(find "$dir/tests" -type f -name "$exe" -perm -u+x | head -1)
+        [[ -n "$path" ]] || { echo "sanitize: $exe not built" >&2; return 1; }
+        # --gtest_list_tests prints "Suite." lines (parameterised: "Prefix/Suite.").
+        while read -r s; do suites+=("$s"); done < <("$path" --gtest_list_tests | sed -n 's/^\([^ ].*\)\.\( .*\)\{0,1\}$/\1/p')
+    done
+    local IFS='|'
+    echo "^(${suites[*]})\\."
+}
+
+run_asan() {
+    local b="$out/build-asan"
+    phase "asan configure" configure "$b" address,undefined
+    phase "asan build" cmake --build "$b" -j"$jobs"
+    phase "asan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -E 'socketcan_vm|_arm_'"
+}
+
+run_tsan() {
+    local b="$out/build-tsan"
+    phase "tsan configure" configure "$b" thread
+    phase "tsan build" cmake --build "$b" -j"$jobs" --target "${tsan_executables[@]}"
+    local regex
+    regex=$(suite_regex "$b" "${tsan_executables[@]}") || { status=1; return 0; }
+    echo "sanitize: tsan ctest -R '$regex'"
+    phase "tsan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -R '$regex'"
+}
+
+case "$what" in
+    asan) run_asan ;;
+    tsan) run_tsan ;;
+    all) run_asan; run_tsan ;;
+    *) echo "usage: $0 [asan|tsan|all]" >&2; exit 2 ;;
+esac
+exit $status
