@@ -263,7 +263,7 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
     }
 
     // fourati: the paper's q(0) = identity in NED, i.e. the sensor axes on north/east/down;
-    // in ENU that is q_enu_ned. Otherwise: any heading, a tilt of up to ~20°.
+    // in ENU that is q_enu_ned. Otherwise: any heading, a tilt of up to 28° (±0.35 rad about east and north).
     Quat q = filter::q_enu_ned();
     if (!fourati) {
         const double yaw = start_rng.uniform(-kPi, kPi);

@@ -389,7 +389,7 @@ our conventions:
   inclination and heading are the same in both frames.""",
     "realistic": """A worn MPU9250-like sensor, 90 s at 100 Hz: white noise gyro 0.3 °/s, accelerometer
 0.03 m/s², magnetometer 0.5 µT on a 50 µT field with 60° dip; a constant gyro bias of 0.5–2 °/s
-per axis (random sign, from the seed); a random start attitude (any heading, tilt up to ~20°);
+per axis (random sign, from the seed); a random start attitude (any heading, tilt up to 28°);
 rest for the first 5–7 s, then movements of 8–16 s separated by 2–4 s of rest (smooth random
 rotations, three sinusoids of 0.15–1.2 Hz per axis, peaks ~2 rad/s, a weak pull of the sensor's
 z axis back to up) with bursts of linear acceleration of 2–6 m/s² lasting 0.3–0.8 s every
