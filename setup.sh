@@ -22,11 +22,13 @@ PACKAGES=(
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib
   clang-14 libclang-rt-14-dev
   assimp-utils qemu-system-x86 busybox-static cpio kmod
+  blender nodejs
 )
 
 log() { printf '\033[1m[setup]\033[0m %s\n' "$*" >&2; }
 
 deps() {
+  npm_deps
   local missing=()
   for p in "${PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
@@ -40,6 +42,15 @@ deps() {
   if [[ $(id -u) -ne 0 ]]; then sudo=(sudo); fi
   "${sudo[@]}" apt-get update -qq
   DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+  npm_deps
+}
+
+# three.js (BVHLoader) for the BVH consumer tests: npm registry, pinned in package-lock.json.
+npm_deps() {
+  local dir="$ROOT/tests/integration/bvh_consumers"
+  if [[ -d "$dir/node_modules/three" ]] || ! command -v npm >/dev/null; then return; fi
+  log "npm: installing three.js for the BVH consumer tests"
+  (cd "$dir" && npm ci --no-audit --no-fund --silent) || log "npm install failed: the three.js BVH test will fail"
 }
 
 build() {

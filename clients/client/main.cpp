@@ -6,6 +6,8 @@
 //   mocap-client --connect HOST:PORT control --token T record-start [--path FILE]
 //   mocap-client --connect HOST:PORT control --token T record-stop | reload
 //   mocap-client --connect HOST:PORT load --clients N --duration S [--json]
+//   mocap-client --connect HOST:7002 record --out FILE.bvh --frames N [--subject ID]
+//   mocap-client --connect HOST:PORT angles --out FILE.csv --frames N [--subject ID]
 //
 // Exit codes: 0 success, 1 refused/failed request or bad data, 2 connection problem.
 // The token may also come from the environment (MOCAP_TOKEN) to keep it out of `ps`.
@@ -18,6 +20,7 @@
 
 #include "json_out.hpp"
 #include "load_client.hpp"
+#include "output_commands.hpp"
 #include "pose_client.hpp"
 
 namespace {
@@ -314,6 +317,19 @@ int main(int argc, char** argv) {
                      "extra subscribed connections that never read (not measured)")
         ->capture_default_str();
 
+    // File exports (output_commands.hpp, docs/outputs.md).
+    mocap::client::ExportOptions export_options;
+    double export_timeout_s = 10.0;
+    auto* record = app.add_subcommand("record", "live BVH port (7002) -> complete BVH file");
+    auto* angles = app.add_subcommand("angles", "joint angles (pose port) -> CSV file");
+    for (auto* sub_cmd : {record, angles}) {
+        sub_cmd->add_option("--out", export_options.out, "output file (must not exist)")->required();
+        sub_cmd->add_option("--frames", export_options.frames, "frames to write")->capture_default_str();
+        sub_cmd->add_option("--subject", export_options.subject, "subject id (default: the server's choice / all)");
+        sub_cmd->add_option("--timeout", export_timeout_s, "give up after this many seconds without data")
+            ->capture_default_str();
+    }
+
     CLI11_PARSE(app, argc, argv);
 
     std::string error;
@@ -325,6 +341,12 @@ int main(int argc, char** argv) {
     const auto connect_timeout =
         std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
 
+    if (*record || *angles) {
+        export_options.host = endpoint->host;
+        export_options.port = endpoint->port;
+        export_options.timeout = std::chrono::milliseconds(static_cast<long long>(export_timeout_s * 1000));
+        return *record ? mocap::client::run_record_bvh(export_options) : mocap::client::run_angles_csv(export_options);
+    }
     if (*load) {
         load_options.host = endpoint->host;
         load_options.port = endpoint->port;

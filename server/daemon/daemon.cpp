@@ -6,13 +6,12 @@
 #include <chrono>
 #include <cmath>
 
+#include "daemon/replay.hpp"
 #include "filter/filter_factory.hpp"
 
 namespace mocap::daemon {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 serve::StageLatencySummary summarize(std::string stage, const LatencySnapshot& s) {
     serve::StageLatencySummary out;
@@ -130,22 +129,50 @@ bool Daemon::start(std::string* error) {
         return serve::ControlResult::success();
     };
     handlers.stats = [this] { return stats(); };
+
+    // --- outputs (docs/outputs.md) ---
+    bvh_encoder_ = std::make_unique<serve::BvhFrameEncoder>(model_, bvh_options_from_config(config_));
+    serve::BvhRecorderConfig brc;
+    brc.directory = config_.record_dir;
+    brc.subject = config_.bvh_subject;
+    brc.flush_interval_s = config_.record_flush_interval_s;
+    bvh_recorder_ = std::make_unique<serve::BvhRecorder>(brc, *bvh_encoder_);
+    handlers.start_recording = [this](const std::string& path) {
+        std::string err, opened;
+        return bvh_recorder_->start(path, &err, &opened) ? serve::ControlResult::success()
+                                                         : serve::ControlResult::failure(err);
+    };
+    handlers.stop_recording = [this] {
+        std::string err;
+        return bvh_recorder_->stop(&err) ? serve::ControlResult::success() : serve::ControlResult::failure(err);
+    };
+    if (config_.bvh_live) {
+        serve::BvhServerConfig bc;
+        bc.bind_address = config_.bvh_listen.host;
+        bc.port = config_.bvh_listen.port;
+        bc.max_clients = config_.bvh_max_clients;
+        bc.queue_frames = config_.client_queue_frames;
+        bc.subject = config_.bvh_subject;
+        bvh_server_ = std::make_unique<serve::BvhServer>(bc, *bvh_encoder_);
+    }
+    if (config_.raw_record) {
+        serve::RawRecorderConfig rrc;
+        rrc.directory = config_.record_dir;
+        rrc.flush_interval_s = config_.record_flush_interval_s;
+        rrc.rotate_bytes = static_cast<std::uint64_t>(config_.raw_rotate_mb * 1024.0 * 1024.0);
+        rrc.rotate_s = config_.raw_rotate_s;
+        rrc.ring_capacity = config_.raw_ring_capacity;
+        raw_recorder_ = std::make_unique<serve::RawRecorder>(rrc, clock_);
+    }
+    // --- end outputs ---
     server_ = std::make_unique<serve::PoseServer>(sc, handlers);
 
-    PoseSolverOptions so;
+    PoseSolverOptions so = pose_solver_options_from_config(config_);  // shared with replay
     so.max_subjects = *std::max_element(subject_ids.begin(), subject_ids.end());
-    so.calibration_s = config_.calibration_s;
-    so.calibration_dir = config_.calibration_dir;
-    so.calibration.heading_mode = config_.heading_align ? skeleton::HeadingMode::kAlignToForward
-                                                        : skeleton::HeadingMode::kKeepEarth;
-    so.calibration.facing_source = config_.facing_from_sensor ? skeleton::FacingSource::kFromSensorAxis
-                                                              : skeleton::FacingSource::kGiven;
-    so.calibration.facing_heading_rad = config_.facing_heading_deg * kPi / 180.0;
-    so.calibration.facing_sensor_axis = {config_.facing_sensor_axis[0], config_.facing_sensor_axis[1],
-                                         config_.facing_sensor_axis[2]};
-    so.smoothing.alpha = config_.smoothing_alpha;
     solver_ = std::make_unique<PoseSolver>(model_, so, [this](const SubjectFrame& f, const serve::SkeletonPose& p) {
         server_->publish(f, p);
+        if (bvh_server_) bvh_server_->publish(f, p);
+        bvh_recorder_->publish(f, p);
     });
     for (const auto& line : solver_->load_calibrations()) spdlog::info("{}", line);
 
@@ -184,6 +211,8 @@ bool Daemon::start(std::string* error) {
     // Bind everything before announcing readiness: a failure here exits non-zero.
     pool_->start();
     if (!server_->start(*error)) return false;
+    if (bvh_server_ && !bvh_server_->start(*error)) return false;
+    if (raw_recorder_ && !raw_recorder_->start(error)) return false;
     if (!sink_listener_->start(error)) return false;
     for (auto& r : can_readers_) {
         if (!r->start(error)) return false;
@@ -207,6 +236,7 @@ bool Daemon::start(std::string* error) {
 
 void Daemon::route(const SegmentSample& in) {
     if (in.times.sink_send_us != 0) ingest_latency_.record(in.times.received_us - in.times.sink_send_us);
+    if (raw_recorder_) raw_recorder_->push(in);  // every node, before the model filters it
     const std::int16_t seg = in.node_id < node_to_segment_.size() ? node_to_segment_[in.node_id] : -1;
     if (seg < 0) {
         unknown_nodes_.add();
@@ -251,6 +281,11 @@ serve::StatsSnapshot Daemon::stats() const {
     if (pool_) append(s.counters, pool_->counters());
     if (assemblers_) append(s.counters, assemblers_->counters());
     if (solver_) append(s.counters, solver_->counters());
+    if (bvh_server_) {
+        for (const auto& c : bvh_server_->counters().snapshot()) s.counters.push_back(c);
+    }
+    if (bvh_recorder_) append(s.counters, bvh_recorder_->counters());
+    if (raw_recorder_) append(s.counters, raw_recorder_->counters());
     s.latencies.push_back(summarize("ingest", ingest_latency_.snapshot()));
     if (pool_) {
         s.latencies.push_back(summarize("queue_wait", pool_->queue_wait_snapshot()));
@@ -354,10 +389,16 @@ void Daemon::shutdown() {
         });
         ingest_thread_.join();
     }
+    if (raw_recorder_) raw_recorder_->stop();  // ingest (its producer) has stopped
     pool_->stop();
     assembler_stop_.store(true, std::memory_order_release);
     if (assembler_thread_.joinable()) assembler_thread_.join();
     if (server_) server_->stop();
+    if (bvh_server_) bvh_server_->stop();
+    if (bvh_recorder_ && bvh_recorder_->recording()) {
+        std::string ignored;
+        bvh_recorder_->stop(&ignored);  // patches the frame count
+    }
     pool_.reset();
     spdlog::info("mocapd stopped");
 }

@@ -30,6 +30,11 @@
 #include "ingest/sink_listener.hpp"
 #include "ingest/socketcan_reader.hpp"
 #include "serve/pose_server.hpp"
+// Outputs (docs/outputs.md): live BVH, BVH file recorder, raw recorder.
+#include "serve/bvh_frame_encoder.hpp"
+#include "serve/bvh_recorder.hpp"
+#include "serve/bvh_server.hpp"
+#include "serve/raw_recorder.hpp"
 #include "skeleton/body_model.hpp"
 
 namespace mocap::daemon {
@@ -57,6 +62,7 @@ public:
     // For tests and the stats reply.
     [[nodiscard]] std::uint16_t sink_port() const { return sink_listener_ ? sink_listener_->port() : 0; }
     [[nodiscard]] std::uint16_t pose_port() const { return server_ ? server_->port() : 0; }
+    [[nodiscard]] std::uint16_t bvh_port() const { return bvh_server_ ? bvh_server_->port() : 0; }
     [[nodiscard]] serve::StatsSnapshot stats() const;
 
 private:
@@ -78,6 +84,12 @@ private:
     std::unique_ptr<PoseSolver> solver_;
     std::unique_ptr<AssemblerSet> assemblers_;
     std::unique_ptr<serve::PoseServer> server_;
+    // Outputs: encoder shared by the live BVH service and the BVH recorder; the raw
+    // recorder is fed by route() (ingest thread) when [outputs].raw_record is on.
+    std::unique_ptr<serve::BvhFrameEncoder> bvh_encoder_;
+    std::unique_ptr<serve::BvhServer> bvh_server_;
+    std::unique_ptr<serve::BvhRecorder> bvh_recorder_;
+    std::unique_ptr<serve::RawRecorder> raw_recorder_;
 
     asio::io_context ingest_io_;
     std::unique_ptr<ingest::SinkListener> sink_listener_;

@@ -7,6 +7,7 @@
 
 #include "daemon/config.hpp"
 #include "daemon/daemon.hpp"
+#include "daemon/replay.hpp"
 
 int main(int argc, char** argv) {
     using namespace mocap::daemon;
@@ -17,6 +18,21 @@ int main(int argc, char** argv) {
     app.add_option("--config", config_path, "TOML config (default: the embedded config/mocapd.toml)");
     app.add_option("--check-config", check_path, "validate FILE and exit (0 = valid)");
     app.add_flag("--print-default-config", print_default, "print the embedded default config and exit");
+    // Replay of raw recordings (docs/outputs.md): no sockets, files out, then exit.
+    ReplayOptions replay;
+    std::vector<std::string> calibrate_at;
+    auto* replay_opt = app.add_option("--replay", replay.files, "re-run raw recording(s) through the pipeline and exit");
+    app.add_flag("--realtime", replay.realtime, "replay at the recorded pace (default: as fast as possible)")
+        ->needs(replay_opt);
+    app.add_option("--bvh-out", replay.bvh_out, "replay: write a BVH file (must not exist)")->needs(replay_opt);
+    app.add_option("--bvh-subject", replay.bvh_subject, "replay: subject written to the BVH (0 = [outputs].bvh_subject)")
+        ->needs(replay_opt);
+    app.add_option("--angles-out", replay.angles_out, "replay: write the joint-angle CSV (must not exist)")
+        ->needs(replay_opt);
+    app.add_option("--calibration-dir", replay.calibration_dir, "replay: load/save calibrations here (default: none)")
+        ->needs(replay_opt);
+    app.add_option("--calibrate-at", calibrate_at, "replay: SECONDS[:SUBJECT[:T|N]] calibrate at that sample time")
+        ->needs(replay_opt);
     CLI11_PARSE(app, argc, argv);
 
     if (print_default) {
@@ -41,6 +57,31 @@ int main(int argc, char** argv) {
         return 1;
     }
     spdlog::set_level(spdlog::level::from_str(config->log_level));
+    if (!replay.files.empty()) {
+        for (const std::string& spec : calibrate_at) {
+            ReplayCalibration c;
+            char pose = 'T';
+            unsigned subject = 1;
+            if (std::sscanf(spec.c_str(), "%lf:%u:%c", &c.at_s, &subject, &pose) < 1) {
+                std::cerr << "mocapd: --calibrate-at " << spec << ": expected SECONDS[:SUBJECT[:T|N]]\n";
+                return 1;
+            }
+            c.subject = subject;
+            c.pose = (pose == 'N' || pose == 'n') ? mocap::skeleton::CalibrationPose::kNPose
+                                                  : mocap::skeleton::CalibrationPose::kTPose;
+            replay.calibrate.push_back(c);
+        }
+        ReplayResult r;
+        if (!run_replay(*config, replay, &r, &error)) {
+            std::cerr << "mocapd: replay: " << error << "\n";
+            return 1;
+        }
+        std::printf("replayed %llu samples (%llu unknown node, %llu rejected) -> %llu frames, %llu BVH frames%s\n",
+                    static_cast<unsigned long long>(r.samples), static_cast<unsigned long long>(r.samples_unknown_node),
+                    static_cast<unsigned long long>(r.samples_rejected), static_cast<unsigned long long>(r.frames),
+                    static_cast<unsigned long long>(r.bvh_frames), r.truncated ? " (last record truncated)" : "");
+        return 0;
+    }
     Daemon daemon(*config, config_path);
     if (!daemon.start(&error)) {
         spdlog::critical("cannot start: {}", error);

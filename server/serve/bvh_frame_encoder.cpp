@@ -31,15 +31,4 @@ void BvhFrameEncoder::append_motion_line(const SkeletonPose& pose, std::string& 
                                      skeleton::Vec3(p[0], p[1], p[2]), out);
 }
 
-std::size_t bvh_value_count(std::string_view line) {
-    std::size_t count = 0;
-    bool in_token = false;
-    for (const char c : line) {
-        const bool space = c == ' ' || c == '\t' || c == '\r' || c == '\n';
-        if (!space && !in_token) ++count;
-        in_token = !space;
-    }
-    return count;
-}
-
 }  // namespace mocap::serve

@@ -16,6 +16,7 @@
 #include <cstddef>
 #include <string>
 
+#include "serve/bvh_text.hpp"
 #include "serve/pose_frame.hpp"
 #include "skeleton/body_model.hpp"
 #include "skeleton/bvh.hpp"
@@ -51,8 +52,5 @@ private:
     std::string hierarchy_;
     std::size_t values_per_frame_ = 0;
 };
-
-/// Counts the numbers on one MOTION line (whitespace separated tokens).
-std::size_t bvh_value_count(std::string_view line);
 
 }  // namespace mocap::serve

@@ -1,0 +1,206 @@
+#include "output_commands.hpp"
+
+#include <netdb.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstring>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+#include "pose_client.hpp"
+#include "serve/angles_csv.hpp"
+#include "serve/bvh_text.hpp"
+
+namespace mocap::client {
+
+namespace {
+
+constexpr int kExitFailed = 1;
+constexpr int kExitConnection = 2;
+constexpr std::size_t kMaxHeaderBytes = 1u << 20;
+
+int connect_blocking(const std::string& host, std::uint16_t port, std::chrono::milliseconds timeout,
+                     std::string& error) {
+    addrinfo hints{};
+    hints.ai_family = AF_UNSPEC;
+    hints.ai_socktype = SOCK_STREAM;
+    addrinfo* found = nullptr;
+    if (const int rc = getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &found); rc != 0) {
+        error = "resolve " + host + ": " + gai_strerror(rc);
+        return -1;
+    }
+    int fd = -1;
+    for (addrinfo* ai = found; ai && fd < 0; ai = ai->ai_next) {
+        fd = ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC, ai->ai_protocol);
+        if (fd < 0) continue;
+        timeval tv{static_cast<time_t>(timeout.count() / 1000), static_cast<suseconds_t>((timeout.count() % 1000) * 1000)};
+        ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+        ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
+        if (::connect(fd, ai->ai_addr, ai->ai_addrlen) != 0) {
+            error = std::string("connect: ") + std::strerror(errno);
+            ::close(fd);
+            fd = -1;
+        }
+    }
+    freeaddrinfo(found);
+    if (fd < 0 && error.empty()) error = "connect " + host + ": no address";
+    return fd;
+}
+
+std::FILE* create_new(const std::string& path) { return std::fopen(path.c_str(), "wx"); }
+
+}  // namespace
+
+std::size_t bvh_channel_count(const std::string& hierarchy) {
+    std::istringstream in(hierarchy);
+    std::string token;
+    std::size_t total = 0;
+    while (in >> token) {
+        if (token == "CHANNELS") {
+            std::size_t n = 0;
+            if (in >> n) total += n;
+        }
+    }
+    return total;
+}
+
+int run_record_bvh(const ExportOptions& o) {
+    std::string error;
+    const int fd = connect_blocking(o.host, o.port, o.timeout, error);
+    if (fd < 0) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    std::unique_ptr<int, void (*)(int*)> guard(new int(fd), [](int* p) {
+        ::close(*p);
+        delete p;
+    });
+    if (o.subject != 0) {
+        const std::string line = "subject " + std::to_string(o.subject) + "\n";
+        if (::send(fd, line.data(), line.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(line.size())) {
+            std::cerr << "mocap-client: cannot send the subject selection\n";
+            return kExitConnection;
+        }
+    }
+    // Header: everything up to and including the "Frame Time:" line.
+    std::string buf, header, frame_time;
+    std::vector<std::string> lines;
+    lines.reserve(o.frames);
+    std::size_t values = 0;
+    bool have_header = false;
+    char chunk[65536];
+    while (lines.size() < o.frames) {
+        const ssize_t n = ::recv(fd, chunk, sizeof chunk, 0);
+        if (n == 0) {
+            std::cerr << "mocap-client: the server closed after " << lines.size() << " frames\n";
+            return kExitConnection;
+        }
+        if (n < 0) {
+            std::cerr << "mocap-client: " << (errno == EAGAIN ? "no data within the timeout" : std::strerror(errno)) << "\n";
+            return kExitConnection;
+        }
+        buf.append(chunk, static_cast<std::size_t>(n));
+        std::size_t pos = 0;
+        for (std::size_t nl; (nl = buf.find('\n', pos)) != std::string::npos && lines.size() < o.frames; pos = nl + 1) {
+            std::string line = buf.substr(pos, nl + 1 - pos);
+            if (!have_header) {
+                if (line.rfind("Frame Time:", 0) == 0) {
+                    frame_time = line;
+                    have_header = true;
+                    values = bvh_channel_count(header);
+                    if (header.rfind("HIERARCHY", 0) != 0 || values == 0 ||
+                        header.size() < 7 || header.compare(header.size() - 7, 7, "MOTION\n") != 0) {
+                        std::cerr << "mocap-client: not a live BVH stream (expected HIERARCHY ... MOTION, Frame Time)\n";
+                        return kExitFailed;
+                    }
+                    header.resize(header.size() - 7);  // "MOTION\n" is written again with the count
+                } else {
+                    header += line;
+                    if (header.size() > kMaxHeaderBytes) {
+                        std::cerr << "mocap-client: BVH header longer than 1 MiB\n";
+                        return kExitFailed;
+                    }
+                }
+                continue;
+            }
+            const std::size_t count = serve::bvh_value_count(line);
+            if (count != values) {
+                std::cerr << "mocap-client: MOTION line " << lines.size() + 1 << " has " << count << " values, the hierarchy declares "
+                          << values << "\n";
+                return kExitFailed;
+            }
+            lines.push_back(std::move(line));
+        }
+        buf.erase(0, pos);
+    }
+    std::FILE* f = create_new(o.out);
+    if (!f) {
+        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << std::strerror(errno) << "\n";
+        return kExitFailed;
+    }
+    std::string text = header + "MOTION\nFrames: " + std::to_string(lines.size()) + "\n" + frame_time;
+    for (const auto& l : lines) text += l;
+    const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+    if (std::fclose(f) != 0 || !ok) {
+        std::cerr << "mocap-client: writing " << o.out << " failed\n";
+        return kExitFailed;
+    }
+    std::cout << o.out << ": " << lines.size() << " frames, " << values << " values per frame\n";
+    return 0;
+}
+
+int run_angles_csv(const ExportOptions& o) {
+    PoseClient client;
+    std::string error;
+    if (!client.connect(o.host, o.port, o.timeout, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    SubscribeOptions sub;
+    if (o.subject != 0) sub.subject_ids.push_back(o.subject);
+    sub.fields = v1::FIELD_JOINT_ANGLES;
+    if (!client.subscribe(sub, o.timeout, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    const auto& names = client.hello().skeleton().joint_angle_names();
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(create_new(o.out), &std::fclose);
+    if (!f) {
+        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << std::strerror(errno) << "\n";
+        return kExitFailed;
+    }
+    std::string text = serve::angles_csv_header(std::vector<std::string>(names.begin(), names.end()));
+    v1::SkeletonFrame frame;
+    std::uint64_t written = 0;
+    while (written < o.frames) {
+        const ReadStatus s = client.next_frame(frame, o.timeout);
+        if (s != ReadStatus::kMessage) {
+            std::cerr << "mocap-client: " << (s == ReadStatus::kTimeout ? "no frame within the timeout" : "connection ended")
+                      << " after " << written << " frames\n";
+            return kExitConnection;
+        }
+        if (frame.joint_angles_rad_size() != names.size()) {
+            std::cerr << "mocap-client: frame has " << frame.joint_angles_rad_size() << " joint angles, Hello names "
+                      << names.size() << "\n";
+            return kExitFailed;
+        }
+        serve::append_angles_csv_row(frame.subject_id(), frame.sync(), frame.sample_us(), frame.joint_angles_rad().data(),
+                                     static_cast<std::size_t>(frame.joint_angles_rad_size()), text);
+        ++written;
+    }
+    if (std::fwrite(text.data(), 1, text.size(), f.get()) != text.size() || std::fflush(f.get()) != 0) {
+        std::cerr << "mocap-client: writing " << o.out << " failed\n";
+        return kExitFailed;
+    }
+    if (client.drops_announced() != 0) {
+        std::cerr << "mocap-client: the server dropped " << client.drops_announced() << " frame(s) for this client\n";
+    }
+    std::cout << o.out << ": " << written << " frames, " << names.size() << " angles per frame\n";
+    return 0;
+}
+
+}  // namespace mocap::client

@@ -1,0 +1,64 @@
+// replay.hpp — `mocapd --replay FILE...`: re-runs a raw recording (serve/raw_recorder.hpp)
+// through the same pipeline stages as live — the configured filter per segment
+// (FilterProcessor), the per-subject assembler (SubjectAssembler with the configured
+// deadline) and the skeleton solver (PoseSolver: calibration, smoothing, kinematics, joint
+// angles) — and writes the same outputs: a BVH file through the same BvhRecorder and
+// encoder as the live recorder, and the joint-angle CSV.
+//
+// Determinism: one thread, samples in file order, and the assembler's clock is the
+// recorded received_us of each sample (the daemon's wall clock when it was decoded), so
+// deadlines fall as they fell live and the same input + the same config give
+// byte-identical files. What differs from live: the worker pool's threads are not used (a
+// segment's samples are filtered in the same order either way), and nothing waits on a
+// wall clock unless `realtime` is set, which paces samples by their received_us.
+// Calibration: none is loaded or saved unless calibration_dir is given; calibrate_at
+// requests one at a sample time (seconds since the first sample), as the control request
+// would.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "daemon/pose_solver.hpp"
+#include "serve/bvh_frame_encoder.hpp"
+#include "skeleton/calibration.hpp"
+
+namespace mocap::daemon {
+
+/// BVH unit, rotation order and frame time from [outputs].
+serve::BvhOutputOptions bvh_options_from_config(const DaemonConfig& config);
+
+/// Skeleton solver options from [skeleton] (max_subjects is left at its default).
+PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config);
+
+struct ReplayCalibration {
+    double at_s = 0.0;  ///< seconds after the first sample's t_us
+    std::uint32_t subject = 1;
+    skeleton::CalibrationPose pose = skeleton::CalibrationPose::kTPose;
+};
+
+struct ReplayOptions {
+    std::vector<std::string> files;  ///< raw recordings, replayed in this order
+    bool realtime = false;
+    std::string bvh_out;             ///< "" = no BVH file; must not exist
+    std::uint32_t bvh_subject = 0;   ///< 0 = [outputs].bvh_subject rule
+    std::string angles_out;          ///< "" = no CSV
+    std::string calibration_dir;     ///< "" = neither load nor save calibrations
+    std::vector<ReplayCalibration> calibrate;
+};
+
+struct ReplayResult {
+    std::uint64_t samples = 0;
+    std::uint64_t samples_unknown_node = 0;  ///< node not in the model, or subject out of range
+    std::uint64_t samples_rejected = 0;  ///< the filter refused them (non-finite input)
+    std::uint64_t frames = 0;            ///< subject frames solved
+    std::uint64_t bvh_frames = 0;
+    bool truncated = false;              ///< a file ended in a partial record
+};
+
+/// Runs the replay. False + error on a bad file, an unwritable output or an invalid config.
+bool run_replay(const DaemonConfig& config, const ReplayOptions& options, ReplayResult* result, std::string* error);
+
+}  // namespace mocap::daemon
