@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include "sim/csv_command.hpp"
+#include "sim/stream_command.hpp"
 
 int main(int argc, char** argv) {
     CLI::App app{"mocap-sim: simulated IMU data for mocapd and its benchmarks"};
@@ -10,8 +11,11 @@ int main(int argc, char** argv) {
 
     mocap::sim::CsvCommandOptions csv;
     CLI::App* csv_cmd = mocap::sim::add_csv_command(app, csv);
+    mocap::sim::StreamCommandOptions stream;
+    CLI::App* stream_cmd = mocap::sim::add_stream_command(app, stream);
 
     CLI11_PARSE(app, argc, argv);
     if (csv_cmd->parsed()) return mocap::sim::run_csv_command(csv);
+    if (stream_cmd->parsed()) return mocap::sim::run_stream_command(stream);
     return 2;
 }

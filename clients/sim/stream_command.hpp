@@ -1,0 +1,89 @@
+// stream_command.hpp — `mocap-sim stream`: K simulated sink nodes with their sensor nodes,
+// streaming to mocapd over TCP; the load generator of the integration tests and benchmarks.
+//
+//   mocap-sim stream --connect HOST:PORT [--subjects K] [--nodes N] [--rate HZ]
+//                    [--mode raw|quat] [--duration S] [--motion walk|FILE.bvh] [--loss P]
+//                    [--seed N] [--truth FILE.csv] [--dropout NODE:START_S:END_S]...
+//                    [--jitter-us J] [--calibrate-s S] [--noise-scale X] [--sink-rate-stats]
+//                    [--no-early-close]
+//
+// Each subject k (1..K) is one sink_node (the real sink core, firmware/sink_node) with sink
+// id k and its own TCP connection, and N sensor nodes on the first N segments of the default
+// 15-segment body (node ids 1..N). Its HAL: can_transmit hands SYNC to the subject's nodes,
+// which compute their sample for that instant (stream_node.hpp) from the subject's motion
+// (stream_motion.hpp: T-pose still for --calibrate-s, then walk or BVH) and queue their CAN
+// frames for can_receive, released after a per-node delay drawn in [0, --jitter-us];
+// --loss P drops each node frame with probability P before the sink sees it; --dropout
+// silences a node id in every subject for a time window (repeatable). The uplink is
+// stream_uplink.hpp. Subjects differ by a seeded heading and start 10 m apart.
+//
+// Clock: time_us is CLOCK_REALTIME in µs, so the sink timestamps compare directly with the
+// daemon's receive times on the same host (latency = daemon clock - sink timestamp).
+// Simulated time is the SYNC index / rate (exact), so the motion and the truth do not
+// depend on scheduling; a SYNC the loop is late for is skipped by the core (counted).
+//
+// One thread, one event loop: it sleeps until the earliest sink deadline or frame release
+// (clock_nanosleep), polls what is due, and allocates nothing per sample once running.
+// Sinks start staggered over one period so that their SYNCs do not all fall together.
+// --duration bounds everything (a peer that never accepts is retried with the core's
+// back-off until then). SIGINT/SIGTERM stop it early.
+//
+// --truth writes one CSV row per subject, segment and SYNC: t_us (the SYNC's send time),
+// subject, segment (name), node, counter, seg_qw..seg_qz = q_earth_segment (what the
+// daemon's calibrated output should match), sensor_qw..sensor_qz = q_earth_sensor (what a
+// filter's raw output should match). ENU. Rows of dropped-out nodes are written as well.
+//
+// --no-early-close makes the sinks close a packet only at the next SYNC (sink_node.h), to
+// measure what the early close saves.
+// --sink-rate-stats prints one JSON line at the end on stdout (see run_stream_command).
+// Exit code: 0, or 1 if a subject never connected, 2 for bad arguments.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+namespace mocap::sim {
+
+struct StreamCommandOptions {
+    std::string connect;
+    int subjects = 1;
+    int nodes = 15;
+    int rate_hz = 100;
+    std::string mode = "raw";
+    double duration_s = 10.0;
+    std::string motion = "walk";
+    double loss = 0.0;
+    std::uint64_t seed = 1;
+    std::string truth_path;
+    std::vector<std::string> dropouts;
+    double jitter_us = 0.0;
+    double calibrate_s = 2.0;
+    double noise_scale = 1.0;
+    bool sink_rate_stats = false;
+    bool early_close = true;  ///< the sink core's early batch close (--no-early-close: off)
+};
+
+/// A parsed --dropout.
+struct NodeDropout {
+    int node = 0;
+    double start_s = 0.0;
+    double end_s = 0.0;
+};
+/// "NODE:START_S:END_S" with START < END; false with *error otherwise.
+bool parse_dropout(const std::string& text, NodeDropout* out, std::string* error);
+
+CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& options);
+
+/// Runs until --duration. The stats JSON (one line): subjects, nodes, rate_hz, mode,
+/// elapsed_s, requested_samples_per_s, samples, samples_per_s, can_frames, packets,
+/// packets_dropped, frames_dropped, lost_can_frames, dropout_samples, syncs_skipped,
+/// early_closes, cpu_percent (user + system of this process over the elapsed time), and
+/// per_subject: [{subject, packets, frames, samples, packets_dropped, frames_dropped,
+/// lost_can_frames, dropout_samples, syncs_skipped, early_closes, connects, disconnects,
+/// packets_busy}].
+int run_stream_command(const StreamCommandOptions& options);
+
+}  // namespace mocap::sim

@@ -1,0 +1,124 @@
+// mocap-sim stream's simulated sensor node: readings derived from the truth, and the CAN
+// frames decoded by the wire library back to that truth within quantisation.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "filter/quaternion.hpp"
+#include "mocap_wire/mw_can.h"
+#include "mocap_wire/mw_scale.h"
+#include "sim/stream_command.hpp"
+#include "sim/stream_motion.hpp"
+#include "sim/stream_node.hpp"
+#include "skeleton/body_model.hpp"
+
+namespace mocap::sim {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+TEST(StreamNode, GyroIntegratesBackToTheTruthOverAWalk) {
+    const auto model = skeleton::default_body_model();
+    const StreamMotion walk = StreamMotion::walk(model, 1.0);
+    const double dt = 0.01;
+    const Quat mount = filter::quat_from_rotvec(Vec3(0.2, -0.3, 0.1));
+    std::array<Quat, kMaxSegments> q_prev, q_cur;
+    Vec3 root;
+    for (std::size_t seg : {0u, 4u, 10u}) {
+        walk.orientations(0.0, 0.3, Vec3::Zero(), q_prev, root);
+        Quat q_est = q_prev[seg] * mount;
+        for (int k = 1; k <= 1000; ++k) {
+            walk.orientations(k * dt, 0.3, Vec3::Zero(), q_cur, root);
+            walk.orientations((k - 1) * dt, 0.3, Vec3::Zero(), q_prev, root);
+            const SensorReading r = ideal_reading(q_prev[seg] * mount, q_cur[seg] * mount, dt, Vec3::Zero());
+            q_est = (q_est * filter::quat_exp(0.5 * dt * r.gyro_rad_s)).normalized();
+        }
+        EXPECT_LT(filter::angle_rad(filter::conj(q_est) * (q_cur[seg] * mount)), 1e-9) << "segment " << seg;
+    }
+}
+
+TEST(StreamNode, AtRestSpecificForceIsGravityAndFieldIsRotated) {
+    const Quat q = filter::quat_from_rotvec(Vec3(0.4, -1.1, 2.0));
+    const SensorReading r = ideal_reading(q, q, 0.01, Vec3::Zero());
+    const Vec3 g_sensor = filter::rotate(filter::conj(q), Vec3(0, 0, MW_STANDARD_GRAVITY_M_S2));
+    EXPECT_LT((r.accel_m_s2 - g_sensor).norm(), 1e-6);
+    EXPECT_LT(r.gyro_rad_s.norm(), 1e-12);
+    EXPECT_LT((filter::rotate(q, r.mag_ut) - stream_mag_earth_ut()).norm(), 1e-9);
+    const Vec3 m = stream_mag_earth_ut();
+    EXPECT_NEAR(m.norm(), 50.0, 1e-9);
+    EXPECT_NEAR(std::atan2(-m.z(), m.y()), 60.0 * kDeg, 1e-9) << "dip 60°, pointing north and down";
+    // Level and at rest: +1 g on +z, as a real MPU9250.
+    const SensorReading level = ideal_reading(Quat::Identity(), Quat::Identity(), 0.01, Vec3::Zero());
+    EXPECT_NEAR(level.accel_m_s2.z(), MW_STANDARD_GRAVITY_M_S2, 1e-6);
+}
+
+TEST(StreamNode, RawFramesDecodeToTheTruthWithinQuantisation) {
+    SimulatedNode node(7, false, 42, 7, stream_node_noise(0.0));
+    const Quat q0 = filter::quat_from_rotvec(Vec3(0.3, 0.2, -0.5));
+    const Quat q1 = q0 * filter::quat_from_rotvec(Vec3(0.02, -0.01, 0.015));
+    const Vec3 lin(1.5, -0.5, 2.0);
+    mw_can_frame frames[3];
+    ASSERT_EQ(node.raw_frames(q0, q1, 0.01, lin, 0x12345u, frames), 3);
+    const SensorReading truth = ideal_reading(q0 * node.q_segment_sensor(), q1 * node.q_segment_sensor(), 0.01, lin);
+    mw_message msg{};
+    float v[3];
+    ASSERT_EQ(mw_can_decode(&frames[0], &msg), MW_OK);
+    EXPECT_EQ(msg.function, MW_FN_ACCEL);
+    EXPECT_EQ(msg.u.raw.node_id, 7);
+    EXPECT_EQ(msg.u.raw.counter_low, 0x2345u);
+    ASSERT_EQ(mw_accel_to_m_s2(msg.u.raw.xyz, MW_ACCEL_16G, v), MW_OK);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(v[i], truth.accel_m_s2[i], 0.51 * mw_accel_m_s2_per_lsb(MW_ACCEL_16G));
+    ASSERT_EQ(mw_can_decode(&frames[1], &msg), MW_OK);
+    EXPECT_EQ(msg.function, MW_FN_GYRO);
+    ASSERT_EQ(mw_gyro_to_rad_s(msg.u.raw.xyz, MW_GYRO_2000DPS, v), MW_OK);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(v[i], truth.gyro_rad_s[i], 0.51 * mw_gyro_rad_s_per_lsb(MW_GYRO_2000DPS));
+    ASSERT_EQ(mw_can_decode(&frames[2], &msg), MW_OK);
+    EXPECT_EQ(msg.function, MW_FN_MAG);
+    ASSERT_EQ(mw_mag_to_ut(msg.u.raw.xyz, v), MW_OK);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(v[i], truth.mag_ut[i], 0.51 * MW_MAG_UT_PER_LSB);
+    EXPECT_GT(truth.gyro_rad_s.norm(), 1.0) << "the test moved the sensor";
+}
+
+TEST(StreamNode, AttitudeFrameDecodesToTheSensorOrientation) {
+    SimulatedNode node(3, false, 42, 3, stream_node_noise(0.0));
+    const Quat q = filter::quat_from_rotvec(Vec3(-0.7, 0.4, 1.9));
+    mw_can_frame frame{};
+    ASSERT_EQ(node.attitude_frame(q, 20000u, &frame), 1);
+    mw_attitude att{};
+    ASSERT_EQ(mw_attitude_decode(&frame, &att), MW_OK);
+    EXPECT_EQ(att.counter_low, 20000u & 0x3FFFu);
+    const Quat decoded(att.q[0], att.q[1], att.q[2], att.q[3]);
+    EXPECT_LT(filter::angle_rad(filter::conj(decoded) * (q * node.q_segment_sensor())), 2e-4);
+}
+
+TEST(StreamNode, MountingAndBiasAreSeededAndBounded) {
+    for (std::uint64_t stream = 1; stream <= 40; ++stream) {
+        SimulatedNode node(static_cast<std::uint8_t>(stream), false, 9, stream, stream_node_noise(1.0));
+        EXPECT_LE(filter::angle_rad(node.q_segment_sensor()), 30.0 * kDeg + 1e-12);
+        for (int i = 0; i < 3; ++i) {
+            EXPECT_GE(std::abs(node.gyro_bias_rad_s()[i]), 0.5 * kDeg - 1e-12);
+            EXPECT_LE(std::abs(node.gyro_bias_rad_s()[i]), 2.0 * kDeg + 1e-12);
+        }
+        SimulatedNode same(static_cast<std::uint8_t>(stream), false, 9, stream, stream_node_noise(1.0));
+        EXPECT_EQ(same.q_segment_sensor().coeffs(), node.q_segment_sensor().coeffs());
+        // The root's node keeps its x axis forward (facing = "sensor" calibration).
+        SimulatedNode root(1, true, 9, stream, stream_node_noise(1.0));
+        EXPECT_LT((filter::rotate(root.q_segment_sensor(), Vec3::UnitX()) - Vec3::UnitX()).norm(), 1e-12);
+    }
+}
+
+TEST(StreamCommand, ParsesDropouts) {
+    NodeDropout d;
+    std::string error;
+    ASSERT_TRUE(parse_dropout("4:1.5:3", &d, &error)) << error;
+    EXPECT_EQ(d.node, 4);
+    EXPECT_DOUBLE_EQ(d.start_s, 1.5);
+    EXPECT_DOUBLE_EQ(d.end_s, 3.0);
+    EXPECT_FALSE(parse_dropout("4:3:1", &d, &error));
+    EXPECT_FALSE(parse_dropout("0:1:2", &d, &error));
+    EXPECT_FALSE(parse_dropout("4:1:2x", &d, &error));
+    EXPECT_FALSE(parse_dropout("4:1", &d, &error));
+}
+
+}  // namespace
+}  // namespace mocap::sim
