@@ -40,7 +40,8 @@ Vec3 fourati_rate_rad_s(double t_s) {
     // ZYX kinematics: body rate = E(roll, pitch) · [roll_dot, pitch_dot, yaw_dot].
     const double sr = std::sin(roll), cr = std::cos(roll);
     const double sp = std::sin(pitch), cp = std::cos(pitch);
-    return {roll_dot - yaw_dot * sp, pitch_dot * cr + yaw_dot * sr * cp, -pitch_dot * sr + yaw_dot * cr * cp};
+    return {roll_dot - yaw_dot * sp, pitch_dot * cr + yaw_dot * sr * cp,
+            -pitch_dot * sr + yaw_dot * cr * cp};
 }
 
 // ---------------------------------------------------------------- realistic / magnetic
@@ -151,9 +152,8 @@ Vec3 plan_rate_rad_s(const MotionPlan& plan, double t_s, const Quat& q_earth_sen
 /// Moving at sample t if the sample's interval (t - dt, t] overlaps a movement, so that
 /// every row whose gyro reading carries motion is flagged.
 bool plan_moving(const MotionPlan& plan, double t_s, double dt_s) {
-    return std::any_of(plan.movements.begin(), plan.movements.end(), [&](const Movement& m) {
-        return t_s > m.t0_s && t_s - dt_s < m.t1_s;
-    });
+    return std::any_of(plan.movements.begin(), plan.movements.end(),
+                       [&](const Movement& m) { return t_s > m.t0_s && t_s - dt_s < m.t1_s; });
 }
 
 Vec3 plan_lin_acc_m_s2(const MotionPlan& plan, double t_s) {
@@ -206,9 +206,12 @@ std::optional<ScenarioKind> parse_scenario_kind(std::string_view name) {
 
 std::string_view scenario_name(ScenarioKind kind) {
     switch (kind) {
-        case ScenarioKind::fourati: return "fourati";
-        case ScenarioKind::realistic: return "realistic";
-        case ScenarioKind::magnetic: return "magnetic";
+        case ScenarioKind::fourati:
+            return "fourati";
+        case ScenarioKind::realistic:
+            return "realistic";
+        case ScenarioKind::magnetic:
+            return "magnetic";
     }
     return "unknown";
 }
@@ -258,17 +261,20 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
 
     if (options.gyro_bias && spec.gyro_bias_max_rad_s > 0.0) {
         for (int i = 0; i < 3; ++i) {
-            sc.gyro_bias_rad_s[i] = bias_rng.sign() * bias_rng.uniform(0.25, 1.0) * spec.gyro_bias_max_rad_s;
+            sc.gyro_bias_rad_s[i] =
+                bias_rng.sign() * bias_rng.uniform(0.25, 1.0) * spec.gyro_bias_max_rad_s;
         }
     }
 
     // fourati: the paper's q(0) = identity in NED, i.e. the sensor axes on north/east/down;
-    // in ENU that is q_enu_ned. Otherwise: any heading, a tilt of up to 28° (±0.35 rad about east and north).
+    // in ENU that is q_enu_ned. Otherwise: any heading, a tilt of up to 28° (±0.35 rad about east
+    // and north).
     Quat q = filter::q_enu_ned();
     if (!fourati) {
         const double yaw = start_rng.uniform(-kPi, kPi);
         const Vec3 tilt(start_rng.uniform(-0.35, 0.35), start_rng.uniform(-0.35, 0.35), 0.0);
-        q = (Quat(Eigen::AngleAxisd(yaw, Vec3::UnitZ())) * filter::quat_from_rotvec(tilt)).normalized();
+        q = (Quat(Eigen::AngleAxisd(yaw, Vec3::UnitZ())) * filter::quat_from_rotvec(tilt))
+                .normalized();
     }
 
     const double dt = 1.0 / spec.rate_hz;
@@ -291,8 +297,9 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
         const Quat q_sensor_earth = filter::conj(q);
         const double ns = options.noise_scale;
         const Vec3 gyro = w + sc.gyro_bias_rad_s + noise_vec(noise_rng, ns * spec.gyro_noise_rad_s);
-        const Vec3 accel = filter::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
-                           noise_vec(noise_rng, ns * spec.accel_noise_m_s2);
+        const Vec3 accel =
+            filter::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
+            noise_vec(noise_rng, ns * spec.accel_noise_m_s2);
         const Vec3 mag = filter::rotate(q_sensor_earth, row.mag_earth_ut) +
                          noise_vec(noise_rng, ns * options.mag_noise_scale * spec.mag_noise_ut);
 

@@ -47,10 +47,10 @@ std::string_view scenario_name(ScenarioKind kind);
 struct ScenarioSpec {
     double rate_hz = 100.0;
     double duration_s = 60.0;
-    double gyro_noise_rad_s = 0.0;    ///< σ of white gyro noise per sample
-    double accel_noise_m_s2 = 0.0;    ///< σ of white accelerometer noise per sample
-    double mag_noise_ut = 0.0;        ///< σ of white magnetometer noise per sample
-    double gyro_bias_max_rad_s = 0.0; ///< per-axis bias magnitude is drawn in [max/4, max]
+    double gyro_noise_rad_s = 0.0;         ///< σ of white gyro noise per sample
+    double accel_noise_m_s2 = 0.0;         ///< σ of white accelerometer noise per sample
+    double mag_noise_ut = 0.0;             ///< σ of white magnetometer noise per sample
+    double gyro_bias_max_rad_s = 0.0;      ///< per-axis bias magnitude is drawn in [max/4, max]
     Vec3 gravity_up_m_s2{0.0, 0.0, 9.81};  ///< specific force at rest, earth frame (ENU)
     Vec3 mag_field_ut = Vec3::Zero();      ///< undisturbed earth field, ENU, µT
 };
@@ -62,17 +62,17 @@ struct ScenarioOptions {
     double noise_scale = 1.0;      ///< multiplies every noise σ (0 = noiseless sensors)
     double mag_noise_scale = 1.0;  ///< multiplies the magnetometer σ once more (studies of
                                    ///< how much heading the field noise costs)
-    bool gyro_bias = true;     ///< false: no gyro bias even where the scenario has one
+    bool gyro_bias = true;         ///< false: no gyro bias even where the scenario has one
 };
 
 /// One sample and the truth behind it.
 struct ScenarioRow {
-    ImuSample sample;             ///< what the sensor reports (t_us, gyro, accel, mag)
-    Quat q_earth_sensor;          ///< true orientation, ENU, unit norm
-    bool moving = false;          ///< the subject moves (BROAD's `movement` column)
-    Vec3 gyro_true_rad_s;         ///< true body rate over (t_{k-1}, t_k], no bias, no noise
-    Vec3 lin_acc_earth_m_s2;      ///< true linear acceleration, earth frame
-    Vec3 mag_earth_ut;            ///< true field at the sensor, earth frame (with disturbance)
+    ImuSample sample;         ///< what the sensor reports (t_us, gyro, accel, mag)
+    Quat q_earth_sensor;      ///< true orientation, ENU, unit norm
+    bool moving = false;      ///< the subject moves (BROAD's `movement` column)
+    Vec3 gyro_true_rad_s;     ///< true body rate over (t_{k-1}, t_k], no bias, no noise
+    Vec3 lin_acc_earth_m_s2;  ///< true linear acceleration, earth frame
+    Vec3 mag_earth_ut;        ///< true field at the sensor, earth frame (with disturbance)
 };
 
 struct Scenario {

@@ -16,7 +16,9 @@ using filter::Vec3;
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-Quat about(const Vec3& axis, double deg) { return Quat(Eigen::AngleAxisd(deg * kDeg, axis.normalized())); }
+Quat about(const Vec3& axis, double deg) {
+    return Quat(Eigen::AngleAxisd(deg * kDeg, axis.normalized()));
+}
 
 EvalSample sample(double t_s, const Quat& est, const Quat& ref, bool evaluated = true) {
     EvalSample s;
@@ -104,7 +106,8 @@ TEST(Evaluation, ConvergenceTimeIsAfterTheLastExcursion) {
     const Quat ref = Quat::Identity();
     const double errs[] = {30.0, 20.0, 5.0, 15.0, 5.0, 5.0};
     std::vector<EvalSample> s;
-    for (int i = 0; i < 6; ++i) s.push_back(sample(10.0 + i, about(Vec3::UnitZ(), errs[i]), ref, false));
+    for (int i = 0; i < 6; ++i)
+        s.push_back(sample(10.0 + i, about(Vec3::UnitZ(), errs[i]), ref, false));
     const EvalResult r = evaluate(s);
     ASSERT_TRUE(r.convergence_time_s.has_value());
     EXPECT_DOUBLE_EQ(*r.convergence_time_s, 4.0);  // relative to the first sample (t = 10)
@@ -116,10 +119,12 @@ TEST(Evaluation, ConvergenceTimeIsAfterTheLastExcursion) {
     EXPECT_DOUBLE_EQ(evaluate(s).first_below_s.value(), 2.0);
     EXPECT_FALSE(evaluate(s, 4.0).first_below_s.has_value());
     // Always below: converged from the start.
-    for (auto& x : s) x.q_est = ref;
+    for (auto& x : s)
+        x.q_est = ref;
     EXPECT_DOUBLE_EQ(evaluate(s).convergence_time_s.value(), 0.0);
     // A custom threshold.
-    for (int i = 0; i < 6; ++i) s[static_cast<std::size_t>(i)].q_est = about(Vec3::UnitZ(), errs[i]);
+    for (int i = 0; i < 6; ++i)
+        s[static_cast<std::size_t>(i)].q_est = about(Vec3::UnitZ(), errs[i]);
     EXPECT_DOUBLE_EQ(evaluate(s, 25.0).convergence_time_s.value(), 1.0);
 }
 
@@ -131,9 +136,10 @@ TEST(Evaluation, JsonHasTheContractKeys) {
     r.convergence_time_s = 3.5;
     r.first_below_s = 0.25;
     const std::string j = eval_json(r, "ma\"d");
-    for (const char* key : {"\"rmse_total_deg\":1.5", "\"rmse_heading_deg\":1.25", "\"rmse_inclination_deg\":0",
-                            "\"rmse_roll_deg\":0", "\"rmse_pitch_deg\":0", "\"rmse_yaw_deg\":0", "\"samples\":42",
-                            "\"convergence_time_s\":3.5", "\"first_below_s\":0.25", "\"filter\":\"ma\\\"d\""}) {
+    for (const char* key :
+         {"\"rmse_total_deg\":1.5", "\"rmse_heading_deg\":1.25", "\"rmse_inclination_deg\":0",
+          "\"rmse_roll_deg\":0", "\"rmse_pitch_deg\":0", "\"rmse_yaw_deg\":0", "\"samples\":42",
+          "\"convergence_time_s\":3.5", "\"first_below_s\":0.25", "\"filter\":\"ma\\\"d\""}) {
         EXPECT_NE(j.find(key), std::string::npos) << key << " in " << j;
     }
     EXPECT_EQ(j.front(), '{');
@@ -146,7 +152,7 @@ TEST(Evaluation, JsonHasTheContractKeys) {
 
 // A filter that reports a fixed orientation, to check run_filter's frame and masks.
 class FixedFilter final : public filter::OrientationFilter {
-public:
+  public:
     explicit FixedFilter(const Quat& q) : q_(q) {}
     void update(const ImuSample&) override { ++updates_; }
     [[nodiscard]] Quat orientation() const override { return q_; }
@@ -154,7 +160,7 @@ public:
     [[nodiscard]] std::string_view name() const override { return "fixed"; }
     int updates_ = 0;
 
-private:
+  private:
     Quat q_;
 };
 
@@ -181,7 +187,8 @@ TEST(FilterRun, SkipWindowMovementMaskAndNedOutput) {
     EXPECT_NEAR(evaluate(enu.compared).rmse_total_deg, 180.0, 1e-6);
     const RunOutput ned = run_filter(f, rec, {EarthFrame::ned, 0.0});
     EXPECT_NEAR(evaluate(ned.compared).rmse_total_deg, 0.0, 1e-6);
-    EXPECT_NEAR(filter::angle_rad(ned.estimates[0].q * filter::conj(filter::q_enu_ned())), 0.0, 1e-12);
+    EXPECT_NEAR(filter::angle_rad(ned.estimates[0].q * filter::conj(filter::q_enu_ned())), 0.0,
+                1e-12);
     EXPECT_EQ(evaluate(ned.compared).samples, 9u);
 }
 

@@ -31,7 +31,8 @@ bool same_rows(const Scenario& a, const Scenario& b) {
 }
 
 TEST(Scenario, NamesRoundTrip) {
-    for (ScenarioKind k : kAllKinds) EXPECT_EQ(parse_scenario_kind(scenario_name(k)), k);
+    for (ScenarioKind k : kAllKinds)
+        EXPECT_EQ(parse_scenario_kind(scenario_name(k)), k);
     EXPECT_FALSE(parse_scenario_kind("Fourati").has_value());
     EXPECT_FALSE(parse_scenario_kind("").has_value());
 }
@@ -84,8 +85,10 @@ TEST(Scenario, NoiselessGyroIntegratesToTruth) {
         Quat q = s.rows.front().q_earth_sensor;
         double worst = 0.0;
         for (std::size_t i = 1; i < s.rows.size(); ++i) {
-            const double dt = 1e-6 * static_cast<double>(s.rows[i].sample.t_us - s.rows[i - 1].sample.t_us);
-            q = (q * filter::quat_from_rotvec(filter::to_vec3(s.rows[i].sample.gyro_rad_s) * dt)).normalized();
+            const double dt =
+                1e-6 * static_cast<double>(s.rows[i].sample.t_us - s.rows[i - 1].sample.t_us);
+            q = (q * filter::quat_from_rotvec(filter::to_vec3(s.rows[i].sample.gyro_rad_s) * dt))
+                    .normalized();
             worst = std::max(worst, filter::angle_rad(q * filter::conj(s.rows[i].q_earth_sensor)));
         }
         EXPECT_LT(worst * kRadToDeg, 1e-6) << scenario_name(k);
@@ -102,12 +105,15 @@ TEST(Scenario, AccelAndMagFollowTruth) {
             const Quat q_se = filter::conj(row.q_earth_sensor);
             const Vec3 f = filter::to_vec3(row.sample.accel_m_s2);
             const Vec3 m = filter::to_vec3(row.sample.mag_ut);
-            ASSERT_LT((f - filter::rotate(q_se, row.lin_acc_earth_m_s2 + s.spec.gravity_up_m_s2)).norm(), 1e-9);
+            ASSERT_LT(
+                (f - filter::rotate(q_se, row.lin_acc_earth_m_s2 + s.spec.gravity_up_m_s2)).norm(),
+                1e-9);
             ASSERT_LT((m - filter::rotate(q_se, row.mag_earth_ut)).norm(), 1e-9);
             if (!row.moving) {
                 ++rest;
                 ASSERT_LT(row.lin_acc_earth_m_s2.norm(), 1e-12);
-                ASSERT_LT((filter::to_vec3(row.sample.gyro_rad_s) - s.gyro_bias_rad_s).norm(), 1e-12);
+                ASSERT_LT((filter::to_vec3(row.sample.gyro_rad_s) - s.gyro_bias_rad_s).norm(),
+                          1e-12);
                 // Specific force points up: rotated back to earth it is +9.81 on z.
                 ASSERT_NEAR(filter::rotate(row.q_earth_sensor, f).z(), 9.81, 1e-9);
             }
@@ -124,12 +130,14 @@ TEST(Scenario, AccelAtRestMatchesGravityWithinNoise) {
     std::size_t n = 0;
     for (const ScenarioRow& row : s.rows) {
         if (row.moving) continue;
-        const Vec3 expected = filter::rotate(filter::conj(row.q_earth_sensor), s.spec.gravity_up_m_s2);
+        const Vec3 expected =
+            filter::rotate(filter::conj(row.q_earth_sensor), s.spec.gravity_up_m_s2);
         sum_sq += (filter::to_vec3(row.sample.accel_m_s2) - expected).squaredNorm();
         n += 3;
     }
     ASSERT_GT(n, 1000u);
-    EXPECT_NEAR(std::sqrt(sum_sq / static_cast<double>(n)), s.spec.accel_noise_m_s2, 0.1 * s.spec.accel_noise_m_s2);
+    EXPECT_NEAR(std::sqrt(sum_sq / static_cast<double>(n)), s.spec.accel_noise_m_s2,
+                0.1 * s.spec.accel_noise_m_s2);
 }
 
 // Table II: σ = 0.4 on every axis of every sensor (rad/s, m/s², G = 40 µT), zero mean.
@@ -148,7 +156,8 @@ TEST(Scenario, FouratiNoiseIsTableTwo) {
         const Vec3 e[3] = {
             filter::to_vec3(row.sample.gyro_rad_s) - row.gyro_true_rad_s,
             filter::to_vec3(row.sample.accel_m_s2) - filter::rotate(q_se, s.spec.gravity_up_m_s2),
-            (filter::to_vec3(row.sample.mag_ut) - filter::rotate(q_se, row.mag_earth_ut)) / 100.0,  // G
+            (filter::to_vec3(row.sample.mag_ut) - filter::rotate(q_se, row.mag_earth_ut)) /
+                100.0,  // G
         };
         for (int i = 0; i < 3; ++i) {
             sum[i] += e[i];
@@ -202,7 +211,8 @@ TEST(Scenario, RealisticHasBiasRestsBurstsAndDisturbanceOnlyInMagnetic) {
         }
     }
     EXPECT_NEAR(max_turn_deg, 39.0, 1e-6);
-    // Plateau (t = 45 s): norm 50 -> 48.0 µT, dip 60° -> 55.0° (the figures docs/accuracy.md states).
+    // Plateau (t = 45 s): norm 50 -> 48.0 µT, dip 60° -> 55.0° (the figures docs/accuracy.md
+    // states).
     const Vec3 h = m.rows[4500].mag_earth_ut;
     EXPECT_NEAR(h.norm(), 47.97, 0.01);
     EXPECT_NEAR(std::atan2(-h.z(), h.head<2>().norm()) * kRadToDeg, 55.02, 0.01);
