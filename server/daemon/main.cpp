@@ -57,6 +57,9 @@ int main(int argc, char** argv) {
         return 1;
     }
     spdlog::set_level(spdlog::level::from_str(config->log_level));
+    // Logs go to stdout (journald under systemd): flush every line so nothing is held back
+    // when the daemon is killed. Log lines are rare (counted events are logged once).
+    spdlog::flush_on(spdlog::level::trace);
     if (!replay.files.empty()) {
         for (const std::string& spec : calibrate_at) {
             ReplayCalibration c;

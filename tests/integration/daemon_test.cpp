@@ -1,0 +1,315 @@
+// The real mocapd on loopback with a generated config, fed by the real mocap-sim stream,
+// read through the real pose port (house style 10). Orientation accuracy is checked against
+// the simulator's own truth file.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <sstream>
+#include <thread>
+
+#include "filter/quaternion.hpp"
+#include "harness.hpp"
+#include "pose_client.hpp"
+
+namespace mocap::itest {
+namespace {
+
+using namespace std::chrono_literals;
+using filter::Quat;
+
+constexpr const char* kToken = "it-s3cret";
+constexpr int kRateHz = 100;
+
+struct TruthKey {
+    std::uint32_t subject;
+    std::uint32_t counter;
+    std::string segment;
+    bool operator<(const TruthKey& o) const {
+        return std::tie(subject, counter, segment) < std::tie(o.subject, o.counter, o.segment);
+    }
+};
+
+// t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,...
+std::map<TruthKey, Quat> read_truth(const std::string& path) {
+    std::map<TruthKey, Quat> out;
+    std::istringstream in(read_file(path));
+    std::string line;
+    std::getline(in, line);  // header
+    while (std::getline(in, line)) {
+        std::vector<std::string> f;
+        std::stringstream ls(line);
+        for (std::string x; std::getline(ls, x, ',');) f.push_back(x);
+        if (f.size() < 9) continue;
+        out[{static_cast<std::uint32_t>(std::stoul(f[1])), static_cast<std::uint32_t>(std::stoul(f[4])), f[2]}] =
+            Quat(std::stod(f[5]), std::stod(f[6]), std::stod(f[7]), std::stod(f[8]));
+    }
+    return out;
+}
+
+struct Received {
+    v1::SkeletonFrame frame;
+    std::int64_t receive_us = 0;
+};
+
+class Daemon : public ::testing::Test {
+protected:
+    void SetUp() override {
+        sink_port_ = free_port();
+        pose_port_ = free_port();
+        std::ostringstream cfg;
+        cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
+            << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\nsink_idle_timeout_s = 2.0\n"
+            << "[pipeline]\nworkers = 2\nmax_subjects = 4\nassembly_deadline_ms = 20.0\n"
+            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\nheading = \"earth\"\n"
+            << "facing = \"given\"\nfacing_heading_deg = 0.0\n"
+            << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 16\n"
+            << "[control]\ntoken = \"" << kToken << "\"\n";
+        config_ = dir_.file("mocapd.toml");
+        write_file(config_, cfg.str());
+        daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", config_},
+                                            dir_.file("mocapd.log"), dir_.path().string());
+        ASSERT_TRUE(wait_for_port(pose_port_, 10s)) << daemon_->log();
+        ASSERT_TRUE(wait_for_port(sink_port_, 10s)) << daemon_->log();
+    }
+
+    void TearDown() override {
+        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
+        const int rc = daemon_->stop(10s);
+        EXPECT_EQ(rc, 0) << "mocapd must drain and exit 0 on SIGTERM";
+    }
+
+    std::unique_ptr<Process> sim(std::vector<std::string> extra, const std::string& log = "sim.log") {
+        std::vector<std::string> argv{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(sink_port_),
+                                      "--rate", std::to_string(kRateHz)};
+        argv.insert(argv.end(), extra.begin(), extra.end());
+        return std::make_unique<Process>(argv, dir_.file(log));
+    }
+
+    client::PoseClient connect_client(std::vector<std::uint32_t> subjects = {}, std::uint32_t fields = 0) {
+        client::PoseClient c;
+        std::string err;
+        EXPECT_TRUE(c.connect("127.0.0.1", pose_port_, 5s, err)) << err;
+        client::SubscribeOptions o;
+        o.subject_ids = std::move(subjects);
+        o.fields = fields;
+        EXPECT_TRUE(c.subscribe(o, 5s, err)) << err;
+        return c;
+    }
+
+    // Reads frames until `done` says so or `limit` passes.
+    template <typename Done>
+    std::vector<Received> collect(client::PoseClient& c, std::chrono::milliseconds limit, Done done) {
+        std::vector<Received> out;
+        const auto end = std::chrono::steady_clock::now() + limit;
+        v1::SkeletonFrame f;
+        while (std::chrono::steady_clock::now() < end && !done(out)) {
+            const auto st = c.next_frame(f, 200ms);
+            if (st == client::ReadStatus::kMessage) {
+                out.push_back({f, c.last_receive_us()});
+            } else if (st != client::ReadStatus::kTimeout) {
+                break;
+            }
+        }
+        return out;
+    }
+
+    v1::ControlReply calibrate(client::PoseClient& c, std::uint32_t subject, const std::string& token) {
+        v1::ControlRequest req;
+        req.set_token(token);
+        req.mutable_calibrate()->set_subject_id(subject);
+        req.mutable_calibrate()->set_pose(v1::POSE_T);
+        v1::ControlReply reply;
+        std::string err;
+        EXPECT_TRUE(c.control(req, reply, 5s, err)) << err;
+        return reply;
+    }
+
+    std::uint64_t stat(client::PoseClient& c, const std::string& name) {
+        v1::Stats s;
+        std::string err;
+        EXPECT_TRUE(c.request_stats(s, 5s, err)) << err;
+        for (const auto& kv : s.counters()) {
+            if (kv.name() == name) return kv.value();
+        }
+        ADD_FAILURE() << "no counter " << name;
+        return 0;
+    }
+
+    TempDir dir_;
+    std::uint16_t sink_port_ = 0;
+    std::uint16_t pose_port_ = 0;
+    std::string config_;
+    std::unique_ptr<Process> daemon_;
+};
+
+std::uint32_t counter_of(const v1::SkeletonFrame& f) { return static_cast<std::uint32_t>(f.sync() & 0xFFFFFFFFu); }
+
+Quat segment_q(const v1::SkeletonFrame& f, int i) {
+    return Quat(f.q_world_segment_wxyz(4 * i), f.q_world_segment_wxyz(4 * i + 1), f.q_world_segment_wxyz(4 * i + 2),
+                f.q_world_segment_wxyz(4 * i + 3))
+        .normalized();
+}
+
+TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
+    auto c = connect_client({1});
+    const std::vector<std::string> names = [&] {
+        std::vector<std::string> n;
+        for (const auto& s : c.hello().skeleton().segments()) n.push_back(s.name());
+        return n;
+    }();
+    ASSERT_EQ(names.size(), 15u);
+    auto s = sim({"--subjects", "1", "--nodes", "15", "--duration", "14", "--calibrate-s", "4", "--seed", "11",
+                  "--truth", dir_.file("truth.csv")});
+
+    // Frames flow before calibration (raw sensor orientations), then calibrate in the T-pose.
+    auto first = collect(c, 10s, [](const auto& v) { return v.size() >= 100; });
+    ASSERT_GE(first.size(), 100u) << "no frames from the simulated subject";
+    const v1::ControlReply reply = calibrate(c, 1, kToken);
+    ASSERT_TRUE(reply.ok()) << reply.error();
+
+    auto frames = collect(c, 25s, [&](const auto&) { return !s->running(); });
+    auto tail = collect(c, 1s, [](const auto&) { return false; });
+    frames.insert(frames.end(), tail.begin(), tail.end());
+    ASSERT_EQ(s->wait(5s).value_or(-1), 0) << s->log();
+
+    const auto truth = read_truth(dir_.file("truth.csv"));
+    ASSERT_FALSE(truth.empty());
+    // With heading "earth" and a given facing of 0, the output equals the truth turned by the
+    // subject's own facing ψ during calibration: q_out ⊗ Rz(ψ) = q_true. ψ from the truth.
+    const Quat pelvis0 = truth.begin()->second;
+    const double psi = filter::to_euler_zyx(pelvis0).yaw_rad;
+    const Quat rz_psi(Eigen::AngleAxisd(psi, filter::Vec3::UnitZ()));
+
+    std::vector<double> err_deg;
+    std::size_t calibrated_frames = 0, motion_frames = 0, stale = 0;
+    const std::uint32_t motion_start = 5 * kRateHz;  // 4 s still + 1 s blend
+    for (const auto& r : frames) {
+        const auto& f = r.frame;
+        ASSERT_EQ(f.segment_count(), 15u);
+        ASSERT_EQ(f.q_world_segment_wxyz_size(), 60);
+        const bool calibrated = (f.flags(0) & v1::SEGMENT_CALIBRATED) != 0;
+        if (!calibrated) continue;
+        ++calibrated_frames;
+        if (counter_of(f) < motion_start) continue;
+        ++motion_frames;
+        for (int i = 0; i < 15; ++i) {
+            if ((f.flags(i) & v1::SEGMENT_STALE) != 0) ++stale;
+            const auto it = truth.find({1, counter_of(f), names[static_cast<std::size_t>(i)]});
+            if (it == truth.end()) continue;
+            const Quat q_err = segment_q(f, i) * rz_psi * it->second.conjugate();
+            err_deg.push_back(filter::error_total_rad(q_err) * 180.0 / std::numbers::pi);
+        }
+    }
+    ASSERT_GT(calibrated_frames, 0u) << "calibration never applied";
+    ASSERT_GT(motion_frames, 5u * kRateHz) << "too few frames in motion";
+    ASSERT_GT(err_deg.size(), motion_frames * 14);
+    std::sort(err_deg.begin(), err_deg.end());
+    const double median = err_deg[err_deg.size() / 2];
+    const double p95 = err_deg[err_deg.size() * 95 / 100];
+    std::cout << "[ metrics  ] segment orientation error vs truth after calibration: median " << median
+              << " deg, p95 " << p95 << " deg over " << err_deg.size() << " segment-frames\n";
+    EXPECT_LT(median, 3.0);
+    EXPECT_LT(p95, 8.0);
+    EXPECT_EQ(stale, 0u) << "no node was cut, nothing may be stale";
+}
+
+TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
+    auto c = connect_client({1});
+    // Node 5 (segment index 4) is silent from 3 s to 5 s.
+    auto s = sim({"--subjects", "1", "--nodes", "15", "--duration", "7", "--calibrate-s", "1", "--seed", "5",
+                  "--dropout", "5:3:5"});
+    auto frames = collect(c, 20s, [&](const auto&) { return !s->running(); });
+    auto tail = collect(c, 500ms, [](const auto&) { return false; });
+    frames.insert(frames.end(), tail.begin(), tail.end());
+    ASSERT_EQ(s->wait(5s).value_or(-1), 0) << s->log();
+
+    std::size_t in_window = 0, stale_in_window = 0, after = 0, stale_after = 0, others_stale = 0;
+    for (const auto& r : frames) {
+        const auto& f = r.frame;
+        const double t = counter_of(f) / static_cast<double>(kRateHz);
+        const bool stale = (f.flags(4) & v1::SEGMENT_STALE) != 0;
+        if (t > 3.2 && t < 4.8) {
+            ++in_window;
+            stale_in_window += stale ? 1 : 0;
+        } else if (t > 5.3) {
+            ++after;
+            stale_after += stale ? 1 : 0;
+        }
+        for (int i = 0; i < 15; ++i) {
+            if (i != 4 && (f.flags(i) & v1::SEGMENT_STALE) != 0) ++others_stale;
+        }
+    }
+    // The subject keeps streaming at full rate while the node is dead (never frozen).
+    EXPECT_GE(in_window, 150u) << "frames must keep flowing while a node is dead";
+    EXPECT_EQ(stale_in_window, in_window) << "the dead node's segment is flagged stale";
+    EXPECT_GT(after, 100u);
+    EXPECT_EQ(stale_after, 0u) << "the node's segment recovers when it returns";
+    EXPECT_EQ(others_stale, 0u);
+}
+
+TEST_F(Daemon, SinkReconnectResumesTheSubject) {
+    auto c = connect_client({2});
+    auto first = sim({"--subjects", "2", "--nodes", "15", "--duration", "2", "--seed", "1"}, "sim1.log");
+    ASSERT_EQ(first->wait(15s).value_or(-1), 0) << first->log();
+    auto before = collect(c, 2s, [](const auto&) { return false; });
+    ASSERT_GT(before.size(), 100u);
+    // The same sink (id 2) comes back on a new connection with its counter restarted.
+    auto second = sim({"--subjects", "2", "--nodes", "15", "--duration", "2", "--seed", "2"}, "sim2.log");
+    auto after = collect(c, 15s, [&](const auto&) { return !second->running(); });
+    ASSERT_EQ(second->wait(5s).value_or(-1), 0) << second->log();
+    ASSERT_GT(after.size(), 100u) << "frames resume after the sink reconnects";
+    for (const auto& r : after) EXPECT_EQ(r.frame.subject_id(), 2u);
+    EXPECT_GT(after.front().frame.sync(), before.back().frame.sync()) << "sync stays monotonic across reconnects";
+    // Two connections per run (sinks 1 and 2) plus the harness's readiness probe.
+    EXPECT_EQ(stat(c, "ingest_tcp.connections_accepted"), 5u);
+}
+
+TEST_F(Daemon, SlowClientDoesNotSlowTheOthers) {
+    auto fast = connect_client({}, v1::FIELD_ORIENTATIONS | v1::FIELD_POSITIONS | v1::FIELD_JOINT_ANGLES);
+    auto slow = connect_client({}, v1::FIELD_ORIENTATIONS | v1::FIELD_POSITIONS | v1::FIELD_JOINT_ANGLES);
+    auto s = sim({"--subjects", "3", "--nodes", "15", "--duration", "8", "--seed", "3"});
+    // `slow` never reads again.
+    auto frames = collect(fast, 25s, [&](const auto&) { return !s->running(); });
+    auto tail = collect(fast, 500ms, [](const auto&) { return false; });
+    frames.insert(frames.end(), tail.begin(), tail.end());
+    ASSERT_EQ(s->wait(5s).value_or(-1), 0) << s->log();
+    std::map<std::uint32_t, std::vector<std::uint64_t>> syncs;
+    for (const auto& r : frames) syncs[r.frame.subject_id()].push_back(r.frame.sync());
+    ASSERT_EQ(syncs.size(), 3u);
+    for (auto& [subject, v] : syncs) {
+        std::uint64_t gaps = 0;
+        for (std::size_t i = 1; i < v.size(); ++i) gaps += v[i] - v[i - 1] - 1;
+        EXPECT_EQ(gaps, 0u) << "subject " << subject << ": the fast client must see every frame";
+        EXPECT_GE(v.size(), 7u * kRateHz);
+    }
+    EXPECT_EQ(fast.drops_announced(), 0u);
+    EXPECT_GT(stat(fast, "serve.frames_dropped"), 0u) << "the slow client's queue must drop its oldest frames";
+}
+
+TEST_F(Daemon, ControlIsRefusedWithoutTheToken) {
+    auto c = connect_client({1});
+    EXPECT_FALSE(calibrate(c, 1, "").ok());
+    EXPECT_FALSE(calibrate(c, 1, "wrong-token").ok());
+    EXPECT_TRUE(calibrate(c, 1, kToken).ok());
+    EXPECT_FALSE(calibrate(c, 99, kToken).ok()) << "unknown subject";
+    EXPECT_EQ(stat(c, "serve.control_refused_no_token"), 1u);
+    EXPECT_EQ(stat(c, "serve.control_refused_bad_token"), 1u);
+}
+
+TEST(DaemonCli, CheckConfigNamesKeyAndLine) {
+    TempDir dir;
+    write_file(dir.file("bad.toml"), "[pipeline]\nworkers = 2\nring_capacity = 1000\n");
+    write_file(dir.file("good.toml"), "[pipeline]\nworkers = 2\n");
+    Process bad({MOCAPD_BIN, "--check-config", dir.file("bad.toml")}, dir.file("bad.log"));
+    EXPECT_NE(bad.wait(10s).value_or(0), 0);
+    EXPECT_NE(bad.log().find("bad.toml:3: pipeline.ring_capacity: must be a power of two"), std::string::npos)
+        << bad.log();
+    Process good({MOCAPD_BIN, "--check-config", dir.file("good.toml")}, dir.file("good.log"));
+    EXPECT_EQ(good.wait(10s).value_or(-1), 0) << good.log();
+}
+
+}  // namespace
+}  // namespace mocap::itest

@@ -1,0 +1,60 @@
+// harness.hpp — integration-test helpers: run the real binaries on loopback.
+//
+// Process: posix_spawn with stdout/stderr to a log file; stop() sends SIGTERM and waits
+// (bounded), then SIGKILL. free_port(): a port the kernel just handed out (bound to 0 and
+// released), so parallel test runs do not collide. TempDir: removed on destruction.
+#pragma once
+
+#include <sys/types.h>
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace mocap::itest {
+
+class TempDir {
+public:
+    TempDir();
+    ~TempDir();
+    TempDir(const TempDir&) = delete;
+    TempDir& operator=(const TempDir&) = delete;
+    [[nodiscard]] const std::filesystem::path& path() const { return path_; }
+    [[nodiscard]] std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+private:
+    std::filesystem::path path_;
+};
+
+class Process {
+public:
+    Process(std::vector<std::string> argv, const std::string& log_path, const std::string& cwd = "");
+    ~Process();
+    Process(const Process&) = delete;
+    Process& operator=(const Process&) = delete;
+
+    [[nodiscard]] bool running();
+    /// Waits up to `limit` for the process to exit; returns its exit status if it did.
+    std::optional<int> wait(std::chrono::milliseconds limit);
+    /// SIGTERM, wait up to `grace`, then SIGKILL. Returns the exit status (or -signal).
+    int stop(std::chrono::milliseconds grace = std::chrono::seconds(5));
+    void signal(int sig);
+    [[nodiscard]] pid_t pid() const { return pid_; }
+    [[nodiscard]] std::string log() const;
+
+private:
+    pid_t pid_ = -1;
+    std::string log_path_;
+    std::optional<int> status_;
+};
+
+std::uint16_t free_port();
+/// True once something accepts TCP connections on 127.0.0.1:port (polls until `limit`).
+bool wait_for_port(std::uint16_t port, std::chrono::milliseconds limit);
+void write_file(const std::string& path, const std::string& text);
+std::string read_file(const std::string& path);
+
+}  // namespace mocap::itest
