@@ -1,0 +1,280 @@
+// BVH file recorder and repair; raw sample recorder and its reader.
+#include "serve/bvh_recorder.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <thread>
+
+#include "bvh_outputs_fixture.hpp"
+#include "serve/raw_recorder.hpp"
+#include "skeleton/bvh.hpp"
+
+namespace mocap::serve {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+struct TempDir {
+    fs::path path;
+    TempDir() {
+        char tmpl[] = "/tmp/mocap-bvhrec-XXXXXX";
+        path = ::mkdtemp(tmpl);
+    }
+    ~TempDir() { fs::remove_all(path); }
+    [[nodiscard]] std::string file(const char* name) const { return (path / name).string(); }
+};
+
+void publish_frames(BvhRecorder& r, const BvhFrameEncoder& e, std::uint32_t subject, std::uint64_t from,
+                    std::uint64_t count) {
+    SubjectFrame f;
+    SkeletonPose p;
+    for (std::uint64_t k = from; k < from + count; ++k) {
+        test::make_pose(subject, k, static_cast<std::uint16_t>(e.model().size()), f, p);
+        r.publish(f, p);
+    }
+}
+
+TEST(BvhRecorder, WritesACompleteFileOfOneSubject) {
+    TempDir dir;
+    const auto encoder = test::default_encoder();
+    BvhRecorderConfig c;
+    c.directory = dir.path.string();
+    BvhRecorder rec(c, encoder);
+    publish_frames(rec, encoder, 1, 0, 3);  // not recording: ignored
+    std::string err, path;
+    ASSERT_TRUE(rec.start("", &err, &path)) << err;
+    EXPECT_EQ(path, dir.file("mocap-1.bvh"));
+    EXPECT_FALSE(rec.start("", &err));  // one at a time
+    publish_frames(rec, encoder, 4, 0, 10);  // first subject with frames: 4
+    publish_frames(rec, encoder, 2, 0, 5);   // not recorded
+    publish_frames(rec, encoder, 4, 10, 15);
+    std::uint64_t frames = 0;
+    ASSERT_TRUE(rec.stop(&err, &frames)) << err;
+    EXPECT_EQ(frames, 25u);
+    EXPECT_FALSE(rec.stop(&err));
+    const std::string text = test::slurp(path);
+    EXPECT_NE(text.find("\nFrames: 0000000025\n"), std::string::npos);
+    const auto clip = skeleton::parse_bvh(text);
+    ASSERT_TRUE(clip) << clip.error;
+    EXPECT_EQ(clip.clip->frame_count, 25u);
+    EXPECT_EQ(clip.clip->joints.size(), encoder.model().size());
+    // Frame 12 of subject 4 turned 12° about ENU z: BVH Y rotation of the root is 12°.
+    EXPECT_NEAR(clip.clip->frame(12)[5], 12.0, 1e-3);  // ZXY: Zrot, Xrot, Yrot
+    // A second recording does not overwrite the first.
+    ASSERT_TRUE(rec.start("", &err, &path)) << err;
+    EXPECT_EQ(path, dir.file("mocap-2.bvh"));
+    ASSERT_TRUE(rec.stop(&err));
+    EXPECT_FALSE(rec.start(dir.file("mocap-1.bvh"), &err));
+}
+
+TEST(BvhRecorder, CountIsPatchedAtEveryFlushSoAKilledDaemonLeavesALoadableFile) {
+    TempDir dir;
+    const auto encoder = test::default_encoder();
+    BvhRecorderConfig c;
+    c.flush_interval_s = 0.02;
+    BvhRecorder rec(c, encoder);
+    std::string err;
+    const std::string path = dir.file("live.bvh");
+    ASSERT_TRUE(rec.start(path, &err)) << err;
+    publish_frames(rec, encoder, 1, 0, 7);
+    std::string text;
+    for (int i = 0; i < 200; ++i) {
+        std::this_thread::sleep_for(10ms);
+        text = test::slurp(path);
+        if (text.find("Frames: 0000000007") != std::string::npos) break;
+    }
+    const auto clip = skeleton::parse_bvh(text);  // while still recording
+    ASSERT_TRUE(clip) << clip.error;
+    EXPECT_EQ(clip.clip->frame_count, 7u);
+    ASSERT_TRUE(rec.stop(&err));
+}
+
+TEST(BvhRepair, CountsCompleteLinesAndCutsAPartialLastLine) {
+    TempDir dir;
+    const auto encoder = test::default_encoder();
+    BvhRecorderConfig c;
+    BvhRecorder rec(c, encoder);
+    std::string err;
+    const std::string path = dir.file("cut.bvh");
+    ASSERT_TRUE(rec.start(path, &err)) << err;
+    publish_frames(rec, encoder, 1, 0, 9);
+    ASSERT_TRUE(rec.stop(&err));
+    // As if killed: the count is stale (0) and a line was half written.
+    std::string text = test::slurp(path);
+    const auto at = text.find("Frames: 0000000009");
+    text.replace(at, 18, "Frames: 0000000000");
+    text += "0.0 1.5 2";
+    { std::ofstream(path, std::ios::binary | std::ios::trunc) << text; }
+    EXPECT_FALSE(skeleton::parse_bvh(test::slurp(path)));
+    const auto r = repair_bvh_file(path);
+    ASSERT_TRUE(r.ok) << r.error;
+    EXPECT_EQ(r.frames, 9u);
+    EXPECT_EQ(r.frames_before, 0u);
+    EXPECT_EQ(r.bytes_cut, 9u);
+    const auto clip = skeleton::parse_bvh(test::slurp(path));
+    ASSERT_TRUE(clip) << clip.error;
+    EXPECT_EQ(clip.clip->frame_count, 9u);
+    // A repaired file is stable under repair.
+    const auto again = repair_bvh_file(path);
+    ASSERT_TRUE(again.ok) << again.error;
+    EXPECT_EQ(again.frames, 9u);
+    EXPECT_EQ(again.bytes_cut, 0u);
+}
+
+TEST(BvhRepair, RejectsAMalformedLineInTheMiddle) {
+    TempDir dir;
+    const auto encoder = test::default_encoder();
+    std::string text = encoder.hierarchy() + "MOTION\nFrames: 3\nFrame Time: 0.01\n";
+    SubjectFrame f;
+    SkeletonPose p;
+    for (std::uint64_t k = 0; k < 3; ++k) {
+        test::make_pose(1, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
+        encoder.append_motion_line(p, text);
+        if (k == 0) text += "1 2 3\n";
+    }
+    const std::string path = dir.file("bad.bvh");
+    { std::ofstream(path, std::ios::binary) << text; }
+    const auto r = repair_bvh_file(path);
+    EXPECT_FALSE(r.ok);
+    EXPECT_NE(r.error.find("line 2"), std::string::npos) << r.error;
+    EXPECT_EQ(test::slurp(path), text);  // untouched
+}
+
+class StepClock final : public Clock {
+public:
+    [[nodiscard]] std::int64_t now_us() const noexcept override { return now.load(); }
+    std::atomic<std::int64_t> now{1'700'000'000'000'000};
+};
+
+SegmentSample sample(std::uint64_t k, bool quat) {
+    SegmentSample s;
+    s.subject_id = 2;
+    s.node_id = static_cast<std::uint8_t>(1 + k % 15);
+    s.sync = 1000 + k / 15;
+    s.imu.t_us = static_cast<std::int64_t>(k) * 667;
+    s.imu.flags = static_cast<std::uint8_t>(k % 3);
+    s.imu.gyro_rad_s = {0.25f * static_cast<float>(k), -1.5f, 3.0f};
+    s.imu.accel_m_s2 = {0.1f, 9.81f, -0.3f};
+    s.imu.mag_ut = {20.5f, -3.25f, static_cast<float>(k)};
+    if (quat) {
+        s.has_node_quat = true;
+        s.node_q_wxyz = {0.5, 0.5, -0.5, 0.5};
+    }
+    s.times.sink_send_us = 5 + static_cast<std::int64_t>(k);
+    s.times.received_us = 9 + static_cast<std::int64_t>(k);
+    return s;
+}
+
+void expect_same(const SegmentSample& a, const SegmentSample& b) {
+    EXPECT_EQ(a.subject_id, b.subject_id);
+    EXPECT_EQ(a.node_id, b.node_id);
+    EXPECT_EQ(a.sync, b.sync);
+    EXPECT_EQ(a.imu.t_us, b.imu.t_us);
+    EXPECT_EQ(a.imu.flags, b.imu.flags);
+    EXPECT_EQ(a.has_node_quat, b.has_node_quat);
+    if (a.has_node_quat) {
+        EXPECT_EQ(a.node_q_wxyz, b.node_q_wxyz);
+    } else {
+        EXPECT_EQ(a.imu.gyro_rad_s, b.imu.gyro_rad_s);  // float32 values: exact
+        EXPECT_EQ(a.imu.accel_m_s2, b.imu.accel_m_s2);
+        EXPECT_EQ(a.imu.mag_ut, b.imu.mag_ut);
+    }
+    EXPECT_EQ(a.times.sink_send_us, b.times.sink_send_us);
+    EXPECT_EQ(a.times.received_us, b.times.received_us);
+}
+
+std::vector<std::string> raw_files(const fs::path& dir) {
+    std::vector<std::string> out;
+    for (const auto& e : fs::directory_iterator(dir)) out.push_back(e.path().string());
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+TEST(RawRecorder, EverySampleComesBackExactly) {
+    TempDir dir;
+    StepClock clock;
+    RawRecorderConfig c;
+    c.directory = dir.path.string();
+    c.ring_capacity = 1024;
+    RawRecorder rec(c, clock);
+    std::string err;
+    ASSERT_TRUE(rec.start(&err)) << err;
+    for (std::uint64_t k = 0; k < 3000; ++k) {
+        while (!rec.push(sample(k, k % 7 == 0))) std::this_thread::sleep_for(1ms);  // test only: wait for room
+    }
+    rec.stop();
+    const auto files = raw_files(dir.path);
+    ASSERT_EQ(files.size(), 1u);
+    EXPECT_NE(files[0].find("raw-20231114-221320-0.mocapraw"), std::string::npos) << files[0];
+    RawRecordingReader reader;
+    ASSERT_TRUE(reader.open(files[0], &err)) << err;
+    SegmentSample got;
+    for (std::uint64_t k = 0; k < 3000; ++k) {
+        ASSERT_EQ(reader.next(got, &err), 1) << k << " " << err;
+        expect_same(sample(k, k % 7 == 0), got);
+    }
+    EXPECT_EQ(reader.next(got, &err), 0);
+    EXPECT_FALSE(reader.truncated());
+    EXPECT_EQ(rec.counters().snapshot()[0].value, 3000u);  // samples_recorded
+}
+
+TEST(RawRecorder, RotatesBySizeAndACutFileReadsUpToItsLastRecord) {
+    TempDir dir;
+    StepClock clock;
+    RawRecorderConfig c;
+    c.directory = dir.path.string();
+    c.rotate_bytes = 20'000;
+    c.flush_interval_s = 0;
+    RawRecorder rec(c, clock);
+    std::string err;
+    ASSERT_TRUE(rec.start(&err)) << err;
+    for (std::uint64_t k = 0; k < 2000; ++k) {
+        while (!rec.push(sample(k, false))) std::this_thread::sleep_for(1ms);
+        if (k % 100 == 0) std::this_thread::sleep_for(10ms);  // let the writer see the size
+    }
+    rec.stop();
+    const auto files = raw_files(dir.path);
+    ASSERT_GE(files.size(), 3u);
+    std::uint64_t k = 0;
+    SegmentSample got;
+    for (const auto& f : files) {
+        RawRecordingReader reader;
+        ASSERT_TRUE(reader.open(f, &err)) << err;
+        while (reader.next(got, &err) == 1) expect_same(sample(k++, false), got);
+    }
+    EXPECT_EQ(k, 2000u);
+    // Cut the last file in the middle of a record: everything before it still reads.
+    const auto size = fs::file_size(files.back());
+    fs::resize_file(files.back(), size - 5);
+    RawRecordingReader reader;
+    ASSERT_TRUE(reader.open(files.back(), &err));
+    int n = 0;
+    while (reader.next(got, &err) == 1) ++n;
+    EXPECT_TRUE(reader.truncated());
+    EXPECT_GT(n, 0);
+    // Not a recording at all.
+    { std::ofstream(dir.file("junk")) << "HIERARCHY\n"; }
+    RawRecordingReader junk;
+    EXPECT_FALSE(junk.open(dir.file("junk"), &err));
+}
+
+TEST(RawRecorder, AFullRingDropsAndCountsInsteadOfBlocking) {
+    TempDir dir;
+    StepClock clock;
+    RawRecorderConfig c;
+    c.directory = dir.path.string();
+    c.ring_capacity = 16;
+    RawRecorder rec(c, clock);  // not started: nothing drains the ring
+    std::uint64_t accepted = 0;
+    for (std::uint64_t k = 0; k < 100; ++k) accepted += rec.push(sample(k, false)) ? 1 : 0;
+    EXPECT_EQ(accepted, 16u);
+    EXPECT_EQ(rec.counters().snapshot()[1].value, 84u);  // samples_dropped
+}
+
+}  // namespace
+}  // namespace mocap::serve

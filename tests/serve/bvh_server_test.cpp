@@ -1,0 +1,191 @@
+// Live BVH service on loopback: framing, subject selection, value counts, lagging clients.
+#include "serve/bvh_server.hpp"
+
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <thread>
+
+#include "bvh_outputs_fixture.hpp"
+#include "skeleton/bvh.hpp"
+
+namespace mocap::serve {
+namespace {
+
+using namespace std::chrono_literals;
+
+class Conn {
+public:
+    explicit Conn(std::uint16_t port) {
+        fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
+        sockaddr_in a{};
+        a.sin_family = AF_INET;
+        a.sin_port = htons(port);
+        a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+        timeval tv{2, 0};
+        ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+        ok_ = ::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+    }
+    ~Conn() { ::close(fd_); }
+    [[nodiscard]] bool ok() const { return ok_; }
+    void send_text(const std::string& s) { ASSERT_EQ(::send(fd_, s.data(), s.size(), 0), static_cast<ssize_t>(s.size())); }
+    /// Reads until `text` holds `lines` complete lines after the greeting (or timeout).
+    std::string read_until_lines(std::size_t greeting_lines, std::size_t lines) {
+        std::string text;
+        char buf[4096];
+        while (std::count(text.begin(), text.end(), '\n') < static_cast<long>(greeting_lines + lines)) {
+            const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+            if (n <= 0) break;
+            text.append(buf, static_cast<std::size_t>(n));
+        }
+        return text;
+    }
+
+private:
+    int fd_ = -1;
+    bool ok_ = false;
+};
+
+std::size_t greeting_line_count(const BvhFrameEncoder& e) {
+    return static_cast<std::size_t>(std::count(e.hierarchy().begin(), e.hierarchy().end(), '\n')) + 2;
+}
+
+bool wait_clients(const BvhServer& s, std::size_t n) {
+    for (int i = 0; i < 200 && s.client_count() != n; ++i) std::this_thread::sleep_for(5ms);
+    return s.client_count() == n;
+}
+
+std::vector<std::string> motion_lines(const std::string& text, std::size_t skip) {
+    std::vector<std::string> out;
+    std::stringstream ss(text);
+    std::string line;
+    for (std::size_t i = 0; std::getline(ss, line); ++i) {
+        if (i >= skip) out.push_back(line);
+    }
+    return out;
+}
+
+TEST(BvhServer, GreetingIsHierarchyMotionFrameTimeThenOneLinePerFrame) {
+    const auto encoder = test::default_encoder();
+    BvhServerConfig c;
+    c.bind_address = "127.0.0.1";
+    c.port = 0;
+    BvhServer server(c, encoder);
+    std::string err;
+    ASSERT_TRUE(server.start(err)) << err;
+    Conn conn(server.port());
+    ASSERT_TRUE(conn.ok());
+    ASSERT_TRUE(wait_clients(server, 1));
+    SubjectFrame f;
+    SkeletonPose p;
+    for (std::uint64_t k = 0; k < 5; ++k) {
+        test::make_pose(3, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
+        server.publish(f, p);
+    }
+    const std::size_t g = greeting_line_count(encoder);
+    const std::string text = conn.read_until_lines(g, 5);
+    ASSERT_EQ(text.rfind(encoder.hierarchy() + "MOTION\nFrame Time: 0.010000\n", 0), 0u);
+    // A reader turns the stream into a file by inserting "Frames: <lines received>".
+    const auto lines = motion_lines(text, g);
+    ASSERT_EQ(lines.size(), 5u);
+    std::string file = encoder.hierarchy() + "MOTION\nFrames: 5\nFrame Time: 0.010000\n";
+    for (const auto& l : lines) {
+        EXPECT_EQ(bvh_value_count(l), encoder.values_per_frame());
+        file += l + "\n";
+    }
+    const auto clip = skeleton::parse_bvh(file);
+    ASSERT_TRUE(clip) << clip.error;
+    EXPECT_EQ(clip.clip->frame_count, 5u);
+    EXPECT_EQ(server.counters().frames_sent.load(), 5u);
+}
+
+TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
+    const auto encoder = test::default_encoder();
+    BvhServerConfig c;
+    c.bind_address = "127.0.0.1";
+    c.port = 0;
+    BvhServer server(c, encoder);
+    std::string err;
+    ASSERT_TRUE(server.start(err)) << err;
+    Conn conn(server.port());
+    ASSERT_TRUE(wait_clients(server, 1));
+    const auto n = static_cast<std::uint16_t>(encoder.model().size());
+    SubjectFrame f;
+    SkeletonPose p;
+    std::string expect_7, expect_2;
+    for (std::uint64_t k = 0; k < 4; ++k) {
+        test::make_pose(7, k, n, f, p);
+        server.publish(f, p);
+        encoder.append_motion_line(p, expect_7);
+        test::make_pose(2, 100 + k, n, f, p);
+        server.publish(f, p);
+    }
+    const std::size_t g = greeting_line_count(encoder);
+    std::string text = conn.read_until_lines(g, 4);
+    EXPECT_EQ(text.substr(text.size() - expect_7.size()), expect_7);  // only subject 7's lines
+    conn.send_text("bogus\nsubject 2\n");
+    for (int i = 0; i < 200 && server.counters().bad_client_lines.load() == 0; ++i) std::this_thread::sleep_for(5ms);
+    EXPECT_EQ(server.counters().bad_client_lines.load(), 1u);
+    std::this_thread::sleep_for(50ms);  // the switch is processed on the serve thread
+    for (std::uint64_t k = 0; k < 3; ++k) {
+        test::make_pose(7, 10 + k, n, f, p);
+        server.publish(f, p);
+        test::make_pose(2, 200 + k, n, f, p);
+        server.publish(f, p);
+        encoder.append_motion_line(p, expect_2);
+    }
+    const std::string more = conn.read_until_lines(0, 3);
+    EXPECT_EQ(more, expect_2);
+}
+
+TEST(BvhServer, NoClientNoEncodingAndStopClosesClients) {
+    const auto encoder = test::default_encoder();
+    BvhServerConfig c;
+    c.bind_address = "127.0.0.1";
+    c.port = 0;
+    auto server = std::make_unique<BvhServer>(c, encoder);
+    std::string err;
+    ASSERT_TRUE(server->start(err)) << err;
+    SubjectFrame f;
+    SkeletonPose p;
+    test::make_pose(1, 1, static_cast<std::uint16_t>(encoder.model().size()), f, p);
+    server->publish(f, p);
+    EXPECT_EQ(server->counters().frames_published.load(), 0u);
+    Conn conn(server->port());
+    ASSERT_TRUE(wait_clients(*server, 1));
+    server->stop();
+    const std::string text = conn.read_until_lines(greeting_line_count(encoder), 1000);
+    EXPECT_EQ(text, encoder.hierarchy() + "MOTION\nFrame Time: 0.010000\n");  // then EOF
+}
+
+TEST(BvhServer, LaggingClientLosesOldestLinesNotThePipeline) {
+    const auto encoder = test::default_encoder();
+    BvhServerConfig c;
+    c.bind_address = "127.0.0.1";
+    c.port = 0;
+    c.queue_frames = 8;
+    BvhServer server(c, encoder);
+    std::string err;
+    ASSERT_TRUE(server.start(err)) << err;
+    Conn conn(server.port());  // never reads until the end
+    ASSERT_TRUE(wait_clients(server, 1));
+    SubjectFrame f;
+    SkeletonPose p;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (std::uint64_t k = 0; k < 100000; ++k) {
+        test::make_pose(1, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
+        server.publish(f, p);
+    }
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 5s);  // publish never waited for the client
+    for (int i = 0; i < 400 && server.counters().frames_dropped.load() + server.counters().backlog_dropped.load() == 0; ++i) {
+        std::this_thread::sleep_for(5ms);
+    }
+    EXPECT_GT(server.counters().frames_dropped.load() + server.counters().backlog_dropped.load(), 0u);
+}
+
+}  // namespace
+}  // namespace mocap::serve
