@@ -69,14 +69,21 @@ std::vector<std::string> motion_lines(const std::string& text, std::size_t skip)
     return out;
 }
 
-TEST(BvhServer, GreetingIsHierarchyMotionFrameTimeThenOneLinePerFrame) {
-    const auto encoder = test::default_encoder();
+std::unique_ptr<BvhServer> started(const BvhFrameEncoder& encoder, std::size_t queue_frames = 64) {
     BvhServerConfig c;
     c.bind_address = "127.0.0.1";
     c.port = 0;
-    BvhServer server(c, encoder);
+    c.queue_frames = queue_frames;
+    auto server = std::make_unique<BvhServer>(c, encoder);
     std::string err;
-    ASSERT_TRUE(server.start(err)) << err;
+    EXPECT_TRUE(server->start(err)) << err;
+    return server;
+}
+
+TEST(BvhServer, GreetingIsHierarchyMotionFrameTimeThenOneLinePerFrame) {
+    const auto encoder = test::default_encoder();
+    auto owned = started(encoder);
+    BvhServer& server = *owned;
     Conn conn(server.port());
     ASSERT_TRUE(conn.ok());
     ASSERT_TRUE(wait_clients(server, 1));
@@ -105,12 +112,8 @@ TEST(BvhServer, GreetingIsHierarchyMotionFrameTimeThenOneLinePerFrame) {
 
 TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
     const auto encoder = test::default_encoder();
-    BvhServerConfig c;
-    c.bind_address = "127.0.0.1";
-    c.port = 0;
-    BvhServer server(c, encoder);
-    std::string err;
-    ASSERT_TRUE(server.start(err)) << err;
+    auto owned = started(encoder);
+    BvhServer& server = *owned;
     Conn conn(server.port());
     ASSERT_TRUE(wait_clients(server, 1));
     const auto n = static_cast<std::uint16_t>(encoder.model().size());
@@ -144,12 +147,7 @@ TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
 
 TEST(BvhServer, NoClientNoEncodingAndStopClosesClients) {
     const auto encoder = test::default_encoder();
-    BvhServerConfig c;
-    c.bind_address = "127.0.0.1";
-    c.port = 0;
-    auto server = std::make_unique<BvhServer>(c, encoder);
-    std::string err;
-    ASSERT_TRUE(server->start(err)) << err;
+    auto server = started(encoder);
     SubjectFrame f;
     SkeletonPose p;
     test::make_pose(1, 1, static_cast<std::uint16_t>(encoder.model().size()), f, p);
@@ -164,13 +162,8 @@ TEST(BvhServer, NoClientNoEncodingAndStopClosesClients) {
 
 TEST(BvhServer, LaggingClientLosesOldestLinesNotThePipeline) {
     const auto encoder = test::default_encoder();
-    BvhServerConfig c;
-    c.bind_address = "127.0.0.1";
-    c.port = 0;
-    c.queue_frames = 8;
-    BvhServer server(c, encoder);
-    std::string err;
-    ASSERT_TRUE(server.start(err)) << err;
+    auto owned = started(encoder, 8);
+    BvhServer& server = *owned;
     Conn conn(server.port());  // never reads until the end
     ASSERT_TRUE(wait_clients(server, 1));
     SubjectFrame f;
