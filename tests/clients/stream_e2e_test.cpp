@@ -102,11 +102,16 @@ protected:
     void start_daemon() {
         sink_port_ = free_port();
         pose_port_ = free_port();
-        if (sink_port_ <= 0 || pose_port_ <= 0 || sink_port_ == pose_port_) return;
+        const int bvh_port = free_port();
+        if (sink_port_ <= 0 || pose_port_ <= 0 || bvh_port <= 0 || sink_port_ == pose_port_ ||
+            bvh_port == sink_port_ || bvh_port == pose_port_) {
+            return;
+        }
         std::ofstream(dir_ / "mocapd.toml") << "[log]\nlevel = \"warn\"\n"
                                             << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\n"
                                             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\n"
-                                            << "[skeleton]\ncalibration_dir = \"" << dir_.string() << "\"\n";
+                                            << "[skeleton]\ncalibration_dir = \"" << dir_.string() << "\"\n"
+                                            << "[outputs]\nbvh_listen = \"127.0.0.1:" << bvh_port << "\"\n";
         const pid_t pid = spawn({MOCAPD_BIN, "--config", (dir_ / "mocapd.toml").string()}, dir_ / "mocapd.out",
                                 dir_ / "mocapd.err");
         for (int i = 0; i < 100; ++i) {
