@@ -10,16 +10,23 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "mocap_wire/mw_can.h"
+#include "mocap_wire/mw_packet.h"
 
 namespace {
 
@@ -188,6 +195,86 @@ TEST_F(StreamEndToEnd, APeerThatNeverAcceptsEndsAtTheDuration) {
     EXPECT_NE(slurp(dir_ / "sim.err").find("never connected"), std::string::npos);
     const std::string stats = slurp(dir_ / "sim.out");
     EXPECT_NE(stats.find("\"packets\":0"), std::string::npos) << stats;
+}
+
+// The truth file says what went on the wire: a plain listener decodes the stream with the wire
+// library, and every ATT quaternion (noiseless quat mode) equals the truth's q_earth_sensor of
+// its subject, node and counter within the ATT resolution.
+TEST_F(StreamEndToEnd, TruthFileMatchesTheFramesOnTheWire) {
+    const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t len = sizeof a;
+    ASSERT_EQ(::bind(listener, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    ASSERT_EQ(::getsockname(listener, reinterpret_cast<sockaddr*>(&a), &len), 0);
+    ASSERT_EQ(::listen(listener, 4), 0);
+    const int port = ntohs(a.sin_port);
+    const fs::path truth = dir_ / "truth.csv";
+    const pid_t sim = spawn({MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(port), "--subjects", "1",
+                             "--mode", "quat", "--noise-scale", "0", "--calibrate-s", "0.5", "--duration", "1.5",
+                             "--truth", truth.string()},
+                            dir_ / "sim.out", dir_ / "sim.err");
+    const int conn = ::accept(listener, nullptr, nullptr);
+    ASSERT_GE(conn, 0);
+    std::vector<std::uint8_t> bytes;
+    std::uint8_t buf[65536];
+    for (ssize_t n; (n = ::recv(conn, buf, sizeof buf, 0)) > 0;) bytes.insert(bytes.end(), buf, buf + n);
+    ::close(conn);
+    ::close(listener);
+    ASSERT_EQ(wait_exit(sim), 0) << slurp(dir_ / "sim.err");
+
+    // (node, counter low 14 bits) -> q_earth_sensor from the truth file (1.5 s < 2^14 counters).
+    std::map<std::pair<int, int>, std::array<double, 4>> expected;
+    std::istringstream rows(slurp(truth));
+    std::string row;
+    std::getline(rows, row);
+    EXPECT_EQ(row, "t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,sensor_qx,sensor_qy,sensor_qz");
+    while (std::getline(rows, row)) {
+        std::vector<std::string> c;
+        std::stringstream cells(row);
+        for (std::string cell; std::getline(cells, cell, ',');) c.push_back(cell);
+        ASSERT_EQ(c.size(), 13u) << row;
+        EXPECT_EQ(c[1], "1");
+        expected[{std::stoi(c[3]), std::stoi(c[4]) & 0x3FFF}] = {std::stod(c[9]), std::stod(c[10]), std::stod(c[11]),
+                                                                 std::stod(c[12])};
+    }
+    EXPECT_GT(expected.size(), 15u * 100u);
+
+    mw_stream_decoder decoder;
+    mw_stream_decoder_init(&decoder);
+    auto packet = std::make_unique<mw_packet>();
+    std::size_t offset = 0, matched = 0;
+    double worst = 0.0;
+    while (offset < bytes.size()) {
+        std::size_t used = 0;
+        const mw_stream_result r =
+            mw_stream_decoder_feed(&decoder, bytes.data() + offset, bytes.size() - offset, &used, packet.get());
+        offset += used;
+        if (r == MW_STREAM_NEED_MORE) break;
+        ASSERT_EQ(r, MW_STREAM_PACKET);
+        EXPECT_EQ(packet->header.sink_id, 1);
+        for (std::size_t i = 0; i < packet->frame_count; ++i) {
+            mw_attitude att{};
+            if (mw_can_id_function(packet->frames[i].frame.id) != MW_FN_ATTITUDE) continue;
+            ASSERT_EQ(mw_attitude_decode(&packet->frames[i].frame, &att), MW_OK);
+            const auto it = expected.find({att.node_id, att.counter_low});
+            ASSERT_NE(it, expected.end()) << "node " << int(att.node_id) << " counter " << att.counter_low;
+            // Both normalised in double: acos near 1 would turn a 1e-7 norm error into 1e-3 rad.
+            double dot = 0.0, n_truth = 0.0, n_att = 0.0;
+            for (int k = 0; k < 4; ++k) {
+                dot += it->second[k] * att.q[k];
+                n_truth += it->second[k] * it->second[k];
+                n_att += static_cast<double>(att.q[k]) * att.q[k];
+            }
+            dot /= std::sqrt(n_truth * n_att);
+            worst = std::max(worst, 2.0 * std::acos(std::min(1.0, std::abs(dot))));
+            ++matched;
+        }
+    }
+    EXPECT_EQ(decoder.counters.bytes_discarded, 0u);
+    EXPECT_GT(matched, 15u * 100u);
+    EXPECT_LT(worst, 2e-4) << "rad";
 }
 
 }  // namespace
