@@ -5,6 +5,9 @@
 #include "serve/pose_server.hpp"
 
 #include <gtest/gtest.h>
+#include <arpa/inet.h>
+#include <ifaddrs.h>
+#include <netinet/in.h>
 #include <sys/socket.h>
 
 #include <atomic>
@@ -414,6 +417,53 @@ TEST(PoseServer, ControlIsRefusedWhenNoTokenIsConfigured) {
     EXPECT_FALSE(reply.ok());
     EXPECT_EQ(calls.load(), 0);
     EXPECT_EQ(s.server.counters().control_refused_disabled.load(), 1u);
+}
+
+// The first IPv4 address of this host that is not loopback, if any.
+std::string non_loopback_ipv4() {
+    ifaddrs* list = nullptr;
+    if (::getifaddrs(&list) != 0) return {};
+    std::string found;
+    for (ifaddrs* i = list; i != nullptr && found.empty(); i = i->ifa_next) {
+        if (i->ifa_addr == nullptr || i->ifa_addr->sa_family != AF_INET) continue;
+        char text[INET_ADDRSTRLEN];
+        const auto* in = reinterpret_cast<const sockaddr_in*>(i->ifa_addr);
+        if (::inet_ntop(AF_INET, &in->sin_addr, text, sizeof text) == nullptr) continue;
+        if (std::string(text).rfind("127.", 0) != 0) found = text;
+    }
+    ::freeifaddrs(list);
+    return found;
+}
+
+TEST(PoseServer, ControlFromANonLoopbackPeerIsRefusedByDefault) {
+    const std::string address = non_loopback_ipv4();
+    if (address.empty()) GTEST_SKIP() << "this host has no non-loopback IPv4 address";
+    std::atomic<int> calls{0};
+    ControlHandlers handlers;
+    handlers.reload = [&] {
+        ++calls;
+        return ControlResult::success();
+    };
+    ServeConfig config = test_config();
+    config.bind_address = "0.0.0.0";
+    Started s(config, handlers);
+    PoseClient c;
+    std::string error;
+    ASSERT_TRUE(c.connect(address, s.server.port(), 2s, error)) << error;
+    v1::ControlRequest request;
+    request.set_token("s3cret-token");  // the right token does not help from outside
+    request.mutable_reload();
+    v1::ControlReply reply;
+    ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
+    EXPECT_FALSE(reply.ok());
+    EXPECT_NE(reply.error().find("loopback"), std::string::npos);
+    EXPECT_EQ(s.server.counters().control_refused_not_loopback.load(), 1u);
+    EXPECT_EQ(calls.load(), 0);
+
+    PoseClient local = s.connect();  // the same request over loopback is accepted
+    ASSERT_TRUE(local.control(request, reply, 2s, error)) << error;
+    EXPECT_TRUE(reply.ok()) << reply.error();
+    EXPECT_EQ(calls.load(), 1);
 }
 
 TEST(PoseServer, StatsCarryServeAndDaemonCounters) {
