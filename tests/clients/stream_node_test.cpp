@@ -47,9 +47,37 @@ TEST(StreamNode, AtRestSpecificForceIsGravityAndFieldIsRotated) {
     const Vec3 m = stream_mag_earth_ut();
     EXPECT_NEAR(m.norm(), 50.0, 1e-9);
     EXPECT_NEAR(std::atan2(-m.z(), m.y()), 60.0 * kDeg, 1e-9) << "dip 60°, pointing north and down";
+    // With linear acceleration: f = R(q)ᵀ (a_lin + g).
+    const Vec3 lin(0.8, -2.0, 1.5);
+    const SensorReading moving = ideal_reading(q, q, 0.01, lin);
+    EXPECT_LT((filter::rotate(q, moving.accel_m_s2) - (lin + Vec3(0, 0, MW_STANDARD_GRAVITY_M_S2))).norm(), 1e-6);
     // Level and at rest: +1 g on +z, as a real MPU9250.
     const SensorReading level = ideal_reading(Quat::Identity(), Quat::Identity(), 0.01, Vec3::Zero());
     EXPECT_NEAR(level.accel_m_s2.z(), MW_STANDARD_GRAVITY_M_S2, 1e-6);
+}
+
+TEST(StreamNode, WalkSensorAccelerationIsZeroAtRestAndCentripetalWhileWalking) {
+    // The stream's finite difference of sensor positions: zero in the still T-pose; while
+    // walking, the gait's oscillations average out over whole strides and what is left is
+    // the circle's centripetal v²/R = 1.2² / 4 = 0.36 m/s².
+    const auto model = skeleton::default_body_model();
+    const StreamMotion walk = StreamMotion::walk(model, 2.0);
+    const double dt = 0.01;
+    auto accel = [&](double t) {
+        BodyPose a, b, c;
+        walk.pose(t - dt, 0.0, Vec3::Zero(), a);
+        walk.pose(t, 0.0, Vec3::Zero(), b);
+        walk.pose(t + dt, 0.0, Vec3::Zero(), c);
+        return Vec3((c.sensor_position_m[0] - 2.0 * b.sensor_position_m[0] + a.sensor_position_m[0]) / (dt * dt));
+    };
+    EXPECT_LT(accel(1.0).norm(), 1e-9);
+    Vec3 mean = Vec3::Zero();
+    const int n = 1000;  // 10 s = 9 strides at 0.9 Hz
+    for (int k = 0; k < n; ++k) mean += accel(6.0 + k * dt) / n;
+    // The heading turns by θ = v·T/R = 3 rad over the window, so the mean of the centripetal
+    // vector shrinks by sin(θ/2)/(θ/2).
+    EXPECT_NEAR(std::hypot(mean.x(), mean.y()), 0.36 * std::sin(1.5) / 1.5, 0.02);
+    EXPECT_LT(std::abs(mean.z()), 0.05);
 }
 
 TEST(StreamNode, RawFramesDecodeToTheTruthWithinQuantisation) {
