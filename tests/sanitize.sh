@@ -29,15 +29,16 @@ tsan_executables=(core_tests ingest_tests serve_tests daemon_tests)
 status=0
 phase() {  # phase NAME COMMAND... — runs, times and reports one step
     local name="$1"; shift
-    local t0=$(date +%s) rc=0
-    "$@" || rc=$?
-    echo "sanitize: $name: $(( $(date +%s) - t0 )) s, exit $rc"
+    local rc=0 TIMEFORMAT="sanitize: $name: %0R s wall, %0U s user + %0S s sys CPU (this shell's children)"
+    time { "$@" || rc=$?; }
+    echo "sanitize: $name: exit $rc"
     [[ $rc -eq 0 ]] || status=1
     return 0
 }
 
-configure() {  # configure DIR SANITIZERS
-    cmake -S "$root" -B "$1" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMOCAP_SANITIZE="$2" >/dev/null
+configure() {  # configure DIR SANITIZERS [CMAKE ARGS...]
+    local dir="$1" sanitizers="$2"; shift 2
+    cmake -S "$root" -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMOCAP_SANITIZE="$sanitizers" "$@" >/dev/null
 }
 
 # Suite names of the given test executables as one ctest regex: ^(A|B)\.
@@ -47,7 +48,7 @@ suite_regex() {
     for exe in "$@"; do
         local path
         path=$(find "$dir/tests" -type f -name "$exe" -perm -u+x | head -1)
-        [[ -n "$path" ]] || { echo "sanitize: $exe not built" >&2; return 1; }
+        [[ -n "$path" ]] || { echo "sanitize: $exe not built, its tests are skipped" >&2; continue; }
         # --gtest_list_tests prints "Suite." lines (parameterised: "Prefix/Suite.").
         while read -r s; do suites+=("$s"); done < <("$path" --gtest_list_tests | sed -n 's/^\([^ ].*\)\.\( .*\)\{0,1\}$/\1/p')
     done
@@ -58,14 +59,18 @@ suite_regex() {
 run_asan() {
     local b="$out/build-asan"
     phase "asan configure" configure "$b" address,undefined
-    phase "asan build" cmake --build "$b" -j"$jobs"
+    # -k: a target that fails to build does not stop the others (the failure is reported).
+    phase "asan build" cmake --build "$b" -j"$jobs" -- -k
     phase "asan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -E 'socketcan_vm|_arm_'"
 }
 
 run_tsan() {
     local b="$out/build-tsan"
-    phase "tsan configure" configure "$b" thread
-    phase "tsan build" cmake --build "$b" -j"$jobs" --target "${tsan_executables[@]}"
+    # g++ 12 warns (-Wtsan, an error with -Werror) that ThreadSanitizer cannot see
+    # std::atomic_thread_fence, which Asio's handler fences use; Asio synchronises through
+    # mutexes, which it does see. Every Asio user needs the switch, not only mocap_serve.
+    phase "tsan configure" configure "$b" thread -DCMAKE_CXX_FLAGS=-Wno-tsan
+    phase "tsan build" cmake --build "$b" -j"$jobs" --target "${tsan_executables[@]}" -- -k
     local regex
     regex=$(suite_regex "$b" "${tsan_executables[@]}") || { status=1; return 0; }
     echo "sanitize: tsan ctest -R '$regex'"

@@ -7,12 +7,18 @@
 // parsing, the request rate limit, Subscribe validation and the broadcaster index, Stats,
 // Ping, and control requests (token check, loopback rule, handlers). Control is enabled
 // with a known token (the seeds carry it) so the accepted branch is reached too.
-// Checks: the session always closes after the client's EOF, and the serve counters stay
-// consistent (one close per session, refusals never above requests).
+// Checks: the session always closes after the client's EOF (exactly once, counted).
+// Before that, the framing alone is checked differentially: DelimitedReader must return
+// the same messages (and the same final error) whether the bytes arrive at once or in
+// chunks of 1..16 bytes (the first input byte picks the size), and write_area() must never
+// be empty while no error was returned.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cstring>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "fuzz_target.hpp"
 #include "mocap/v1/mocap.pb.h"
@@ -67,9 +73,40 @@ struct Harness {
     }
 };
 
+// Every message (and a final error marker) the reader yields when fed `chunk` bytes at a time.
+std::vector<std::string> deframe(const std::uint8_t* data, std::size_t size, std::size_t chunk) {
+    serve::DelimitedReader reader(serve::ServeConfig{}.max_client_message_bytes);
+    std::vector<std::string> out;
+    std::size_t pos = 0;
+    for (;;) {
+        const serve::FrameResult r = reader.next();
+        if (r.status == serve::FrameStatus::kMessage) {
+            out.emplace_back(reinterpret_cast<const char*>(r.payload.data()), r.payload.size());
+            continue;
+        }
+        if (r.status != serve::FrameStatus::kNeedMore) {
+            out.push_back(r.status == serve::FrameStatus::kTooLarge ? "<too large>" : "<bad prefix>");
+            return out;
+        }
+        if (pos == size) return out;
+        const auto area = reader.write_area();
+        MOCAP_FUZZ_CHECK(!area.empty(), "write_area() empty without an error");
+        const std::size_t n = std::min({chunk, area.size(), size - pos});
+        std::memcpy(area.data(), data + pos, n);
+        reader.commit(n);
+        pos += n;
+    }
+}
+
 }  // namespace
 
 MOCAP_FUZZ_ENTRY(client_session) {
+    if (size > 0) {
+        const auto whole = deframe(data, size, size);
+        MOCAP_FUZZ_CHECK(whole == deframe(data, size, 1 + data[0] % 16),
+                         "framing depends on how the bytes were split");
+    }
+
     static Harness* h = new Harness;
     asio::ip::tcp::socket client(h->io);
     asio::ip::tcp::socket server(h->io);
