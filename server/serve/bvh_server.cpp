@@ -98,6 +98,8 @@ private:
     }
 
     void on_read(const boost::system::error_code& ec, std::size_t n) {
+        // A client that half-closes (e.g. `echo subject 2 | nc`) still reads: keep writing.
+        if (ec == asio::error::eof) return;
         if (ec) return fail(ec, "read");
         for (std::size_t i = 0; i < n; ++i) {
             const char c = read_buf_[i];

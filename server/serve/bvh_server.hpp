@@ -9,7 +9,8 @@
 // received and writes "Frames: <count>" before "Frame Time:".
 // Subject: the configured `subject`, or with 0 the subject of the first frame published
 // after the client connected. A client may switch by sending the text line
-// "subject <id>\n" at any time (other input: counted as bad lines; a line longer than
+// "subject <id>\n" at any time (a client may half-close its side after it; other
+// input: counted as bad lines; a line longer than
 // 64 bytes closes the connection).
 // Lag: each client has a bounded queue of queue_frames lines; when it is full the OLDEST
 // line is dropped and counted (frames_dropped), so a slow reader sees a gap, never a
