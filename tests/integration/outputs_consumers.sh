@@ -148,8 +148,19 @@ write_config "$DIR/madgwick.toml" "$DIR" madgwick
   --angles-out "$DIR/replay_madgwick.csv" --calibrate-at 0.8:1:T > "$DIR/replay_m.log" 2>&1 || fail "replay madgwick"
 cmp -s "$DIR/replay1.bvh" "$DIR/replay_madgwick.bvh" && fail "another filter gave the same BVH"
 check_bvh "$DIR/replay_madgwick.bvh"
-echo "round trip (mocap filter): $("$ROUNDTRIP" --truth "$DIR/truth.csv" --bvh "$DIR/replay1.bvh" \
-  --angles "$DIR/replay1.csv" --skip-s 3 --exclude right_hand --max-rms-deg 8)" || fail "round trip error too large"
+# The simulator's motion advances 10 ms per SYNC while its timestamps are wall time: on a
+# starved machine (SYNCs sent late) the gyro integrates over longer intervals than the motion
+# took, and every filter drifts. Judge the round trip only when the SYNCs kept their rate.
+SYNC_RATE=$(awk -F, '$3 == "pelvis" && $2 == 1 { if (!n) t0 = $1; t1 = $1; n++ }
+  END { if (n > 1) printf "%.1f", (n - 1) / ((t1 - t0) / 1e6); else print 0 }' "$DIR/truth.csv")
+RT=$("$ROUNDTRIP" --truth "$DIR/truth.csv" --bvh "$DIR/replay1.bvh" --angles "$DIR/replay1.csv" \
+  --skip-s 3 --exclude right_hand --max-rms-deg 8) && RT_OK=1 || RT_OK=0
+echo "round trip (mocap filter, SYNCs at $SYNC_RATE Hz of 100): $RT"
+if awk -v r="$SYNC_RATE" 'BEGIN { exit !(r >= 97) }'; then
+  [[ $RT_OK == 1 ]] || fail "round trip error above 8 deg"
+else
+  echo "round trip NOT JUDGED: the simulator sent SYNCs at $SYNC_RATE Hz instead of 100 (machine overloaded)"
+fi
 
 # --- 3. kill -9 while recording ---------------------------------------------------------
 mkdir "$DIR/kill"
