@@ -140,6 +140,13 @@ for i in 1 2; do
     --angles-out "$DIR/replay$i.csv" --calibrate-at 0.8:1:T > "$DIR/replay$i.log" 2>&1 || fail "replay $i"
 done
 cmp "$DIR/replay1.bvh" "$DIR/replay2.bvh" || fail "replayed BVH differs between two runs"
+# Replay refuses to overwrite an output and to read something that is not a recording.
+"$MOCAPD" --config "$DIR/mocapd.toml" --replay $RAW --bvh-out "$DIR/replay1.bvh" > "$DIR/err1.log" 2>&1 \
+  && fail "replay overwrote an existing BVH"
+grep -q "cannot create" "$DIR/err1.log" || fail "replay: no reason given for an existing output"
+"$MOCAPD" --config "$DIR/mocapd.toml" --replay "$DIR/replay1.bvh" > "$DIR/err2.log" 2>&1 \
+  && fail "replay accepted a BVH as a raw recording"
+grep -q "bad magic" "$DIR/err2.log" || fail "replay: no reason given for a wrong file"
 cmp "$DIR/replay1.csv" "$DIR/replay2.csv" || fail "replayed CSV differs between two runs"
 echo "ok replay twice: identical BVH ($(stat -c %s "$DIR/replay1.bvh") bytes) and CSV"
 check_bvh "$DIR/replay1.bvh"
