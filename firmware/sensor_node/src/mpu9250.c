@@ -249,9 +249,9 @@ int mpu9250_read(mpu9250 *dev, mpu9250_sample *out)
     if (rc != MPU9250_OK) {
         return rc;
     }
-    for (int i = 0; i < 3; ++i) {
-        out->accel[i] = be16(&raw[2 * i]);
-        out->gyro[i] = be16(&raw[8 + 2 * i]);
+    for (size_t i = 0; i < 3u; ++i) {
+        out->accel[i] = be16(&raw[2u * i]);
+        out->gyro[i] = be16(&raw[8u + 2u * i]);
     }
     out->temperature = be16(&raw[6]);
     out->mag_overflow = 0;

@@ -122,8 +122,8 @@ int mw_raw_encode(const mw_raw* msg, mw_can_frame* out) {
     }
     if (msg->kind == MW_FN_MAG && !mag_valid(msg->xyz)) return MW_ERR_RANGE;
     frame_begin(out, MW_CAN_ID(msg->kind, msg->node_id), MW_DLC_RAW);
-    for (int i = 0; i < 3; ++i)
-        mw_put_i16(out->data + 2 * i, msg->xyz[i]);
+    for (size_t i = 0; i < 3u; ++i)
+        mw_put_i16(out->data + 2u * i, msg->xyz[i]);
     mw_put_u16(out->data + 6, msg->counter_low);
     return MW_OK;
 }
@@ -135,8 +135,8 @@ int mw_raw_decode(const mw_can_frame* frame, mw_raw* out) {
     const int rc = check_frame(frame, kind, MW_NODE_ID_MIN, MW_DLC_RAW);
     if (rc != MW_OK) return rc;
     int16_t xyz[3];
-    for (int i = 0; i < 3; ++i)
-        xyz[i] = mw_get_i16(frame->data + 2 * i);
+    for (size_t i = 0; i < 3u; ++i)
+        xyz[i] = mw_get_i16(frame->data + 2u * i);
     if (kind == MW_FN_MAG && !mag_valid(xyz)) return MW_ERR_RANGE;
     out->kind = kind;
     out->node_id = mw_can_id_node(frame->id);
@@ -189,14 +189,15 @@ int mw_attitude_decode(const mw_can_frame* frame, mw_attitude* out) {
     if (rc != MW_OK) return rc;
     int16_t c[3];
     uint32_t sumsq = 0;
-    for (int i = 0; i < 3; ++i) {
-        c[i] = mw_get_i16(frame->data + 2 * i);
+    for (size_t i = 0; i < 3u; ++i) {
+        c[i] = mw_get_i16(frame->data + 2u * i);
         if (c[i] > MW_ATT_COMPONENT_MAX || c[i] < -MW_ATT_COMPONENT_MAX) return MW_ERR_RANGE;
         sumsq += (uint32_t)((int32_t)c[i] * (int32_t)c[i]);
     }
     if (sumsq > MW_ATT_SUMSQ_MAX) return MW_ERR_RANGE;
     const uint16_t tail = mw_get_u16(frame->data + 6);
-    const unsigned largest = (unsigned)(tail >> MW_ATT_COUNTER_BITS);
+    /* Two bits above the counter; the mask states the 0..3 range the loop below relies on. */
+    const unsigned largest = (unsigned)(tail >> MW_ATT_COUNTER_BITS) & 3u;
 
     float q[4];
     float small2 = 0.0f;
