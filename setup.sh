@@ -23,6 +23,7 @@ PACKAGES=(
   clang-14 libclang-rt-14-dev
   assimp-utils qemu-system-x86 busybox-static cpio kmod
   blender nodejs
+  python3-protobuf python3-numpy python3-matplotlib python3-pytest
 )
 
 log() { printf '\033[1m[setup]\033[0m %s\n' "$*" >&2; }

@@ -1,0 +1,147 @@
+"""Fixtures: the real mocapd on loopback with a generated config, fed by mocap-sim stream.
+
+The binaries come from the environment (ctest sets them): MOCAPD_BIN, MOCAP_SIM_BIN.
+Every port the daemon listens on is a free one, so parallel ctest runs never collide.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+import mocapd_client as mc
+
+TOKEN = "py-s3cret"
+RATE_HZ = 100
+CALIBRATE_S = 4.0  # still T-pose at the start of the simulated walk
+BLEND_S = 1.0  # the walk blends in over this long after the T-pose (clients/sim/stream_motion)
+
+
+def binary(env: str) -> str:
+    path = os.environ.get(env)
+    if not path or not os.access(path, os.X_OK):
+        pytest.fail(f"{env} must name the built executable (ctest sets it)")
+    return path
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for_port(port: int, limit_s: float, process: subprocess.Popen) -> bool:
+    end = time.monotonic() + limit_s
+    while time.monotonic() < end and process.poll() is None:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                return True
+        except OSError:
+            time.sleep(0.02)
+    return False
+
+
+def stop(process: subprocess.Popen, grace_s: float = 10.0) -> int:
+    if process.poll() is None:
+        process.terminate()
+        try:
+            return process.wait(grace_s)
+        except subprocess.TimeoutExpired:
+            process.kill()
+    return process.wait()
+
+
+@dataclass
+class Daemon:
+    process: subprocess.Popen
+    dir: Path
+    sink_port: int
+    pose_port: int
+
+    @property
+    def endpoint(self) -> str:
+        return f"127.0.0.1:{self.pose_port}"
+
+    def log(self) -> str:
+        return (self.dir / "mocapd.log").read_text(errors="replace")
+
+    def client(self) -> mc.Client:
+        c = mc.Client("127.0.0.1", self.pose_port, timeout=5.0)
+        c.connect()
+        return c
+
+
+@pytest.fixture(scope="session")
+def daemon(tmp_path_factory):
+    work = tmp_path_factory.mktemp("mocapd")
+    sink_port, pose_port = free_port(), free_port()
+    config = work / "mocapd.toml"
+    config.write_text(
+        f'[log]\nlevel = "info"\nstats_interval_s = 0\n'
+        f'[ingest]\nsink_listen = "127.0.0.1:{sink_port}"\n'
+        f'[pipeline]\nworkers = 2\nmax_subjects = 4\n'
+        f'[skeleton]\ncalibration_dir = "{work}"\n'
+        f'[serve]\npose_listen = "127.0.0.1:{pose_port}"\n'
+        f'[control]\ntoken = "{TOKEN}"\n'
+        f'[outputs]\nbvh_listen = "127.0.0.1:{free_port()}"\nrecord_dir = "{work}"\n'
+        f'[http]\nlisten = "127.0.0.1:{free_port()}"\n')
+    with open(work / "mocapd.log", "wb") as log:
+        process = subprocess.Popen([binary("MOCAPD_BIN"), "--config", str(config)], cwd=work, stdout=log,
+                                   stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    d = Daemon(process, work, sink_port, pose_port)
+    try:
+        if not (wait_for_port(pose_port, 10, process) and wait_for_port(sink_port, 10, process)):
+            pytest.fail("mocapd did not listen:\n" + d.log())
+        yield d
+    finally:
+        rc = stop(process)
+    assert rc == 0, "mocapd must drain and exit 0 on SIGTERM:\n" + d.log()
+
+
+@dataclass
+class Walk:
+    """A simulated subject 1 (15 nodes) walking after a still T-pose, calibrated."""
+
+    daemon: Daemon
+    sim: subprocess.Popen
+
+
+def wait_frames(c: mc.Client, until, limit_s: float) -> mc.Frame:
+    end = time.monotonic() + limit_s
+    for f in c.frames(idle_timeout=5.0):
+        if until(f):
+            return f
+        if time.monotonic() > end:
+            break
+    pytest.fail("the awaited frame did not come")
+
+
+@pytest.fixture(scope="session")
+def walk(daemon):
+    """Starts the simulated walk, calibrates it in its T-pose with the control token, and
+    returns once the subject walks at full stride."""
+    with open(daemon.dir / "sim.log", "wb") as log:
+        sim = subprocess.Popen(
+            [binary("MOCAP_SIM_BIN"), "stream", "--connect", f"127.0.0.1:{daemon.sink_port}", "--rate",
+             str(RATE_HZ), "--subjects", "1", "--nodes", "15", "--duration", "600", "--calibrate-s",
+             str(CALIBRATE_S), "--seed", "11"], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    try:
+        with daemon.client() as c:
+            c.subscribe(subjects=[1])
+            first = wait_frames(c, lambda f: True, 10)
+            # One second of frames lets the filters settle; the T-pose lasts CALIBRATE_S.
+            wait_frames(c, lambda f: f.sync >= first.sync + RATE_HZ, 5)
+            reply = c.control(TOKEN, calibrate=1, pose="T")
+            assert reply.ok, reply.error
+            wait_frames(c, lambda f: f.all_flagged(mc.SegmentFlags.CALIBRATED), 10)
+            walking = first.sync + int((CALIBRATE_S + BLEND_S + 0.5) * RATE_HZ)
+            wait_frames(c, lambda f: f.sync >= walking, 15)
+        yield Walk(daemon, sim)
+    finally:
+        stop(sim)
