@@ -32,11 +32,15 @@ def test_frames_carry_numpy_poses_of_the_subscribed_fields(walk):
         assert sub.fields == mc.Fields.ALL and sub.subject_ids == [1] and sub.queue_frames > 0
         frames = list(c.frames(count=RATE_HZ))
         names = c.info.skeleton.joint_angle_names
+        drops = c.drops_announced
     assert len(frames) == RATE_HZ
     syncs = [f.sync for f in frames]
     assert all(b > a for a, b in zip(syncs, syncs[1:])), "sync only grows"
-    # Frames come at the sensor rate: 100 frames span about one second of samples.
-    assert 0.9e6 < frames[-1].sample_us - frames[0].sample_us < 1.1e6
+    if drops == 0:
+        assert syncs[-1] - syncs[0] == RATE_HZ - 1, "no frame lost unless announced"
+    # One SYNC step is one sample period on the sink's clock.
+    span_us = frames[-1].sample_us - frames[0].sample_us
+    assert span_us == pytest.approx((syncs[-1] - syncs[0]) * 1e6 / RATE_HZ, rel=0.05)
     for f in frames:
         assert f.subject_id == 1
         assert f.q.shape == (SEGMENTS, 4) and f.p.shape == (SEGMENTS, 3) and f.q_raw.shape == (SEGMENTS, 4)
