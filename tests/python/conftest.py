@@ -6,10 +6,12 @@ Every port the daemon listens on is a free one, so parallel ctest runs never col
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
 import time
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,20 +79,42 @@ class Daemon:
         return c
 
 
+# The config compiled into mocapd: every "...listen" key in it is a port the daemon opens.
+SHIPPED_CONFIG = Path(__file__).resolve().parents[2] / "config" / "mocapd.toml"
+
+
+def daemon_config(work: Path, sink_port: int, pose_port: int) -> str:
+    """The daemon's config: loopback only, and a free port for every listening key the
+    shipped config has (live BVH, HTTP, and whatever comes later), so parallel runs never
+    collide on a default port."""
+    sections: dict[str, dict] = {
+        "log": {"level": "info", "stats_interval_s": 0},
+        "ingest": {"sink_listen": f"127.0.0.1:{sink_port}"},
+        "pipeline": {"workers": 2, "max_subjects": 4},
+        "skeleton": {"calibration_dir": str(work)},
+        "serve": {"pose_listen": f"127.0.0.1:{pose_port}"},
+        "control": {"token": TOKEN},
+        "outputs": {"record_dir": str(work)},
+    }
+    with open(SHIPPED_CONFIG, "rb") as fh:
+        shipped = tomllib.load(fh)
+    for name, table in shipped.items():
+        for key, value in table.items() if isinstance(table, dict) else ():
+            if key.endswith("listen") and isinstance(value, str):
+                sections.setdefault(name, {}).setdefault(key, f"127.0.0.1:{free_port()}")
+    lines = []
+    for name, table in sections.items():
+        lines.append(f"[{name}]")
+        lines += [f"{k} = {json.dumps(v)}" for k, v in table.items()]  # JSON scalars are TOML
+    return "\n".join(lines) + "\n"
+
+
 @pytest.fixture(scope="session")
 def daemon(tmp_path_factory):
     work = tmp_path_factory.mktemp("mocapd")
     sink_port, pose_port = free_port(), free_port()
     config = work / "mocapd.toml"
-    config.write_text(
-        f'[log]\nlevel = "info"\nstats_interval_s = 0\n'
-        f'[ingest]\nsink_listen = "127.0.0.1:{sink_port}"\n'
-        f'[pipeline]\nworkers = 2\nmax_subjects = 4\n'
-        f'[skeleton]\ncalibration_dir = "{work}"\n'
-        f'[serve]\npose_listen = "127.0.0.1:{pose_port}"\n'
-        f'[control]\ntoken = "{TOKEN}"\n'
-        f'[outputs]\nbvh_listen = "127.0.0.1:{free_port()}"\nrecord_dir = "{work}"\n'
-        f'[http]\nlisten = "127.0.0.1:{free_port()}"\n')
+    config.write_text(daemon_config(work, sink_port, pose_port))
     with open(work / "mocapd.log", "wb") as log:
         process = subprocess.Popen([binary("MOCAPD_BIN"), "--config", str(config)], cwd=work, stdout=log,
                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
