@@ -109,7 +109,7 @@ public:
         };
         hal.uplink_close = [](void* u) { static_cast<SimSink*>(u)->uplink_.close(); };
         hal.can_rx_lost = [](void* u) { return static_cast<SimSink*>(u)->rx_overflows_; };
-        first_counter_ = config.first_counter;
+        config.first_counter = o.first_counter;
         started_ = sink_node_init(core_.get(), &hal, &config) == MW_OK;
         return started_;
     }
@@ -164,27 +164,23 @@ private:
         pending_[i] = {release_us, frame};
     }
 
-    BodyPose& pose_at(std::int64_t k) { return poses_[static_cast<std::size_t>(((k % 3) + 3) % 3)]; }
-
-    void evaluate(std::int64_t k) {
-        shared_.motion->pose(static_cast<double>(k) * shared_.dt_s, heading_rad_, origin_m_, pose_at(k));
-    }
-
+    // The motion is sampled at the SYNC's real send time, not at counter × period: when the
+    // loop runs late the sink core skips instants (the counter does not), and the daemon
+    // integrates with the SYNC timestamps, so motion and time must agree or every filter
+    // drifts. prev/next are one nominal period away for the rate and linear acceleration.
     void on_sync(std::uint32_t counter) {
         const std::uint64_t now = realtime_us();
-        const auto k = static_cast<std::int64_t>(static_cast<std::uint32_t>(counter - first_counter_));
-        if (k == last_k_ + 1 && last_k_ >= 0) {
-            evaluate(k + 1);
-        } else {
-            evaluate(k - 1);
-            evaluate(k);
-            evaluate(k + 1);
+        if (!motion_started_) {
+            motion_started_ = true;
+            start_us_ = now;
         }
-        last_k_ = k;
-        const BodyPose& prev = pose_at(k - 1);
-        const BodyPose& cur = pose_at(k);
-        const BodyPose& next = pose_at(k + 1);
-        const double t_s = static_cast<double>(k) * shared_.dt_s;
+        const double t_s = static_cast<double>(now - start_us_) * 1e-6;
+        shared_.motion->pose(t_s - shared_.dt_s, heading_rad_, origin_m_, prev_);
+        shared_.motion->pose(t_s, heading_rad_, origin_m_, cur_);
+        shared_.motion->pose(t_s + shared_.dt_s, heading_rad_, origin_m_, next_);
+        const BodyPose& prev = prev_;
+        const BodyPose& cur = cur_;
+        const BodyPose& next = next_;
         const double inv_dt2 = 1.0 / (shared_.dt_s * shared_.dt_s);
         const StreamCommandOptions& o = *shared_.options;
         mw_can_frame frames[3];
@@ -221,13 +217,12 @@ private:
     }
 
     void write_truth(std::uint64_t t_us, std::uint32_t counter, std::size_t j, const Quat& q_sensor) const {
-        const Quat& q = pose_at_const(last_k_).q_earth_segment[j];
+        const Quat& q = cur_.q_earth_segment[j];
         const auto& seg = shared_.motion->model().segments[j];
         std::fprintf(shared_.truth, "%llu,%d,%s,%d,%u,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n",
                      static_cast<unsigned long long>(t_us), subject_, seg.name.c_str(), seg.node_id, counter, q.w(), q.x(),
                      q.y(), q.z(), q_sensor.w(), q_sensor.x(), q_sensor.y(), q_sensor.z());
     }
-    const BodyPose& pose_at_const(std::int64_t k) const { return poses_[static_cast<std::size_t>(((k % 3) + 3) % 3)]; }
 
     const Shared& shared_;
     int subject_;
@@ -236,9 +231,9 @@ private:
     double heading_rad_ = 0.0;
     Vec3 origin_m_ = Vec3::Zero();
     std::vector<SimulatedNode> nodes_;
-    std::array<BodyPose, 3> poses_{};
-    std::int64_t last_k_ = -1;
-    std::uint32_t first_counter_ = 0;
+    BodyPose prev_{}, cur_{}, next_{};
+    bool motion_started_ = false;
+    std::uint64_t start_us_ = 0;
     std::vector<PendingFrame> pending_;
     std::size_t head_ = 0, count_ = 0;
     std::uint32_t rx_overflows_ = 0;
@@ -328,6 +323,8 @@ CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
         ->capture_default_str();
     cmd->add_option("--noise-scale", o.noise_scale, "Multiply every sensor noise sigma and the gyro bias (0 = ideal)")
         ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    cmd->add_option("--first-counter", o.first_counter, "SYNC counter of the first instant (test the 2^32 wrap)")
         ->capture_default_str();
     cmd->add_flag("--sink-rate-stats", o.sink_rate_stats, "Print one JSON line of sent/dropped counts at the end");
     cmd->add_flag("--early-close,!--no-early-close", o.early_close,

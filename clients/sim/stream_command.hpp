@@ -5,7 +5,7 @@
 //                    [--mode raw|quat] [--duration S] [--motion walk|FILE.bvh] [--loss P]
 //                    [--seed N] [--truth FILE.csv] [--dropout NODE:START_S:END_S]...
 //                    [--jitter-us J] [--calibrate-s S] [--noise-scale X] [--sink-rate-stats]
-//                    [--no-early-close]
+//                    [--no-early-close] [--first-counter C]
 //
 // Each subject k (1..K) is one sink_node (the real sink core, firmware/sink_node) with sink
 // id k and its own TCP connection, and N sensor nodes on the first N segments of the default
@@ -35,6 +35,8 @@
 //
 // --no-early-close makes the sinks close a packet only at the next SYNC (sink_node.h), to
 // measure what the early close saves.
+// --first-counter starts every sink's SYNC counter at C (e.g. near 2^32 to cross the wrap);
+// the motion and the truth still start at the first instant.
 // --sink-rate-stats prints one JSON line at the end on stdout (see run_stream_command).
 // Exit code: 0, or 1 if a subject never connected, 2 for bad arguments.
 #pragma once
@@ -64,6 +66,7 @@ struct StreamCommandOptions {
     double noise_scale = 1.0;
     bool sink_rate_stats = false;
     bool early_close = true;  ///< the sink core's early batch close (--no-early-close: off)
+    std::uint32_t first_counter = 0;  ///< SYNC counter of the first instant (--first-counter)
 };
 
 /// A parsed --dropout.

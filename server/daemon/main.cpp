@@ -1,5 +1,6 @@
 // mocapd — entry point: command line, config, logging, then the Daemon.
 #include <CLI/CLI.hpp>
+#include <google/protobuf/stubs/logging.h>
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
@@ -8,6 +9,22 @@
 #include "daemon/config.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/replay.hpp"
+
+namespace {
+
+// libprotobuf reports malformed client input (e.g. invalid UTF-8 in a string field) by
+// printing an ERROR line itself, bypassing the sessions' log limiter: a client reconnecting
+// in a loop could flood the log. The session already counts and closes such clients, so
+// protobuf's own lines go to debug level.
+void protobuf_log(google::protobuf::LogLevel level, const char* file, int line, const std::string& message) {
+    if (level >= google::protobuf::LOGLEVEL_FATAL) {
+        spdlog::critical("protobuf {}:{}: {}", file, line, message);
+    } else {
+        spdlog::debug("protobuf {}:{}: {}", file, line, message);
+    }
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
     using namespace mocap::daemon;
@@ -60,6 +77,7 @@ int main(int argc, char** argv) {
     // Logs go to stdout (journald under systemd): flush every line so nothing is held back
     // when the daemon is killed. Log lines are rare (counted events are logged once).
     spdlog::flush_on(spdlog::level::trace);
+    google::protobuf::SetLogHandler(&protobuf_log);
     if (!replay.files.empty()) {
         for (const std::string& spec : calibrate_at) {
             ReplayCalibration c;

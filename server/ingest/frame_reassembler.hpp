@@ -124,7 +124,6 @@ private:
     bool have_reference_ = false;
     std::uint32_t last_sync32_ = 0;
     std::uint64_t last_sync64_ = 0;
-    std::uint64_t epoch_ = 0;  // multiples of 2^32 added to 32-bit counters
     std::array<std::pair<std::uint64_t, std::int64_t>, kSyncTimes> sync_times_{};
 };
 

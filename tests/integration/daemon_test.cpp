@@ -66,7 +66,9 @@ protected:
             << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\nheading = \"earth\"\n"
             << "facing = \"given\"\nfacing_heading_deg = 0.0\n"
             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 16\n"
-            << "[control]\ntoken = \"" << kToken << "\"\n";
+            << "[control]\ntoken = \"" << kToken << "\"\n"
+            // Every listening port is a free one: ctest runs daemons in parallel.
+            << "[outputs]\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n";
         config_ = dir_.file("mocapd.toml");
         write_file(config_, cfg.str());
         daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", config_},
