@@ -23,7 +23,7 @@ PACKAGES=(
   clang-14 libclang-rt-14-dev
   assimp-utils qemu-system-x86 busybox-static cpio kmod
   blender nodejs
-  python3-protobuf python3-numpy python3-matplotlib python3-pytest
+  chromium
 )
 
 log() { printf '\033[1m[setup]\033[0m %s\n' "$*" >&2; }
@@ -46,12 +46,18 @@ deps() {
   npm_deps
 }
 
-# three.js (BVHLoader) for the BVH consumer tests: npm registry, pinned in package-lock.json.
+# npm registry, pinned in each package-lock.json: three.js (BVHLoader) for the BVH consumer
+# tests; three.js for the viewer (embedded into mocapd at build time); playwright-core for
+# the viewer test (it drives Debian's chromium and never downloads a browser).
 npm_deps() {
-  local dir="$ROOT/tests/integration/bvh_consumers"
-  if [[ -d "$dir/node_modules/three" ]] || ! command -v npm >/dev/null; then return; fi
-  log "npm: installing three.js for the BVH consumer tests"
-  (cd "$dir" && npm ci --no-audit --no-fund --silent) || log "npm install failed: the three.js BVH test will fail"
+  if ! command -v npm >/dev/null; then return; fi
+  local pair dir
+  for pair in tests/integration/bvh_consumers:three clients/viewer:three tests/integration/viewer:playwright-core; do
+    dir="$ROOT/${pair%%:*}"
+    if [[ -d "$dir/node_modules/${pair##*:}" ]]; then continue; fi
+    log "npm: installing ${pair##*:} in ${pair%%:*}"
+    (cd "$dir" && npm ci --no-audit --no-fund --silent) || log "npm install failed in ${pair%%:*}: its tests will fail"
+  done
 }
 
 build() {

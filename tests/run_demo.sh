@@ -32,6 +32,12 @@ pids+=($!)
 wait_port 7001
 wait_port 7000
 echo "mocapd is running (log: $work/mocapd.log); poses on 127.0.0.1:7001, sinks on :7000" >&2
+# The web endpoint binds before the sink port, so it is up by now (if 8080 was free).
+if (exec 3<>"/dev/tcp/127.0.0.1/8080") 2>/dev/null; then
+  echo "live 3D viewer: http://127.0.0.1:8080/  (metrics: http://127.0.0.1:8080/metrics, health: /healthz)" >&2
+else
+  echo "the viewer's port 8080 did not open (in use?); see $work/mocapd.log" >&2
+fi
 "$bin_sim" stream --connect 127.0.0.1:7000 --subjects 1 --nodes 15 --rate 100 --motion walk \
   --duration 86400 >"$work/sim.log" 2>&1 &
 pids+=($!)

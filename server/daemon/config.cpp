@@ -303,6 +303,16 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
     }
 }
 
+void read_http(TableReader& r, DaemonConfig& c) {
+    if (const auto* n = r.take("enabled")) {
+        if (!n->is_boolean()) r.fail("enabled", n, "expected true or false");
+        c.http_enabled = n->value<bool>().value();
+    }
+    r.read("listen", c.http_listen);
+    r.read("max_clients", c.http_max_clients, 1, 10000);
+    r.read("ws_queue_frames", c.http_ws_queue_frames, 1, 4096);
+}
+
 }  // namespace
 
 std::string Endpoint::str() const {
@@ -350,6 +360,7 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
             {"log", read_log},           {"ingest", read_ingest}, {"pipeline", read_pipeline},
             {"filter", read_filter},     {"skeleton", read_skeleton}, {"serve", read_serve},
             {"control", read_control},   {"outputs", read_outputs},
+            {"http", read_http},
         };
         for (const auto& [name, fn] : sections) {
             if (const auto* t = top.sub_table(name)) {

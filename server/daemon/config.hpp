@@ -91,6 +91,11 @@ struct DaemonConfig {
     double raw_rotate_mb = 256.0;            ///< 0 = never by size
     double raw_rotate_s = 3600.0;            ///< 0 = never by time
     std::uint32_t raw_ring_capacity = 16384;
+    // [http] (docs/viewer.md): viewer page, pose WebSocket, /metrics, /healthz
+    bool http_enabled = true;
+    Endpoint http_listen{"0.0.0.0", 8080};
+    std::uint32_t http_max_clients = 64;      ///< HTTP + WebSocket connections at once
+    std::uint32_t http_ws_queue_frames = 16;  ///< per-WebSocket frame queue (oldest dropped)
 
     bool operator==(const DaemonConfig&) const = default;
 };

@@ -166,6 +166,26 @@ bool Daemon::start(std::string* error) {
     }
     // --- end outputs ---
     server_ = std::make_unique<serve::PoseServer>(sc, handlers);
+    // --- web endpoint (docs/viewer.md) ---
+    if (config_.http_enabled) {
+        serve::HttpServerConfig hc;
+        hc.bind_address = config_.http_listen.host;
+        hc.port = config_.http_listen.port;
+        hc.max_clients = config_.http_max_clients;
+        hc.ws_queue_frames = config_.http_ws_queue_frames;
+        hc.control_token = config_.control_token;
+        hc.control_loopback_only = config_.control_loopback_only;
+        hc.wall_clock_us = [this] { return clock_.now_us(); };
+        serve::HttpDescription hd;
+        for (const auto& seg : model_.segments) hd.segments.push_back({seg.name, seg.parent, {seg.end_m.x(), seg.end_m.y(), seg.end_m.z()}});
+        hd.subjects = subject_ids;
+        serve::HttpHandlers hh;
+        hh.control = handlers;
+        hh.metrics = [this] { return metrics(); };
+        hh.health = [this] { return health(); };
+        http_server_ = std::make_unique<serve::HttpServer>(std::move(hc), std::move(hd), std::move(hh));
+    }
+    // --- end web endpoint ---
 
     PoseSolverOptions so = pose_solver_options_from_config(config_);  // shared with replay
     so.max_subjects = *std::max_element(subject_ids.begin(), subject_ids.end());
@@ -173,6 +193,7 @@ bool Daemon::start(std::string* error) {
         server_->publish(f, p);
         if (bvh_server_) bvh_server_->publish(f, p);
         bvh_recorder_->publish(f, p);
+        if (http_server_) http_server_->publish(f, p);
     });
     for (const auto& line : solver_->load_calibrations()) spdlog::info("{}", line);
 
@@ -212,6 +233,16 @@ bool Daemon::start(std::string* error) {
     pool_->start();
     if (!server_->start(*error)) return false;
     if (bvh_server_ && !bvh_server_->start(*error)) return false;
+    if (http_server_) {
+        // The web endpoint is an aid, not the pose service: a taken port is logged, not fatal.
+        std::string http_error;
+        if (!http_server_->start(http_error)) {
+            spdlog::error("{}; the viewer, /metrics and /healthz are off", http_error);
+            http_server_.reset();
+        }
+    }
+    start_us_ = clock_.now_us();
+    assembler_alive_us_ = start_us_;
     if (raw_recorder_ && !raw_recorder_->start(error)) return false;
     if (!sink_listener_->start(error)) return false;
     for (auto& r : can_readers_) {
@@ -237,6 +268,8 @@ bool Daemon::start(std::string* error) {
 void Daemon::route(const SegmentSample& in) {
     if (in.times.sink_send_us != 0) ingest_latency_.record(in.times.received_us - in.times.sink_send_us);
     if (raw_recorder_) raw_recorder_->push(in);  // every node, before the model filters it
+    if (first_sample_us_.load(std::memory_order_relaxed) == 0) first_sample_us_.store(in.times.received_us);
+    last_sample_us_.store(in.times.received_us, std::memory_order_relaxed);
     const std::int16_t seg = in.node_id < node_to_segment_.size() ? node_to_segment_[in.node_id] : -1;
     if (seg < 0) {
         unknown_nodes_.add();
@@ -270,6 +303,7 @@ void Daemon::assembler_loop() {
         pool_->wait_for_output(wait);
         pool_->drain([this](const PoseUpdate& u) { assemblers_->on_pose(u, clock_.now_us()); });
         assemblers_->advance(clock_.now_us());
+        assembler_alive_us_.store(clock_.now_us(), std::memory_order_relaxed);
         if (watchdog_usec_ != 0) {
             const auto t = std::chrono::steady_clock::now();
             if (t - last_ping > std::chrono::microseconds(watchdog_usec_ / 4)) {
@@ -304,6 +338,49 @@ serve::StatsSnapshot Daemon::stats() const {
     if (assemblers_) s.latencies.push_back(summarize("assembly", assemblers_->assembly_snapshot()));
     return s;
 }
+
+// --- web endpoint (docs/viewer.md) ---
+serve::MetricsSnapshot Daemon::metrics() const {
+    serve::MetricsSnapshot m;
+    m.counters = stats().counters;
+    for (auto& c : server_->counter_snapshot()) m.counters.push_back(std::move(c));
+    auto gauge = [&m](std::string name, std::string help, double value) {
+        m.gauges.push_back({std::move(name), std::move(help), value});
+    };
+    gauge("pose_clients", "Protobuf pose clients connected now", static_cast<double>(server_->client_count()));
+    if (bvh_server_) gauge("bvh_live_clients", "Live BVH clients connected now", static_cast<double>(bvh_server_->client_count()));
+    if (sink_listener_) {
+        const auto& g = sink_listener_->counters();
+        const auto opened = g.value("connections_accepted").value_or(0);
+        const auto closed = g.value("connections_closed").value_or(0);
+        gauge("sinks_connected", "Sink TCP connections open now", static_cast<double>(opened - std::min(opened, closed)));
+    }
+    gauge("subjects_configured", "Subjects the pipeline was built for", static_cast<double>(assemblers_ ? assemblers_->subject_count() : 0));
+    gauge("start_time_seconds", "Start of mocapd, Unix time in seconds", static_cast<double>(start_us_) * 1e-6);
+    m.latencies.push_back({"ingest", ingest_latency_.snapshot()});
+    if (pool_) {
+        m.latencies.push_back({"queue_wait", pool_->queue_wait_snapshot()});
+        m.latencies.push_back({"filter", pool_->filter_snapshot()});
+    }
+    if (assemblers_) m.latencies.push_back({"assembly", assemblers_->assembly_snapshot()});
+    return m;
+}
+
+// Alive: the assembler loop turns (it wakes at least every 50 ms), the ingest thread's
+// io_context runs, and samples that arrive turn into frames within 2 s.
+serve::HealthStatus Daemon::health() const {
+    constexpr std::int64_t kWindowUs = 2'000'000;
+    const std::int64_t now = clock_.now_us();
+    if (stopping_.load()) return {false, "stopping"};
+    if (now - assembler_alive_us_.load(std::memory_order_relaxed) > kWindowUs) return {false, "assembler thread stalled"};
+    if (ingest_io_.stopped()) return {false, "ingest thread stopped"};
+    const std::int64_t last_sample = last_sample_us_.load(std::memory_order_relaxed);
+    if (last_sample == 0) return {true, "no sink data yet"};
+    const std::int64_t last_frame = std::max(http_server_ ? http_server_->last_frame_us() : 0, first_sample_us_.load(std::memory_order_relaxed));
+    if (now - last_sample <= kWindowUs && now - last_frame > kWindowUs) return {false, "samples arrive but no frame was assembled for 2 s"};
+    return {true, "ok"};
+}
+// --- end web endpoint ---
 
 void Daemon::log_stats() {
     const auto s = stats();
@@ -405,6 +482,7 @@ void Daemon::shutdown() {
     if (assembler_thread_.joinable()) assembler_thread_.join();
     if (server_) server_->stop();
     if (bvh_server_) bvh_server_->stop();
+    if (http_server_) http_server_->stop();
     if (bvh_recorder_ && bvh_recorder_->recording()) {
         std::string ignored;
         bvh_recorder_->stop(&ignored);  // patches the frame count

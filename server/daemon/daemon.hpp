@@ -35,6 +35,8 @@
 #include "serve/bvh_recorder.hpp"
 #include "serve/bvh_server.hpp"
 #include "serve/raw_recorder.hpp"
+// Web endpoint (docs/viewer.md): viewer + WebSocket poses, /metrics, /healthz.
+#include "serve/http_server.hpp"
 #include "skeleton/body_model.hpp"
 
 namespace mocap::daemon {
@@ -64,6 +66,10 @@ public:
     [[nodiscard]] std::uint16_t pose_port() const { return server_ ? server_->port() : 0; }
     [[nodiscard]] std::uint16_t bvh_port() const { return bvh_server_ ? bvh_server_->port() : 0; }
     [[nodiscard]] serve::StatsSnapshot stats() const;
+    // Web endpoint: what /metrics and /healthz show (any thread).
+    [[nodiscard]] std::uint16_t http_port() const { return http_server_ ? http_server_->port() : 0; }
+    [[nodiscard]] serve::MetricsSnapshot metrics() const;
+    [[nodiscard]] serve::HealthStatus health() const;
 
 private:
     void route(const SegmentSample& sample);
@@ -90,6 +96,12 @@ private:
     std::unique_ptr<serve::BvhServer> bvh_server_;
     std::unique_ptr<serve::BvhRecorder> bvh_recorder_;
     std::unique_ptr<serve::RawRecorder> raw_recorder_;
+    // Web endpoint; liveness stamps (wall clock µs) read by health().
+    std::unique_ptr<serve::HttpServer> http_server_;
+    std::atomic<std::int64_t> assembler_alive_us_{0};  // every assembler loop pass
+    std::atomic<std::int64_t> first_sample_us_{0};     // ingest thread
+    std::atomic<std::int64_t> last_sample_us_{0};      // ingest thread
+    std::int64_t start_us_ = 0;
 
     asio::io_context ingest_io_;
     std::unique_ptr<ingest::SinkListener> sink_listener_;

@@ -176,5 +176,35 @@ TEST(ConfigOutputs, ErrorsNameKeyAndLine) {
     EXPECT_NE(err.find("outputs.bvh_frame_time_s"), std::string::npos) << err;
 }
 
+TEST(Config, HttpSectionDefaultsValuesAndErrors) {
+    std::string err;
+    const auto d = parse_config(embedded_default_config(), "mocapd.toml", &err);
+    ASSERT_TRUE(d) << err;
+    const DaemonConfig s;
+    EXPECT_TRUE(d->http_enabled);
+    EXPECT_EQ(d->http_listen, (Endpoint{"0.0.0.0", 8080}));
+    EXPECT_EQ(d->http_listen, s.http_listen);
+    EXPECT_EQ(d->http_max_clients, s.http_max_clients);
+    EXPECT_EQ(d->http_ws_queue_frames, s.http_ws_queue_frames);
+
+    const auto c = parse("[http]\nenabled = false\nlisten = \"127.0.0.1:9090\"\nmax_clients = 3\n"
+                         "ws_queue_frames = 2\n",
+                         &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_FALSE(c->http_enabled);
+    EXPECT_EQ(c->http_listen, (Endpoint{"127.0.0.1", 9090}));
+    EXPECT_EQ(c->http_max_clients, 3u);
+    EXPECT_EQ(c->http_ws_queue_frames, 2u);
+
+    EXPECT_FALSE(parse("[http]\nenabled = 1\n", &err));
+    EXPECT_NE(err.find("test.toml:2: http.enabled: expected true or false"), std::string::npos) << err;
+    EXPECT_FALSE(parse("[http]\n\nlisten = \"8080\"\n", &err));
+    EXPECT_NE(err.find("test.toml:3: http.listen:"), std::string::npos) << err;
+    EXPECT_FALSE(parse("[http]\nws_queue_frames = 0\n", &err));
+    EXPECT_NE(err.find("test.toml:2: http.ws_queue_frames: must be between"), std::string::npos) << err;
+    EXPECT_FALSE(parse("[http]\nport = 8080\n", &err));
+    EXPECT_NE(err.find("test.toml:2: http.port: unknown key"), std::string::npos) << err;
+}
+
 }  // namespace
 }  // namespace mocap::daemon

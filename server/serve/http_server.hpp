@@ -1,0 +1,192 @@
+// http_server.hpp — mocapd's web endpoint (Boost.Beast HTTP/1.1 + WebSocket, default
+// port 8080; docs/viewer.md):
+//
+//   GET  /, /index.html, /viewer.js, /three/...   the live 3D viewer (embedded files)
+//   GET  /metrics    Prometheus text format 0.0.4 (prometheus_text.hpp)
+//   GET  /healthz    200 "ok" while HttpHandlers::health says so, else 503 + reason
+//   GET  /ws?subject=N   WebSocket: JSON poses of subject N (0 or absent = the first
+//                        subject that delivers a frame); see "WebSocket messages"
+//   POST /api/calibrate?subject=N&pose=t|n, /api/record/start, /api/record/stop
+//        control: header "X-Mocap-Token: <token>" compared in constant time with the
+//        [control] token; refused when no token is configured, and from non-loopback
+//        peers when loopback_only. A custom header cannot be sent cross-site without a
+//        CORS preflight, which this server never grants. Reply: JSON {"ok":..,"error":..}.
+//
+// WebSocket messages (text, one JSON object each; numbers in SI units, wall-clock µs):
+//   {"type":"hello","subject":N,"subjects":[..],"world_frame":"ENU","queue_frames":Q,
+//    "control":{"enabled":b,"loopback_only":b},
+//    "segments":[{"name":"pelvis","parent":-1,"end_m":[x,y,z]},..]}        once, first
+//   {"type":"frame","subject":N,"sync":S,"sample_us":T,
+//    "stamps":{"sink_send_us":..,"received_us":..,"filtered_us":..,"assembled_us":..,
+//              "encoded_us":..},
+//    "pos":[x0,y0,z0,x1,..],      segment origins (joint with the parent), world, metres
+//    "q":[w0,x0,y0,z0,w1,..],     world-from-segment orientations
+//    "flags":[f0,f1,..]}          SegmentFlags bits (1 stale, 2 never seen, 4 calibrated)
+//   {"type":"drops","dropped":k,"dropped_total":n}    before the next frame after drops
+// A segment's distal tip is pos_i + rotate(q_i, end_m_i). Client messages are read and
+// ignored (counted); the subject is chosen by reconnecting.
+//
+// Lag: each WebSocket has a queue of ws_queue_frames encoded frames; when it is full the
+// OLDEST is dropped (counted), so a slow browser sees gaps, never stalls the pipeline.
+// One write in flight per connection. Frames are encoded once, shared by every client.
+//
+// Threads: one serve thread (own io_context) runs the acceptor, every HTTP and WebSocket
+// session, and the metrics/health/control callbacks. publish() may be called from any
+// thread (the assembler): it encodes only while a WebSocket is open and hands the frame
+// over through a mutex-guarded backlog of publish_backlog_frames (beyond: dropped,
+// counted). Ownership: the daemon owns the server; stop() or the destructor closes all.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "core/asio.hpp"
+#include "core/frame.hpp"
+#include "serve/pose_frame.hpp"
+#include "serve/prometheus_text.hpp"
+#include "serve/serve_config.hpp"
+
+namespace mocap::serve {
+
+struct HttpServerConfig {
+    std::string bind_address = "0.0.0.0";
+    std::uint16_t port = 8080;               ///< 0 = any free port (tests)
+    std::size_t max_clients = 64;            ///< HTTP + WebSocket connections at once
+    std::size_t ws_queue_frames = 16;        ///< per WebSocket; oldest dropped beyond it
+    std::size_t publish_backlog_frames = 1024;
+    std::uint32_t idle_timeout_s = 30;       ///< an HTTP connection idle this long is closed
+    std::string control_token;               ///< empty = control refused
+    bool control_loopback_only = true;
+    /// Wall clock (CLOCK_REALTIME µs) for encoded_us; empty = system_clock.
+    std::function<std::int64_t()> wall_clock_us;
+};
+
+struct HttpSegment {
+    std::string name;
+    int parent = -1;
+    std::array<double, 3> end_m{};  ///< distal tip in the segment's frame
+};
+
+/// What the viewer needs to draw frames: segment order of the frames, subjects.
+struct HttpDescription {
+    std::vector<HttpSegment> segments;
+    std::vector<std::uint32_t> subjects;
+    std::string world_frame = "ENU";
+};
+
+struct HealthStatus {
+    bool ok = false;
+    std::string detail;  ///< why not (shown in the 503 body), or a short state
+};
+
+/// Called on the serve thread; must return quickly and be safe from any thread.
+struct HttpHandlers {
+    ControlHandlers control;                  ///< calibrate, start/stop_recording used
+    std::function<MetricsSnapshot()> metrics;  ///< daemon counters, gauges, latencies
+    std::function<HealthStatus()> health;      ///< empty = always healthy
+};
+
+struct HttpServerCounters {
+    using C = std::atomic<std::uint64_t>;
+    C connections_accepted{0};
+    C connections_rejected_full{0};
+    C connections_closed{0};
+    C requests{0};
+    C bad_requests{0};  ///< unparseable, unknown path or method (4xx)
+    C metrics_scrapes{0};
+    C health_checks{0};
+    C ws_connections{0};
+    C ws_frames_encoded{0};
+    C ws_frames_sent{0};
+    C ws_frames_dropped{0};   ///< oldest frames dropped from lagging browsers
+    C ws_backlog_dropped{0};  ///< the serve thread fell behind publish()
+    C ws_client_messages{0};  ///< messages browsers sent (ignored)
+    C write_errors{0};
+    C control_ok{0};
+    C control_failed{0};
+    C control_refused_disabled{0};
+    C control_refused_not_loopback{0};
+    C control_refused_bad_token{0};  ///< missing or wrong token
+    /// Every counter as "http.<name>".
+    [[nodiscard]] std::vector<NamedCounter> snapshot() const;
+};
+
+class HttpServer {
+public:
+    HttpServer(HttpServerConfig config, HttpDescription description, HttpHandlers handlers);
+    ~HttpServer();
+    HttpServer(const HttpServer&) = delete;
+    HttpServer& operator=(const HttpServer&) = delete;
+
+    /// Binds and starts the serve thread. Returns false and sets `error` on failure.
+    [[nodiscard]] bool start(std::string& error);
+    /// Closes every connection and joins the thread. Idempotent.
+    void stop();
+
+    /// Any thread; never blocks on a client. Also records the subject as active.
+    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+
+    [[nodiscard]] std::uint16_t port() const { return bound_port_.load(); }
+    [[nodiscard]] std::size_t client_count() const { return clients_.load(); }
+    [[nodiscard]] std::size_t ws_client_count() const { return ws_clients_.load(); }
+    [[nodiscard]] const HttpServerCounters& counters() const { return counters_; }
+    /// Subjects whose last frame is at most `window_us` old (wall clock); any thread.
+    [[nodiscard]] std::size_t active_subjects(std::int64_t window_us) const;
+    /// Wall-clock time of the newest published frame (0 = none yet); any thread.
+    [[nodiscard]] std::int64_t last_frame_us() const { return last_frame_us_.load(); }
+
+    class Session;  // http_server.cpp: base of the two below
+    class HttpSession;
+    class WsSession;
+
+private:
+    friend class HttpSession;
+    friend class WsSession;
+    struct Encoded {
+        std::uint32_t subject_id = 0;
+        std::shared_ptr<const std::string> json;
+    };
+    void do_accept();
+    void drain();
+    void on_closed(std::uint64_t id);
+    void on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& session);
+    std::string hello_json(std::uint32_t subject) const;
+    std::string metrics_text();
+    std::int64_t now_us() const { return config_.wall_clock_us(); }
+
+    HttpServerConfig config_;
+    HttpDescription description_;
+    HttpHandlers handlers_;
+    HttpServerCounters counters_;
+
+    asio::io_context io_{1};
+    std::unique_ptr<asio::ip::tcp::acceptor> acceptor_;
+    std::unordered_map<std::uint64_t, std::shared_ptr<Session>> sessions_;  // serve thread
+    std::unordered_map<std::uint64_t, std::shared_ptr<WsSession>> ws_sessions_;  // serve thread
+    std::thread thread_;
+    std::uint64_t next_id_ = 1;  // serve thread
+
+    std::mutex backlog_mutex_;
+    std::vector<Encoded> backlog_;   // guarded; reserved at construction
+    std::vector<Encoded> draining_;  // serve thread
+
+    mutable std::mutex subjects_mutex_;
+    std::vector<std::pair<std::uint32_t, std::int64_t>> subject_last_us_;  // guarded
+
+    std::atomic<std::int64_t> last_frame_us_{0};
+    std::atomic<std::size_t> clients_{0};
+    std::atomic<std::size_t> ws_clients_{0};
+    std::atomic<std::uint16_t> bound_port_{0};
+    std::atomic<bool> running_{false};
+};
+
+}  // namespace mocap::serve

@@ -1,0 +1,198 @@
+// The web endpoint on loopback (http_server.hpp): embedded viewer files, /metrics,
+// /healthz, control with token and refusals, WebSocket poses and a stalled browser.
+#include "serve/http_server.hpp"
+
+#include <gtest/gtest.h>
+
+#include <thread>
+
+#include "http_test_client.hpp"
+
+namespace mocap::serve {
+namespace {
+
+using namespace std::chrono_literals;
+using boost::beast::http::verb;
+using mocap::testing::http_request;
+using mocap::testing::WsTestClient;
+
+struct Fixture {
+    std::atomic<bool> healthy{true};
+    std::atomic<int> calibrations{0};
+    std::atomic<std::uint32_t> calibrated_subject{0};
+    std::unique_ptr<HttpServer> server;
+
+    explicit Fixture(std::string token, bool loopback_only = true, std::size_t queue = 4) {
+        HttpServerConfig c;
+        c.bind_address = "127.0.0.1";
+        c.port = 0;
+        c.ws_queue_frames = queue;
+        c.control_token = std::move(token);
+        c.control_loopback_only = loopback_only;
+        HttpDescription d;
+        d.segments = {{"pelvis", -1, {0, 0, 0.2}}, {"trunk", 0, {0, 0, 0.5}}};
+        d.subjects = {1, 2};
+        HttpHandlers h;
+        h.control.calibrate = [this](std::uint32_t subject, CalibrationPose) {
+            calibrations++;
+            calibrated_subject = subject;
+            return ControlResult::success();
+        };
+        h.control.start_recording = [](const std::string&) { return ControlResult::failure("disk full"); };
+        h.metrics = [] {
+            MetricsSnapshot m;
+            m.counters.push_back({"route.samples_routed", 42});
+            return m;
+        };
+        h.health = [this] { return HealthStatus{healthy.load(), healthy ? "ok" : "assembler thread stalled"}; };
+        server = std::make_unique<HttpServer>(c, d, h);
+        std::string err;
+        EXPECT_TRUE(server->start(err)) << err;
+    }
+    std::uint16_t port() const { return server->port(); }
+};
+
+SubjectFrame frame(std::uint32_t subject, std::uint64_t sync) {
+    SubjectFrame f;
+    f.subject_id = subject;
+    f.sync = sync;
+    f.segment_count = 2;
+    f.segments[1].flags = kSegmentStale;
+    f.times.sink_send_us = 1'000'000;
+    return f;
+}
+
+SkeletonPose pose(double x) {
+    SkeletonPose p;
+    p.segment_count = 2;
+    p.position_m[0] = {x, 0, 1};
+    p.position_m[1] = {x, 0, 1.2};
+    return p;
+}
+
+TEST(HttpServer, ServesEmbeddedViewer) {
+    Fixture f("");
+    const auto index = http_request(f.port(), "/");
+    EXPECT_EQ(index.status, 200u);
+    EXPECT_EQ(index.content_type, "text/html; charset=utf-8");
+    EXPECT_NE(index.body.find("importmap"), std::string::npos);
+    const auto js = http_request(f.port(), "/viewer.js");
+    EXPECT_EQ(js.status, 200u);
+    EXPECT_NE(js.body.find("OrbitControls"), std::string::npos);
+    const auto three = http_request(f.port(), "/three/three.module.js");
+    EXPECT_EQ(three.status, 200u) << "three.js not embedded: run npm ci in clients/viewer and reconfigure";
+    EXPECT_GT(three.body.size(), 500'000u);
+    EXPECT_EQ(http_request(f.port(), "/three/addons/controls/OrbitControls.js").status, 200u);
+    EXPECT_EQ(http_request(f.port(), "/nope").status, 404u);
+    EXPECT_EQ(http_request(f.port(), "/", verb::delete_).status, 405u);
+}
+
+TEST(HttpServer, MetricsAndHealth) {
+    Fixture f("");
+    const auto m = http_request(f.port(), "/metrics");
+    EXPECT_EQ(m.status, 200u);
+    EXPECT_EQ(m.content_type, "text/plain; version=0.0.4; charset=utf-8");
+    EXPECT_NE(m.body.find("mocapd_route_samples_routed_total 42\n"), std::string::npos) << m.body;
+    EXPECT_NE(m.body.find("# TYPE mocapd_http_requests_total counter\n"), std::string::npos) << m.body;
+    EXPECT_NE(m.body.find("# TYPE mocapd_http_ws_clients gauge\n"), std::string::npos);
+
+    auto h = http_request(f.port(), "/healthz");
+    EXPECT_EQ(h.status, 200u);
+    EXPECT_EQ(h.body, "ok\n");
+    f.healthy = false;
+    h = http_request(f.port(), "/healthz");
+    EXPECT_EQ(h.status, 503u);
+    EXPECT_EQ(h.body, "unhealthy: assembler thread stalled\n");
+}
+
+TEST(HttpServer, ControlNeedsTheToken) {
+    Fixture f("s3cret");
+    const std::map<std::string, std::string> good{{"X-Mocap-Token", "s3cret"}};
+    EXPECT_EQ(http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::post).status, 401u);
+    EXPECT_EQ(http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::post, {{"X-Mocap-Token", "s3cre"}}).status,
+              401u);
+    EXPECT_EQ(http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::get, good).status, 405u);
+    EXPECT_EQ(f.calibrations.load(), 0);
+    const auto ok = http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::post, good);
+    EXPECT_EQ(ok.status, 200u);
+    EXPECT_EQ(ok.body, "{\"ok\":true,\"error\":\"\"}\n");
+    EXPECT_EQ(f.calibrations.load(), 1);
+    EXPECT_EQ(f.calibrated_subject.load(), 2u);
+    EXPECT_EQ(http_request(f.port(), "/api/calibrate?subject=x", verb::post, good).status, 400u);
+    const auto failed = http_request(f.port(), "/api/record/start", verb::post, good);
+    EXPECT_EQ(failed.status, 409u);
+    EXPECT_EQ(failed.body, "{\"ok\":false,\"error\":\"disk full\"}\n");
+    EXPECT_EQ(http_request(f.port(), "/api/record/stop", verb::post, good).status, 501u);  // no handler
+    EXPECT_EQ(f.server->counters().control_refused_bad_token.load(), 2u);
+    EXPECT_EQ(f.server->counters().control_ok.load(), 1u);
+    EXPECT_EQ(f.server->counters().control_failed.load(), 1u);
+}
+
+TEST(HttpServer, ControlRefusedWithoutConfiguredToken) {
+    Fixture f("");
+    EXPECT_EQ(http_request(f.port(), "/api/record/stop", verb::post, {{"X-Mocap-Token", ""}}).status, 403u);
+    EXPECT_EQ(f.server->counters().control_refused_disabled.load(), 1u);
+}
+
+// Waits until `pred` holds or 5 s pass.
+template <typename Pred>
+bool eventually(Pred pred) {
+    for (int i = 0; i < 500 && !pred(); ++i) std::this_thread::sleep_for(10ms);
+    return pred();
+}
+
+TEST(HttpServer, WebSocketStreamsTheChosenSubject) {
+    Fixture f("");
+    WsTestClient ws;
+    ASSERT_TRUE(ws.connect(f.port(), "/ws?subject=2"));
+    const auto hello = ws.read();
+    ASSERT_TRUE(hello);
+    EXPECT_NE(hello->find("\"type\":\"hello\",\"subject\":2,\"subjects\":[1,2]"), std::string::npos) << *hello;
+    EXPECT_NE(hello->find("{\"name\":\"trunk\",\"parent\":0,\"end_m\":[0.0000,0.0000,0.5000]}"), std::string::npos)
+        << *hello;
+    ASSERT_TRUE(eventually([&] { return f.server->ws_client_count() == 1; }));
+    f.server->publish(frame(1, 10), pose(9.0));  // another subject: not sent
+    f.server->publish(frame(2, 11), pose(0.5));
+    const auto m = ws.read();
+    ASSERT_TRUE(m);
+    EXPECT_NE(m->find("\"type\":\"frame\",\"subject\":2,\"sync\":11,"), std::string::npos) << *m;
+    EXPECT_NE(m->find("\"sink_send_us\":1000000,"), std::string::npos) << *m;
+    EXPECT_NE(m->find("\"pos\":[0.5000,0.0000,1.0000,0.5000,0.0000,1.2000]"), std::string::npos) << *m;
+    EXPECT_NE(m->find("\"q\":[1.00000,0.00000,0.00000,0.00000,1.00000,"), std::string::npos) << *m;
+    EXPECT_NE(m->find("\"flags\":[2,1]}"), std::string::npos) << *m;  // never seen, stale
+    EXPECT_EQ(f.server->active_subjects(10'000'000), 2u);
+}
+
+TEST(HttpServer, StalledBrowserDropsOldestAndOthersKeepUp) {
+    Fixture f("", true, 4);
+    WsTestClient stalled, reader;
+    ASSERT_TRUE(stalled.connect(f.port(), "/ws?subject=1"));
+    ASSERT_TRUE(reader.connect(f.port(), "/ws?subject=1"));
+    ASSERT_TRUE(reader.read());  // hello
+    ASSERT_TRUE(eventually([&] { return f.server->ws_client_count() == 2; }));
+    // ~2 KB frames (32 segments): 12 MB fill the stalled client's kernel buffers, then
+    // its queue drops.
+    SubjectFrame big_frame = frame(1, 0);
+    big_frame.segment_count = kMaxSegments;
+    SkeletonPose big = pose(1.0);
+    big.segment_count = kMaxSegments;
+    constexpr int kFrames = 6000;
+    int received = 0;
+    for (int i = 0; i < kFrames; ++i) {
+        big_frame.sync = static_cast<std::uint64_t>(i);
+        f.server->publish(big_frame, big);
+        if (i % 10 == 9) {  // a browser that keeps up: reads what was sent so far
+            while (const auto m = reader.read(200ms)) {
+                if (m->find("\"type\":\"frame\"") != std::string::npos) ++received;
+                if (m->find("\"sync\":" + std::to_string(i) + ",") != std::string::npos) break;
+            }
+        }
+    }
+    EXPECT_GT(received, kFrames * 9 / 10) << "the reading browser must not suffer from the stalled one";
+    EXPECT_TRUE(eventually([&] { return f.server->counters().ws_frames_dropped.load() > 0; }))
+        << "the stalled browser's queue must drop its oldest frames";
+    EXPECT_EQ(f.server->counters().ws_backlog_dropped.load(), 0u);
+}
+
+}  // namespace
+}  // namespace mocap::serve
