@@ -230,6 +230,24 @@ record_dir = "{tmp}"
 """
 
 
+OPTIONAL_SECTIONS = {}  # mocapd path -> extra config text it accepts
+
+
+def optional_sections(mocapd, tmp):
+    """Ports the run does not use are switched off, if this mocapd has them: builds with
+    the web endpoint listen on 8080 by default, and two runs (or a running mocapd) would
+    collide. An older mocapd rejects the unknown section, so ask --check-config first."""
+    if mocapd not in OPTIONAL_SECTIONS:
+        text = ""
+        probe = os.path.join(tmp, "probe.toml")
+        with open(probe, "w") as f:
+            f.write("[http]\nenabled = false\n")
+        if subprocess.run([mocapd, "--check-config", probe], capture_output=True).returncode == 0:
+            text = "[http]\nenabled = false\n"
+        OPTIONAL_SECTIONS[mocapd] = text
+    return OPTIONAL_SECTIONS[mocapd]
+
+
 def stats(client_bin, pose_port):
     r = subprocess.run([client_bin, "--connect", f"127.0.0.1:{pose_port}", "stats", "--json"],
                        capture_output=True, text=True, timeout=20)
@@ -262,7 +280,7 @@ def run_once(bins, spec, log_dir):
     sink_port, pose_port = free_port(), free_port()
     cfg = os.path.join(tmp, "mocapd.toml")
     with open(cfg, "w") as f:
-        f.write(daemon_config(sink_port, pose_port, tmp, spec))
+        f.write(daemon_config(sink_port, pose_port, tmp, spec) + optional_sections(bins["mocapd"], tmp))
     log = open(os.path.join(log_dir, f"{spec['name']}.mocapd.log"), "w")
     daemon = subprocess.Popen([bins["mocapd"], "--config", cfg], stdout=log, stderr=subprocess.STDOUT,
                               preexec_fn=child_setup)
