@@ -238,6 +238,23 @@ def render(args, names, available, scenarios, seeds, table, conv, study, runs):
              "their first attitude from the first sample(s)." % ("; ".join(starts) if starts else "No filter has an "
                                                                "initial-quaternion parameter"))
     L.append("")
+    L.append("**Summary** (median total RMSE after %g s):" % SKIP_S)
+    L.append("")
+    default = names[0]  # mocap-filter --list puts the product default first
+    for sc in scenarios:
+        tot = {n: statistics.median([r["rmse_total_deg"] for r in table[(sc, n)]]) for n in names}
+        best = min(names, key=lambda n: tot[n])
+        line = "- `%s`: best `%s` %.1f°; default `%s` %.1f°" % (sc, best, tot[best], default, tot[default])
+        if "csmo" in tot and default != "csmo":
+            line += " (%s CSMO's %.1f°)" % ("better than" if tot[default] < tot["csmo"] else "not better than",
+                                            tot["csmo"])
+        if sc == "fourati" and study:
+            at_truth = [rs for st, f, n, rs in study if st == "the truth" and f == OWN_DIP and n.startswith("0.4")]
+            if at_truth:
+                line += "; CSMO started at the truth instead of its default identity: %.1f°" % statistics.median(
+                    [r["rmse_total_deg"] for r in at_truth[0]])
+        L.append(line + ".")
+    L.append("")
     for sc in scenarios:
         L.append("## `%s`" % sc)
         L.append("")
