@@ -377,6 +377,8 @@ def render_study(study, seeds):
                 (" The paper's Euler errors around 3° are consistent with a magnetometer about four times quieter "
                  "than Table II states (÷ 4: %s)." % rpy(q4)) if worst_q4 <= 4.0 else ""))
     L.append("")
+    L.append(FOURATI_EXPLANATION)
+    L.append("")
     return L
 
 
@@ -417,15 +419,17 @@ by 39° (direction from the seed) and grows by 10%, and the vertical field weake
 50 → ~48.0 µT, dip 60° → ~55.0°). A filter that trusts the magnetometer follows the 39°.""",
 }
 
-FOURATI_EXPLANATION = """**Why heading suffers.** Table II's magnetometer noise is 0.4 G per axis on a 0.5 G field at 60°
-inclination, whose horizontal part — the only part that carries heading — is 0.5 · cos 60° =
-0.25 G. One sample's heading is therefore off by about atan(0.4 / 0.25) ≈ 58° (1σ): almost
-random. The accelerometer's 0.4 m/s² on 9.81 m/s² tilts one sample by only atan(0.4 / 9.81) ≈
-2.3°. A complementary filter averages both over a similar number of samples, so from measurement
-noise alone its heading error is an order of magnitude above its tilt error; a sliding-mode
-(sign) correction fed nearly random heading signs corrects heading slowly and lets it wander. The
-gyro's 0.4 rad/s white noise (a 0.04 rad random step per sample) is what the corrections fight
-in between."""
+FOURATI_EXPLANATION = """**Why the magnetometer dominates.** Table II's magnetometer noise is 0.4 G per axis on a 0.5 G
+field at 60° inclination, whose horizontal part — the only part that carries heading — is
+0.5 · cos 60° = 0.25 G. One sample's heading is therefore off by about atan(0.4 / 0.25) ≈ 58°
+(1σ): almost random. The accelerometer's 0.4 m/s² on 9.81 m/s² tilts one sample by only
+atan(0.4 / 9.81) ≈ 2.3°. Per sample, heading is some 25 times less certain than tilt. The RMSE
+ratio is much smaller (about 2 above) because CSMO's correction is bounded — the saturated
+switching term moves the estimate by at most about 0.1° per sample whatever the measurement says —
+so each filter error is an average over many near-random corrections, and because the gyro's
+0.4 rad/s white noise (a 0.04 rad random step per sample) keeps disturbing every axis in between.
+The measured attitude q_m is solved from both vectors together, so the field noise reaches roll
+and pitch too; that is why all three angles improve when only the magnetometer gets quieter."""
 
 LIMITS_TEXT = """## What these numbers do not say
 
@@ -433,7 +437,7 @@ The `realistic` scenario is optimistic next to real recordings: its sensors are 
 calibrated (no hard/soft-iron residual, no scale-factor or axis-misalignment error), the field is
 homogeneous outside the disturbance, and the reference is exact. On public recordings with
 optical ground truth (BROAD) the best published filters reach about 2–3° total RMSE and
-Madgwick about 5°; differences between filters there come mostly from those effects, which this
+Madgwick about 5°, several times the figures above: real data adds those effects, which this
 simulation does not contain. Use these tables to catch regressions and to compare behaviour
 (bias, rest, disturbance, convergence), and `mocap-filter --eval` on real recordings to choose
 parameters."""
