@@ -27,7 +27,7 @@ const sun = new THREE.DirectionalLight(0xffffff, 1.5);
 sun.position.set(3, 5, 2);
 scene.add(sun);
 const kGridCell_m = 0.5;
-const grid = new THREE.GridHelper(20, 20 / kGridCell_m, 0x666666, 0x333333);
+const grid = new THREE.GridHelper(20, 20 / kGridCell_m, 0x8a93a6, 0x4a505e);
 scene.add(grid);
 const world = new THREE.Group();
 world.rotation.x = -Math.PI / 2;
@@ -117,6 +117,9 @@ function applyFrame(f) {
 // Stream state, also read by the integration test (window.mocapViewer).
 const state = { frames: 0, dropped: 0, subject: 0, fps: 0, latencyMs: NaN, connected: false, calibrated: false, hello: null };
 window.mocapViewer = state;
+// Scene positions in three.js coordinates (y up), for tests and debugging.
+state.scene = () => ({ grid: grid.position.toArray(), camera: camera.position.toArray(),
+                       target: controls.target.toArray(), root: origin[0] ? origin[0].toArray() : null });
 let latest = null;
 let arrivals = [];
 let latencies = [];

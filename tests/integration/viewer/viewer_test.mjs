@@ -42,6 +42,7 @@ try {
   await page.waitForTimeout(2500);  // into the walk
   await page.waitForTimeout(1200);  // the panel's rate/latency refresh every 500 ms
   const state = await page.evaluate(() => ({ ...window.mocapViewer, hello: undefined }));
+  console.log('scene:', JSON.stringify(await page.evaluate(() => window.mocapViewer.scene())));
   console.log(`viewer: ${state.frames} frames, ${state.fps} Hz, latency ${state.latencyMs} ms (wall clock), subject ${state.subject}`);
   // Software WebGL on a loaded CI machine renders slowly; the stream keeps going (the
   // server drops what the page cannot take), so only require a live stream.
