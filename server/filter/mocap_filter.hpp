@@ -141,7 +141,7 @@ struct LowPassCoeffs {
 /// output never depends on one sample. Part of MocapFilterState.
 template <int N>
 struct LowPassState {
-    std::array<double, 2 * N> z{};    ///< filter memory
+    std::array<double, std::size_t{2} * N> z{};  ///< filter memory
     std::array<double, N> sum{};      ///< running sum during the initial averaging
     std::array<double, N> out{};      ///< last output
     int count = 0;                    ///< samples averaged so far

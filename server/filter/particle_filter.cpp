@@ -308,7 +308,7 @@ void ParticleFilter::resample() {
     double u = step * (static_cast<double>(rng_.next() >> 11) * 0x1.0p-53);
     double c = w_[0];
     int j = 0;
-    for (int i = 0; i < n_; ++i, u += step) {
+    for (int i = 0; i < n_; ++i) {
         while (u > c && j < n_ - 1) c += w_[++j];
         qw_tmp_[i] = qw_[j];
         qx_tmp_[i] = qx_[j];
@@ -317,6 +317,7 @@ void ParticleFilter::resample() {
         bx_tmp_[i] = bx_[j];
         by_tmp_[i] = by_[j];
         bz_tmp_[i] = bz_[j];
+        u += step;
     }
     qw_.swap(qw_tmp_);
     qx_.swap(qx_tmp_);
