@@ -31,7 +31,7 @@ BodyModel default_body_model(double height_m, std::string_view default_filter) {
 
     BodyModel m;
     m.root_height_m = hip_z;
-    auto add = [&](std::string_view name, int parent, Vec3 offset, Vec3 end) {
+    auto add = [&](std::string_view name, int parent, const Vec3& offset, const Vec3& end) {
         SegmentDef s;
         s.name = std::string(name);
         s.parent = parent;

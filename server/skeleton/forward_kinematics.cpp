@@ -18,7 +18,7 @@ void forward_kinematics(const BodyModel& model, std::span<const Quat> q_world_se
     out.segment_count = n;
     for (std::size_t i = 0; i < n; ++i) {
         const SegmentDef& s = model.segments[i];
-        const Quat q = q_world_segment[i];
+        const Quat& q = q_world_segment[i];
         out.q_world_segment[i] = q;
         if (s.parent < 0) {
             out.joint_position_m[i] = root_position_m;
