@@ -256,6 +256,8 @@ void read_serve(TableReader& r, DaemonConfig& c) {
     r.read("client_queue_frames", c.client_queue_frames, 1, 65536);
     r.read("handshake_timeout_s", c.handshake_timeout_s, 0.05, 3600.0);
     r.read("max_message_bytes", c.max_message_bytes, 64, 16 << 20);
+    r.read("max_client_messages_per_s", c.max_client_messages_per_s, 0.1, 100000.0);
+    r.read("client_message_burst", c.client_message_burst, 1, 100000);
 }
 
 void read_control(TableReader& r, DaemonConfig& c) {

@@ -111,6 +111,8 @@ bool Daemon::start(std::string* error) {
     sc.queue_frames = config_.client_queue_frames;
     sc.subscribe_timeout_ms = static_cast<std::uint32_t>(config_.handshake_timeout_s * 1000.0);
     sc.max_client_message_bytes = config_.max_message_bytes;
+    sc.max_client_messages_per_s = config_.max_client_messages_per_s;
+    sc.client_message_burst = config_.client_message_burst;
     sc.control_token = config_.control_token;
     sc.control_loopback_only = config_.control_loopback_only;
     sc.io_threads = config_.serve_threads;
@@ -330,7 +332,10 @@ serve::StatsSnapshot Daemon::stats() const {
     }
     if (bvh_recorder_) append(s.counters, bvh_recorder_->counters());
     if (raw_recorder_) append(s.counters, raw_recorder_->counters());
-    s.latencies.push_back(summarize("ingest", ingest_latency_.snapshot()));
+    const LatencySnapshot ingest = ingest_latency_.snapshot();
+    // A sink clock ahead of the host gives negative latencies: not in the histogram, counted.
+    s.counters.push_back({"latency.ingest_negative", ingest.negative});
+    s.latencies.push_back(summarize("ingest", ingest));
     if (pool_) {
         s.latencies.push_back(summarize("queue_wait", pool_->queue_wait_snapshot()));
         s.latencies.push_back(summarize("filter", pool_->filter_snapshot()));

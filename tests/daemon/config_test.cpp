@@ -1,4 +1,5 @@
 #include "daemon/config.hpp"
+#include "serve/serve_config.hpp"
 
 #include <gtest/gtest.h>
 
@@ -204,6 +205,31 @@ TEST(Config, HttpSectionDefaultsValuesAndErrors) {
     EXPECT_NE(err.find("test.toml:2: http.ws_queue_frames: must be between"), std::string::npos) << err;
     EXPECT_FALSE(parse("[http]\nport = 8080\n", &err));
     EXPECT_NE(err.find("test.toml:2: http.port: unknown key"), std::string::npos) << err;
+}
+
+}  // namespace
+}  // namespace mocap::daemon
+
+namespace mocap::daemon {
+namespace {
+
+TEST(ConfigServe, RateLimitKeysDefaultsMatchTheServeLayerAndRangesAreChecked) {
+    std::string err;
+    const auto d = parse_config(embedded_default_config(), "mocapd.toml", &err);
+    ASSERT_TRUE(d) << err;
+    const serve::ServeConfig s;
+    EXPECT_DOUBLE_EQ(d->max_client_messages_per_s, s.max_client_messages_per_s);
+    EXPECT_EQ(d->client_message_burst, s.client_message_burst);
+
+    const auto c = parse("[serve]\nmax_client_messages_per_s = 2.5\nclient_message_burst = 3\n", &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_DOUBLE_EQ(c->max_client_messages_per_s, 2.5);
+    EXPECT_EQ(c->client_message_burst, 3u);
+
+    EXPECT_FALSE(parse("[serve]\nmax_client_messages_per_s = 0.0\n", &err));
+    EXPECT_NE(err.find("test.toml:2: serve.max_client_messages_per_s: must be between"), std::string::npos) << err;
+    EXPECT_FALSE(parse("[serve]\n\nclient_message_burst = 0\n", &err));
+    EXPECT_NE(err.find("test.toml:3: serve.client_message_burst: must be between"), std::string::npos) << err;
 }
 
 }  // namespace
