@@ -288,7 +288,10 @@ def run_once(bins, spec, log_dir):
     sim = None
     try:
         if not wait_for_port(pose_port, 10):
-            raise RuntimeError("mocapd did not open its pose port")
+            log.flush()
+            with open(log.name) as f:
+                tail = f.read()[-2000:]
+            raise RuntimeError(f"mocapd did not open its pose port; its output:\n{tail}")
         warmup, measure = spec.get("warmup_s", 3.0), spec.get("measure_s", 10.0)
         sim_cmd = [bins["mocap-sim"], "stream", "--connect", f"127.0.0.1:{sink_port}",
                    "--subjects", str(spec["subjects"]), "--nodes", str(spec.get("nodes", 15)),
