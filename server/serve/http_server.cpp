@@ -355,7 +355,10 @@ private:
         };
         auto refuse = [&](HttpServerCounters::C& counter, http::status status, const char* why) {
             counter.fetch_add(1, std::memory_order_relaxed);
-            spdlog::warn("http: control request {} refused: {}", path, why);
+            std::uint64_t suppressed = 0;
+            if (server_.log_.allow(LogLimiter::kControlRefused, suppressed)) {
+                spdlog::warn("http: control request {} refused: {} ({} suppressed)", path, why, suppressed);
+            }
             reply(status, ControlResult::failure(why));
         };
         const auto token_field = request.find("X-Mocap-Token");

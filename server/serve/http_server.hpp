@@ -54,6 +54,7 @@
 #include "serve/pose_frame.hpp"
 #include "serve/prometheus_text.hpp"
 #include "serve/serve_config.hpp"
+#include "serve/serve_counters.hpp"
 
 namespace mocap::serve {
 
@@ -167,6 +168,7 @@ private:
     HttpDescription description_;
     HttpHandlers handlers_;
     HttpServerCounters counters_;
+    LogLimiter log_;  ///< one refusal line per 10 s, not one per request
 
     asio::io_context io_{1};
     std::unique_ptr<asio::ip::tcp::acceptor> acceptor_;

@@ -459,6 +459,32 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
     EXPECT_TRUE(closed_by_peer(bvh_long, 3s)) << "a line over 64 bytes closes the BVH client";
     const int bvh_deaf = tcp_connect(bvh_port_);  // never reads
 
+    // ---- HTTP port (8080) ----
+    int http_closed = 0;
+    for (int i = 0; i < 20; ++i) {  // random bytes instead of a request line
+        const int fd = tcp_connect(http_port_);
+        send_all(fd, random_bytes(rng, 200));
+        http_closed += closed_by_peer(fd, 3s) ? 1 : 0;
+        ::close(fd);
+    }
+    EXPECT_EQ(http_closed, 20) << "an unparseable request closes the connection";
+    const int http_huge = tcp_connect(http_port_);  // a header line far above any limit
+    send_all(http_huge, "GET / HTTP/1.1\r\nX-Junk: " + std::string(64 * 1024, 'a') + "\r\n\r\n");
+    EXPECT_TRUE(closed_by_peer(http_huge, 3s));
+    ::close(http_huge);
+    int http_refused = 0;
+    for (int i = 0; i < 200; ++i) {  // control without the token
+        const int fd = tcp_connect(http_port_);
+        send_all(fd, std::string("POST /api/record/start HTTP/1.1\r\nHost: x\r\nContent-Length: 0\r\n"
+                                 "Connection: close\r\n\r\n"));
+        std::string reply;
+        std::array<char, 2048> buf{};
+        for (ssize_t r; (r = ::recv(fd, buf.data(), buf.size(), 0)) > 0;) reply.append(buf.data(), static_cast<std::size_t>(r));
+        http_refused += reply.rfind("HTTP/1.1 4", 0) == 0 ? 1 : 0;
+        ::close(fd);
+    }
+    EXPECT_EQ(http_refused, 200);
+
     ASSERT_EQ(s->wait(20s).value_or(-1), 0) << s->log();
     std::this_thread::sleep_for(500ms);
     ref.stop();
@@ -503,6 +529,7 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
               << count_lines(log, "") << " lines\n";
     EXPECT_LE(sink_malformed, 4u) << "one line per connection at most";
     EXPECT_LE(serve_unparseable, 2u) << "one line per 10 s";
+    EXPECT_LE(count_lines(log, "http: control request"), 2u) << "200 refusals, one line per 10 s";
     EXPECT_LT(count_lines(log, ""), 200u) << "no log flood";
 }
 
