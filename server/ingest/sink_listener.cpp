@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <exception>
 
 #include "mocap_wire/mw_packet.h"
 
@@ -147,7 +148,15 @@ SinkListener::SinkListener(asio::io_context& io, SinkListenerConfig config, cons
     reassembly_.register_in(group_);
 }
 
-SinkListener::~SinkListener() { stop(); }
+SinkListener::~SinkListener() {
+    // Asio's timer cancel() reports failure by throwing; a destructor must not, and at this
+    // point the only thing left to do with such a failure is to say so.
+    try {
+        stop();
+    } catch (const std::exception& e) {
+        spdlog::error("sink listener: stop: {}", e.what());
+    }
+}
 
 bool SinkListener::start(std::string* error) {
     error_code ec;
@@ -175,7 +184,10 @@ void SinkListener::stop() {
     stopped_ = true;
     error_code ec;
     acceptor_.close(ec);
-    auto conns = connections_;  // close() erases from connections_
+    // Moved, not copied: stop() runs in the destructor, where a copy's allocation could throw.
+    // close() looks the connection up in connections_ and finds nothing to erase.
+    auto conns = std::move(connections_);
+    connections_.clear();
     for (const auto& c : conns) c->close();
 }
 
