@@ -20,7 +20,7 @@ PACKAGES=(
   libeigen3-dev libboost-dev libspdlog-dev libprotobuf-dev protobuf-compiler
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib
-  clang-14 libclang-rt-14-dev
+  clang-14 libclang-rt-14-dev clang-tidy-14 cppcheck
   assimp-utils qemu-system-x86 busybox-static cpio kmod
   blender nodejs
   chromium

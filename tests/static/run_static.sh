@@ -1,0 +1,128 @@
+#!/usr/bin/env bash
+# Static analysis of the product sources: clang-tidy (checks in /.clang-tidy) and cppcheck
+# (options below, suppressions in tests/static/cppcheck.supp), over server/, clients/ and
+# firmware/ as compiled by one build's compile_commands.json. Generated code (protobuf
+# *.pb.cc, the embedded default config) lives in the build directory and is not analysed;
+# neither are third-party headers. Tests are not analysed either (gtest macros).
+#
+#   tests/static/run_static.sh [BUILD_DIR]        default BUILD_DIR: build/
+#
+#   MOCAP_STATIC_JOBS=N       parallel clang-tidy processes and cppcheck threads (default 2)
+#   MOCAP_STATIC_TOOLS="..."  subset of "clang-tidy cppcheck" (default both)
+#   MOCAP_STATIC_FILES=REGEX  only the sources whose path matches REGEX (default all)
+#
+# The build must have been built at least up to the protobuf headers (mocap_proto), since
+# the sources include them. Prints every finding once (a header finding is reported by every
+# translation unit that includes it; duplicates are dropped), a count per check, the time
+# per tool, and exits 1 if there is any finding, 2 if a tool or the database is missing.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+BUILD="$(cd "${1:-$ROOT/build}" && pwd)"
+DB="$BUILD/compile_commands.json"
+JOBS="${MOCAP_STATIC_JOBS:-2}"
+TOOLS="${MOCAP_STATIC_TOOLS:-clang-tidy cppcheck}"
+FILTER="${MOCAP_STATIC_FILES:-.}"
+OUT="$BUILD/static"
+SUPP="$ROOT/tests/static/cppcheck.supp"
+
+say() { printf '[static] %s\n' "$*"; }
+
+if [[ ! -f "$DB" ]]; then
+  say "no $DB (configure with CMAKE_EXPORT_COMPILE_COMMANDS=ON, the project default)"
+  exit 2
+fi
+rm -rf "$OUT"
+mkdir -p "$OUT/tidy"
+
+# The product's translation units: under ROOT/{server,clients,firmware}, not generated.
+python3 - "$DB" "$ROOT" "$BUILD" "$FILTER" "$OUT" <<'PY'
+import json, os, re, sys
+db, root, build, pattern, out = sys.argv[1:]
+entries = []
+for e in json.load(open(db)):
+    f = os.path.normpath(os.path.join(e["directory"], e["file"]))
+    rel = os.path.relpath(f, root)
+    if f.startswith(build + os.sep) or rel.split(os.sep)[0] not in ("server", "clients", "firmware"):
+        continue
+    if f.endswith(".pb.cc") or not re.search(pattern, rel):
+        continue
+    entries.append(dict(e, file=f))
+with open(os.path.join(out, "compile_commands.json"), "w") as fh:
+    json.dump(entries, fh, indent=1)
+with open(os.path.join(out, "files.txt"), "w") as fh:
+    fh.write("".join(e["file"] + "\n" for e in entries))
+PY
+nfiles=$(wc -l <"$OUT/files.txt")
+if ((nfiles == 0)); then
+  say "no product sources in $DB match '$FILTER'"
+  exit 2
+fi
+say "$nfiles translation units from $DB"
+
+status=0
+hfilter="^$ROOT/(server|clients|firmware)/"
+
+run_tidy() {
+  local tidy
+  tidy="$(command -v clang-tidy-14 || command -v clang-tidy || true)"
+  if [[ -z "$tidy" ]]; then say "clang-tidy not found (Debian package clang-tidy)"; return 2; fi
+  local t0=$SECONDS
+  # One process per translation unit, each into its own log so outputs never interleave.
+  # -UNDEBUG: the analyser takes assert()s as facts, which removes impossible paths.
+  # The build uses g++ options clang does not know; they are not findings.
+  export tidy OUT hfilter
+  # shellcheck disable=SC2016
+  xargs -a "$OUT/files.txt" -P "$JOBS" -I{} sh -c '
+    log="$OUT/tidy/$(printf %s "$1" | tr / _).log"
+    "$tidy" -p "$OUT" --quiet --header-filter="$hfilter" \
+      --extra-arg=-Wno-unknown-warning-option --extra-arg=-UNDEBUG "$1" >"$log" 2>&1 || rc=$?
+    # 1 is "findings"; a signal or any other code is a tool failure, reported as a finding.
+    if [ "${rc:-0}" -gt 1 ]; then echo "$1:1:1: error: clang-tidy exited with $rc [clang-tidy-failure]" >>"$log"; fi
+  ' sh {}
+  # A finding: "path:line:col: warning|error: message [check]". Keep each once.
+  cat "$OUT"/tidy/*.log | grep -E '^[^ ]+:[0-9]+:[0-9]+: (warning|error): .*\[[^]]+\]$' \
+    | sed -E 's/,-warnings-as-errors\]$/]/' | sort -u >"$OUT/clang-tidy.txt" || true
+  report clang-tidy "$t0" "($nfiles TUs, $JOBS jobs)"
+}
+
+# report TOOL START_SECONDS NOTE: print $OUT/TOOL.txt with paths relative to the root and a
+# count per check; return 1 if it holds any finding.
+report() {
+  local n
+  n=$(wc -l <"$OUT/$1.txt")
+  say "$1: $n finding(s) in $((SECONDS - $2)) s $3"
+  if ((n > 0)); then
+    sed "s|^$ROOT/||" "$OUT/$1.txt"
+    grep -oE '\[[^]]+\]$' "$OUT/$1.txt" | sort | uniq -c | sort -rn | sed 's/^/  /'
+    return 1
+  fi
+}
+
+run_cppcheck() {
+  if ! command -v cppcheck >/dev/null; then say "cppcheck not found (Debian package cppcheck)"; return 2; fi
+  local t0=$SECONDS
+  mkdir -p "$OUT/cppcheck-build"
+  # warning, performance, portability: bug classes; style is left out (taste, and clang-tidy
+  # covers its useful part). Third-party headers are parsed for types but not reported.
+  cppcheck --project="$OUT/compile_commands.json" --cppcheck-build-dir="$OUT/cppcheck-build" \
+    -j "$JOBS" --quiet --enable=warning,performance,portability --inline-suppr \
+    --library=posix --suppressions-list="$SUPP" --suppress='*:/usr/*' \
+    --template='{file}:{line}:{column}: {severity}: {message} [{id}]' \
+    2>"$OUT/cppcheck.log" >/dev/null || true
+  grep -E '^[^ ]+:[0-9]+:[0-9]+: [a-z]+: .*\[[^]]+\]$' "$OUT/cppcheck.log" \
+    | sort -u >"$OUT/cppcheck.txt" || true
+  report cppcheck "$t0" ""
+}
+
+for tool in $TOOLS; do
+  rc=0
+  case "$tool" in
+    clang-tidy) run_tidy || rc=$? ;;
+    cppcheck) run_cppcheck || rc=$? ;;
+    *) say "unknown tool $tool"; rc=2 ;;
+  esac
+  if ((rc > status)); then status=$rc; fi
+done
+if ((status == 0)); then say "clean"; fi
+exit "$status"
