@@ -11,18 +11,9 @@
 #include <cerrno>
 #include <cstring>
 
-namespace mocap::ingest {
+#include "core/errno_text.hpp"
 
-namespace {
-// errno as text. std::strerror (and std::system_category().message, which calls it in
-// libstdc++) may share one buffer between threads; the GNU strerror_r fills ours or returns a
-// static string.
-std::string errno_text() {
-    const int err = errno;
-    char buf[128];
-    return ::strerror_r(err, buf, sizeof buf);
-}
-}  // namespace
+namespace mocap::ingest {
 
 using boost::system::error_code;
 
@@ -47,7 +38,7 @@ SocketCanReader::~SocketCanReader() { stop(); }
 
 bool SocketCanReader::start(std::string* error) {
     const auto fail = [&](const std::string& what) {
-        *error = "socketcan " + config_.interface + ": " + what + ": " + errno_text();
+        *error = "socketcan " + config_.interface + ": " + what + ": " + errno_text(errno);
         return false;
     };
     const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW);
@@ -112,7 +103,7 @@ void SocketCanReader::read_all() {
         if (n < 0) {
             if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR) return;
             read_errors_.add();
-            spdlog::error("socketcan {}: recvmsg: {}", config_.interface, errno_text());
+            spdlog::error("socketcan {}: recvmsg: {}", config_.interface, errno_text(errno));
             return;
         }
         const std::int64_t received_us = clock_.now_us();
