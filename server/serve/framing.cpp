@@ -34,7 +34,8 @@ bool append_delimited(const google::protobuf::MessageLite& message, std::string&
 DelimitedReader::DelimitedReader(std::size_t max_message_bytes)
     : max_message_bytes_(max_message_bytes) {
     // Start small; a server-side reader (max a few KiB) reaches its full size at once.
-    buf_.resize(std::min<std::size_t>(max_message_bytes + kMaxLengthPrefixBytes, 64 * 1024));
+    buf_.resize(std::min<std::size_t>(max_message_bytes + kMaxLengthPrefixBytes,
+                                      std::size_t{64} * 1024));
 }
 
 std::span<std::uint8_t> DelimitedReader::write_area() {

@@ -19,7 +19,7 @@ struct PoseBroadcaster::Lane {
     std::vector<std::shared_ptr<ClientSession>> all_subjects;
 };
 
-PoseBroadcaster::PoseBroadcaster(std::vector<asio::io_context*> lanes,
+PoseBroadcaster::PoseBroadcaster(const std::vector<asio::io_context*>& lanes,
                                  std::size_t backlog_frames,
                                  std::function<std::int64_t()> wall_clock_us,
                                  ServeCounters& counters)

@@ -46,7 +46,7 @@ struct EncodedFrame {
 class PoseBroadcaster {
 public:
     /// `lanes`: one io_context per serve thread (not owned; must outlive this object).
-    PoseBroadcaster(std::vector<asio::io_context*> lanes, std::size_t backlog_frames,
+    PoseBroadcaster(const std::vector<asio::io_context*>& lanes, std::size_t backlog_frames,
                     std::function<std::int64_t()> wall_clock_us, ServeCounters& counters);
     ~PoseBroadcaster();
     PoseBroadcaster(const PoseBroadcaster&) = delete;
