@@ -23,6 +23,7 @@ PACKAGES=(
   clang-14 libclang-rt-14-dev clang-tidy-14 cppcheck
   assimp-utils qemu-system-x86 busybox-static cpio kmod
   blender nodejs
+  python3-protobuf python3-numpy python3-matplotlib python3-pytest
   chromium
 )
 

@@ -215,6 +215,10 @@ void read_choice(TableReader& r, std::string_view key, bool& out, const char* ye
 void read_skeleton(TableReader& r, DaemonConfig& c) {
     r.read("calibration_dir", c.calibration_dir);
     r.read("calibration_s", c.calibration_s, 0.1, 60.0);
+    r.read("auto_calibrate", c.auto_calibrate);
+    if (c.auto_calibrate != "t-pose" && c.auto_calibrate != "n-pose" && c.auto_calibrate != "off") {
+        r.fail("auto_calibrate", r.take("auto_calibrate"), "must be \"t-pose\", \"n-pose\" or \"off\"");
+    }
     read_choice(r, "heading", c.heading_align, "align", "earth");
     read_choice(r, "facing", c.facing_from_sensor, "sensor", "given");
     r.read("facing_heading_deg", c.facing_heading_deg, -360.0, 360.0);

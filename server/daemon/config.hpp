@@ -60,6 +60,7 @@ struct DaemonConfig {
     // [skeleton]
     std::string calibration_dir = ".";
     double calibration_s = 1.0;
+    std::string auto_calibrate = "t-pose";   ///< "t-pose" | "n-pose" | "off"
     bool heading_align = true;               ///< heading = "align" (else "earth")
     bool facing_from_sensor = true;          ///< facing = "sensor" (else "given")
     double facing_heading_deg = 0.0;

@@ -23,6 +23,7 @@ PoseSolver::PoseSolver(skeleton::BodyModel model, PoseSolverOptions options, Pub
     group_.add("frames_solved", frames_solved_);
     group_.add("calibrations_ok", calibrations_ok_);
     group_.add("calibrations_failed", calibrations_failed_);
+    group_.add("auto_calibration_retries", auto_calibration_retries_);
 }
 
 std::string PoseSolver::calibration_path(std::uint32_t subject_id) const {
@@ -69,6 +70,8 @@ void PoseSolver::take_requests() {
         Subject& s = subjects_[id];
         s.collector.reset();
         s.collecting = true;
+        s.auto_run = false;
+        s.auto_pending = false;
         s.collect_start_us = -1;
         s.pose = pose;
         spdlog::info("subject {}: calibration ({}) started: stand still for {} s", id,
@@ -91,9 +94,20 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
     opt.pose = s.pose;
     auto result = skeleton::calibrate(model_, s.collector, opt);
     if (!result) {
+        if (s.auto_run) {  // the subject moved: try the next still period
+            auto_calibration_retries_.add();
+            spdlog::debug("subject {}: automatic calibration restarts: {}", subject_id, result.error);
+            return;
+        }
         calibrations_failed_.add();
         spdlog::warn("subject {}: calibration failed: {}", subject_id, result.error);
         return;
+    }
+    if (s.auto_run) {
+        s.auto_pending = false;
+        spdlog::info("subject {}: calibrated automatically from its first still period ({} assumed); "
+                     "send a calibrate request to redo it",
+                     subject_id, skeleton::to_string(s.pose));
     }
     s.calibration = *result.calibration;
     s.smoother.reset();
@@ -128,6 +142,15 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
     for (std::size_t i = 0; i < n; ++i) {
         const auto& q = frame.segments[i].q_earth_sensor_wxyz;
         q_earth_sensor[i] = Quat(q[0], q[1], q[2], q[3]);
+    }
+    if (s.first_us < 0) s.first_us = frame.sample_us;
+    if (options_.auto_calibrate && s.auto_pending && !s.calibration && !s.collecting &&
+        frame.sample_us - s.first_us >= 500'000) {
+        s.collector.reset();
+        s.collecting = true;
+        s.auto_run = true;
+        s.collect_start_us = -1;
+        s.pose = *options_.auto_calibrate;
     }
     if (s.collecting) collect(s, frame.subject_id, frame, q_earth_sensor);
 

@@ -8,6 +8,10 @@
 // A subject without a calibration is served with its raw sensor orientations (flags lack
 // kSegmentCalibrated), so poses stream from the first sample.
 //
+// Automatic calibration (options.auto_calibrate): a subject that has no calibration is
+// calibrated from its first still period of calibration_s (after 0.5 s of data, so filters
+// have settled), assuming the configured pose; while it moves, collection restarts. Any
+// calibrate command replaces it.
 // Calibration on command: request_calibration() (any thread, e.g. a control request) asks
 // the subject to stand still in a T- or N-pose; the solver collects calibration_s of
 // frames (sample time, not wall time), calibrates (skeleton/calibration.hpp), and on success
@@ -44,6 +48,9 @@ struct PoseSolverOptions {
     skeleton::CalibrationOptions calibration{};  ///< pose is set per request
     skeleton::PoseSmootherParams smoothing{};
     std::string calibration_dir;       ///< "" = do not save or load
+    /// Calibrate a subject without a calibration from its first still period, assuming
+    /// this pose (nullopt = only on command).
+    std::optional<skeleton::CalibrationPose> auto_calibrate;
 };
 
 using PublishFn = std::function<void(const SubjectFrame&, const serve::SkeletonPose&)>;
@@ -63,7 +70,8 @@ public:
 
     [[nodiscard]] const skeleton::BodyModel& model() const { return model_; }
     [[nodiscard]] const std::vector<skeleton::JointSpec>& joints() const { return joints_; }
-    /// Component "skeleton": frames_solved, calibrations_ok, calibrations_failed.
+    /// Component "skeleton": frames_solved, calibrations_ok, calibrations_failed,
+    /// auto_calibration_retries (automatic attempts restarted because the subject moved).
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
 
 private:
@@ -75,6 +83,9 @@ private:
         std::int64_t collect_start_us = -1;
         skeleton::CalibrationPose pose = skeleton::CalibrationPose::kTPose;
         std::optional<skeleton::FootContactRootTracker> root;  // travel once calibrated
+        bool auto_pending = true;   // no calibration yet: calibrate from the first still period
+        bool auto_run = false;      // the collection in progress is the automatic one
+        std::int64_t first_us = -1;  // sample time of the subject's first frame
     };
 
     void take_requests();
@@ -93,7 +104,7 @@ private:
     std::vector<std::pair<std::uint32_t, skeleton::CalibrationPose>> requests_;
     std::atomic<bool> has_requests_{false};
 
-    Counter frames_solved_, calibrations_ok_, calibrations_failed_;
+    Counter frames_solved_, calibrations_ok_, calibrations_failed_, auto_calibration_retries_;
     CounterGroup group_{"skeleton"};
 };
 

@@ -43,6 +43,8 @@ PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config) {
     so.calibration.facing_sensor_axis = {config.facing_sensor_axis[0], config.facing_sensor_axis[1],
                                          config.facing_sensor_axis[2]};
     so.smoothing.alpha = config.smoothing_alpha;
+    if (config.auto_calibrate == "t-pose") so.auto_calibrate = skeleton::CalibrationPose::kTPose;
+    if (config.auto_calibrate == "n-pose") so.auto_calibrate = skeleton::CalibrationPose::kNPose;
     return so;
 }
 

@@ -50,9 +50,9 @@ public:
 private:
     void fail(const error_code& ec, const char* what) {
         if (ec != asio::error::operation_aborted && ec != asio::error::eof) {
-            spdlog::info("sink {}: {}: {}", peer_, what, ec.message());
+            if (owner_.log_allowed()) spdlog::info("sink {}: {}: {}", peer_, what, ec.message());
         } else if (ec == asio::error::eof) {
-            spdlog::info("sink {}: disconnected", peer_);
+            if (owner_.log_allowed()) spdlog::info("sink {}: disconnected", peer_);
         }
         close();
     }
@@ -63,7 +63,7 @@ private:
         idle_timer_.async_wait([self = shared_from_this()](const error_code& ec) {
             if (ec || self->closed_) return;
             self->owner_.c_.idle_timeouts.add();
-            spdlog::warn("sink {}: nothing received for {} s, closing", self->peer_,
+            if (self->owner_.log_allowed()) spdlog::warn("sink {}: nothing received for {} s, closing", self->peer_,
                          self->owner_.config_.idle_timeout_s);
             self->close();
         });
@@ -95,7 +95,7 @@ private:
             if (r == MW_STREAM_PACKET) {
                 garbage_since_packet_ = 0;
                 owner_.on_packet(*this, *packet_, received_us);
-            } else if (!logged_malformed_) {
+            } else if (!logged_malformed_ && owner_.log_allowed()) {
                 logged_malformed_ = true;  // one line per connection: no log flood
                 spdlog::warn("sink {}: malformed packet ({}); resynchronising", peer_,
                              mw_error_name(decoder_->last_error));
@@ -109,7 +109,7 @@ private:
         garbage_since_packet_ += discarded;
         if (garbage_since_packet_ > owner_.config_.max_garbage_bytes) {
             c.garbage_closes.add();
-            spdlog::warn("sink {}: {} bytes without a valid packet, closing", peer_,
+            if (owner_.log_allowed()) spdlog::warn("sink {}: {} bytes without a valid packet, closing", peer_,
                          garbage_since_packet_);
             close();
             return;
@@ -198,16 +198,16 @@ void SinkListener::do_accept() {
 void SinkListener::on_accept(const error_code& ec, tcp::socket socket) {
     if (ec == asio::error::operation_aborted || stopped_) return;
     if (ec) {
-        spdlog::warn("sink listener: accept: {}", ec.message());
+        if (log_allowed()) spdlog::warn("sink listener: accept: {}", ec.message());
     } else if (connections_.size() >= config_.max_sinks) {
         c_.refused.add();
-        spdlog::warn("sink listener: refusing a connection: max_sinks ({}) reached", config_.max_sinks);
+        if (log_allowed()) spdlog::warn("sink listener: refusing a connection: max_sinks ({}) reached", config_.max_sinks);
         error_code ignored;
         socket.close(ignored);
     } else {
         c_.accepted.add();
         auto conn = std::make_shared<SinkConnection>(*this, std::move(socket));
-        spdlog::info("sink {}: connected", conn->peer());
+        if (log_allowed()) spdlog::info("sink {}: connected", conn->peer());
         connections_.insert(conn);
         conn->start();
     }
@@ -234,7 +234,7 @@ void SinkListener::on_packet(SinkConnection& from, const mw_packet& packet, std:
         if (owner != nullptr) {
             // The sink came back on a new connection before the old one timed out.
             c_.takeovers.add();
-            spdlog::info("sink id {}: now on {}, closing the old connection {}", sink_id,
+            if (log_allowed()) spdlog::info("sink id {}: now on {}, closing the old connection {}", sink_id,
                          from.peer(), owner->peer());
             SinkConnection* old = owner;
             owner = &from;
@@ -248,6 +248,25 @@ void SinkListener::on_packet(SinkConnection& from, const mw_packet& packet, std:
         const mw_stamped_frame& f = packet.frames[i];
         r->on_frame(f.frame, ts + f.offset_us, ts, received_us);
     }
+}
+
+bool SinkListener::log_allowed() {
+    const std::int64_t now = clock_.now_us();
+    if (now - log_window_start_us_ >= kLogWindowUs || now < log_window_start_us_) {
+        if (log_suppressed_ > 0) {
+            spdlog::warn("sink listener: {} more connection events in the last {} s were not logged",
+                         log_suppressed_, kLogWindowUs / 1'000'000);
+        }
+        log_window_start_us_ = now;
+        log_lines_in_window_ = 0;
+        log_suppressed_ = 0;
+    }
+    if (log_lines_in_window_ < kLogBurst) {
+        ++log_lines_in_window_;
+        return true;
+    }
+    ++log_suppressed_;
+    return false;
 }
 
 void SinkListener::on_closed(SinkConnection& c) {

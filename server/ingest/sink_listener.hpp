@@ -79,6 +79,14 @@ private:
     // Called by a connection for each valid packet.
     void on_packet(SinkConnection& from, const mw_packet& packet, std::int64_t received_us);
     void on_closed(SinkConnection& c);
+    // Connection events are logged at most kLogBurst per kLogWindowUs; the rest are counted
+    // and summarised, so a connect/disconnect storm cannot flood the log.
+    bool log_allowed();
+    static constexpr std::uint32_t kLogBurst = 20;
+    static constexpr std::int64_t kLogWindowUs = 10'000'000;
+    std::int64_t log_window_start_us_ = 0;
+    std::uint32_t log_lines_in_window_ = 0;
+    std::uint64_t log_suppressed_ = 0;
 
     asio::io_context& io_;
     SinkListenerConfig config_;

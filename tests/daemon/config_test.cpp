@@ -60,6 +60,15 @@ TEST(Config, WrongTypeAndRangeNameKeyAndLine) {
     EXPECT_EQ(err, "test.toml:2: log.level: must be one of trace, debug, info, warn, error, off");
 }
 
+TEST(Config, AutoCalibrateChoices) {
+    std::string err;
+    auto c = parse("[skeleton]\nauto_calibrate = \"off\"\n", &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_EQ(c->auto_calibrate, "off");
+    EXPECT_FALSE(parse("[skeleton]\nauto_calibrate = \"always\"\n", &err));
+    EXPECT_EQ(err, "test.toml:2: skeleton.auto_calibrate: must be \"t-pose\", \"n-pose\" or \"off\"");
+}
+
 TEST(Config, SyntaxErrorNamesLine) {
     std::string err;
     EXPECT_FALSE(parse("[log]\nlevel = \n", &err));
@@ -177,6 +186,31 @@ TEST(ConfigOutputs, ErrorsNameKeyAndLine) {
     EXPECT_NE(err.find("outputs.bvh_frame_time_s"), std::string::npos) << err;
 }
 
+}  // namespace
+}  // namespace mocap::daemon
+
+namespace mocap::daemon {
+namespace {
+
+TEST(ConfigServe, RateLimitKeysDefaultsMatchTheServeLayerAndRangesAreChecked) {
+    std::string err;
+    const auto d = parse_config(embedded_default_config(), "mocapd.toml", &err);
+    ASSERT_TRUE(d) << err;
+    const serve::ServeConfig s;
+    EXPECT_DOUBLE_EQ(d->max_client_messages_per_s, s.max_client_messages_per_s);
+    EXPECT_EQ(d->client_message_burst, s.client_message_burst);
+
+    const auto c = parse("[serve]\nmax_client_messages_per_s = 2.5\nclient_message_burst = 3\n", &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_DOUBLE_EQ(c->max_client_messages_per_s, 2.5);
+    EXPECT_EQ(c->client_message_burst, 3u);
+
+    EXPECT_FALSE(parse("[serve]\nmax_client_messages_per_s = 0.0\n", &err));
+    EXPECT_NE(err.find("test.toml:2: serve.max_client_messages_per_s: must be between"), std::string::npos) << err;
+    EXPECT_FALSE(parse("[serve]\n\nclient_message_burst = 0\n", &err));
+    EXPECT_NE(err.find("test.toml:3: serve.client_message_burst: must be between"), std::string::npos) << err;
+}
+
 TEST(Config, HttpSectionDefaultsValuesAndErrors) {
     std::string err;
     const auto d = parse_config(embedded_default_config(), "mocapd.toml", &err);
@@ -205,31 +239,6 @@ TEST(Config, HttpSectionDefaultsValuesAndErrors) {
     EXPECT_NE(err.find("test.toml:2: http.ws_queue_frames: must be between"), std::string::npos) << err;
     EXPECT_FALSE(parse("[http]\nport = 8080\n", &err));
     EXPECT_NE(err.find("test.toml:2: http.port: unknown key"), std::string::npos) << err;
-}
-
-}  // namespace
-}  // namespace mocap::daemon
-
-namespace mocap::daemon {
-namespace {
-
-TEST(ConfigServe, RateLimitKeysDefaultsMatchTheServeLayerAndRangesAreChecked) {
-    std::string err;
-    const auto d = parse_config(embedded_default_config(), "mocapd.toml", &err);
-    ASSERT_TRUE(d) << err;
-    const serve::ServeConfig s;
-    EXPECT_DOUBLE_EQ(d->max_client_messages_per_s, s.max_client_messages_per_s);
-    EXPECT_EQ(d->client_message_burst, s.client_message_burst);
-
-    const auto c = parse("[serve]\nmax_client_messages_per_s = 2.5\nclient_message_burst = 3\n", &err);
-    ASSERT_TRUE(c) << err;
-    EXPECT_DOUBLE_EQ(c->max_client_messages_per_s, 2.5);
-    EXPECT_EQ(c->client_message_burst, 3u);
-
-    EXPECT_FALSE(parse("[serve]\nmax_client_messages_per_s = 0.0\n", &err));
-    EXPECT_NE(err.find("test.toml:2: serve.max_client_messages_per_s: must be between"), std::string::npos) << err;
-    EXPECT_FALSE(parse("[serve]\n\nclient_message_burst = 0\n", &err));
-    EXPECT_NE(err.find("test.toml:3: serve.client_message_burst: must be between"), std::string::npos) << err;
 }
 
 }  // namespace

@@ -68,7 +68,8 @@ protected:
             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 16\n"
             << "[control]\ntoken = \"" << kToken << "\"\n"
             // Every listening port is a free one: ctest runs daemons in parallel.
-            << "[outputs]\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n";
+            << "[outputs]\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n"
+            << "[http]\nlisten = \"127.0.0.1:" << free_port() << "\"\n";
         config_ = dir_.file("mocapd.toml");
         write_file(config_, cfg.str());
         daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", config_},
@@ -221,7 +222,7 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
 TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
     auto c = connect_client({1});
     // Node 5 (segment index 4) is silent from 3 s to 5 s.
-    auto s = sim({"--subjects", "1", "--nodes", "15", "--duration", "7", "--calibrate-s", "1", "--seed", "5",
+    auto s = sim({"--subjects", "1", "--nodes", "15", "--duration", "7", "--calibrate-s", "1.8", "--seed", "5",
                   "--dropout", "5:3:5"});
     auto frames = collect(c, 20s, [&](const auto&) { return !s->running(); });
     auto tail = collect(c, 500ms, [](const auto&) { return false; });
@@ -229,9 +230,13 @@ TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
     ASSERT_EQ(s->wait(5s).value_or(-1), 0) << s->log();
 
     std::size_t in_window = 0, stale_in_window = 0, after = 0, stale_after = 0, others_stale = 0;
+    std::size_t uncalibrated_late = 0;
     for (const auto& r : frames) {
         const auto& f = r.frame;
         const double t = counter_of(f) / static_cast<double>(kRateHz);
+        // No calibrate request was sent: the first still period (the simulator's T-pose)
+        // calibrates the subject automatically (skeleton.auto_calibrate = "t-pose").
+        if (t > 2.0 && (f.flags(0) & v1::SEGMENT_CALIBRATED) == 0) ++uncalibrated_late;
         const bool stale = (f.flags(4) & v1::SEGMENT_STALE) != 0;
         if (t > 3.2 && t < 4.8) {
             ++in_window;
@@ -250,6 +255,7 @@ TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
     EXPECT_GT(after, 100u);
     EXPECT_EQ(stale_after, 0u) << "the node's segment recovers when it returns";
     EXPECT_EQ(others_stale, 0u);
+    EXPECT_EQ(uncalibrated_late, 0u) << "the subject is calibrated automatically from its first still period";
 }
 
 TEST_F(Daemon, SinkReconnectResumesTheSubject) {
