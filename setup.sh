@@ -3,10 +3,15 @@
 #
 #   ./setup.sh run    install, build, start mocapd on its default config fed by a
 #                     simulated walking subject, and print live poses
-#   ./setup.sh test   install, build, and run the whole test suite (CI calls this)
+#   ./setup.sh test   install, build, and run the whole test suite (CI calls this):
+#                     ctest (unit, integration, SocketCAN VM, real BVH consumers, viewer in
+#                     chromium, Python client, static analysis), libFuzzer targets for a
+#                     bounded time, then ThreadSanitizer and ASan+UBSan builds of the suite
 #   ./setup.sh deps   only install missing Debian packages
 #   ./setup.sh build  only configure and build (build/)
+#   ./setup.sh fuzz | sanitize   only those phases of the test command
 #
+# Environment: MOCAP_JOBS (parallelism), MOCAP_FUZZ_SECONDS (per fuzz target, default 30).
 # Needs root (or sudo) only when packages are missing.
 set -euo pipefail
 
@@ -16,7 +21,7 @@ JOBS="${MOCAP_JOBS:-$(nproc)}"
 
 # Everything the build, the tests and the firmware cross-build need.
 PACKAGES=(
-  build-essential cmake pkg-config git python3
+  build-essential cmake pkg-config git python3 systemd
   libeigen3-dev libboost-dev libspdlog-dev libprotobuf-dev protobuf-compiler
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib
@@ -76,11 +81,37 @@ test_all() {
   (cd "$BUILD" && ctest --output-on-failure -j "$JOBS" --timeout 900)
 }
 
+fuzz() {
+  MOCAP_FUZZ_SECONDS="${MOCAP_FUZZ_SECONDS:-30}" MOCAP_FUZZ_JOBS="$JOBS" \
+    "$ROOT/tests/fuzz/run_fuzzers.sh" "$ROOT/build-fuzz-clang"
+}
+
+sanitize() {
+  MOCAP_SANITIZE_JOBS="$JOBS" "$ROOT/tests/sanitize.sh" "${1:-all}"
+}
+
+phase() {  # phase NAME FUNCTION...: runs one phase of the test command and times it
+  local name="$1" start=$SECONDS
+  shift
+  log "phase $name"
+  "$@"
+  log "phase $name: passed in $((SECONDS - start)) s"
+}
+
 cmd="${1:-}"
 case "$cmd" in
   deps) deps ;;
   build) deps; build ;;
   run) deps; build; run ;;
-  test) deps; build; test_all ;;
-  *) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
+  test)
+    phase deps deps
+    phase build build
+    phase ctest test_all
+    phase fuzz fuzz
+    phase tsan sanitize tsan
+    phase asan sanitize asan
+    ;;
+  fuzz) deps; fuzz ;;
+  sanitize) deps; sanitize "${2:-all}" ;;
+  *) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
 esac
