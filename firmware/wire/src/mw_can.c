@@ -196,15 +196,14 @@ int mw_attitude_decode(const mw_can_frame* frame, mw_attitude* out) {
     }
     if (sumsq > MW_ATT_SUMSQ_MAX) return MW_ERR_RANGE;
     const uint16_t tail = mw_get_u16(frame->data + 6);
-    /* Two bits above the counter; the mask states the 0..3 range the loop below relies on. */
-    const unsigned largest = (unsigned)(tail >> MW_ATT_COUNTER_BITS) & 3u;
+    const unsigned largest = (unsigned)(tail >> MW_ATT_COUNTER_BITS); /* two bits: 0..3 */
 
     float q[4];
     float small2 = 0.0f;
-    unsigned k = 0;
-    for (unsigned i = 0; i < 4; ++i) {
-        if (i == largest) continue;
-        q[i] = (float)c[k++] / MW_ATT_Q15_SCALE;
+    /* The three sent components fill the other slots in order (k indexes what was sent). */
+    for (unsigned k = 0; k < 3u; ++k) {
+        const unsigned i = k < largest ? k : k + 1u;
+        q[i] = (float)c[k] / MW_ATT_Q15_SCALE;
         small2 += q[i] * q[i];
     }
     q[largest] = sqrtf(1.0f - small2); /* small2 <= 0.75 + slack, so the root is >= 0.49 */
