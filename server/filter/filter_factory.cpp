@@ -58,6 +58,12 @@ std::string format_value(Int v) {
     return std::to_string(v);
 }
 
+std::string cannot_parse_message(std::string_view filter, const std::string& key,
+                                 const std::string& value) {
+    return "parameter \"" + key + "\" of filter \"" + std::string(filter) + "\": cannot parse \"" +
+           value + "\"";
+}
+
 // Everything the factory needs to know about one filter type.
 template <class P, class F>
 struct Entry {
@@ -83,10 +89,7 @@ struct Entry {
             const bool ok = std::visit([&](auto member) { return parse_value(value, p.*member); },
                                        field->member);
             if (!ok) {
-                // Once, on the way out: no repeated temporaries to save.
-                // NOLINTNEXTLINE(performance-inefficient-string-concatenation)
-                if (error) *error = "parameter \"" + key + "\" of filter \"" + std::string(name) +
-                                    "\": cannot parse \"" + value + "\"";
+                if (error) *error = cannot_parse_message(name, key, value);
                 return nullptr;
             }
         }
