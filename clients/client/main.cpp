@@ -18,6 +18,7 @@
 #include <iostream>
 #include <string>
 
+#include "core/guarded_main.hpp"
 #include "json_out.hpp"
 #include "load_client.hpp"
 #include "output_commands.hpp"
@@ -241,7 +242,7 @@ int run_stats(PoseClient& client, bool json) {
     return 0;
 }
 
-int run_control(PoseClient& client, v1::ControlRequest request) {
+int run_control(PoseClient& client, const v1::ControlRequest& request) {
     std::string error;
     v1::ControlReply reply;
     if (!client.control(request, reply, 10s, error)) {
@@ -258,7 +259,7 @@ int run_control(PoseClient& client, v1::ControlRequest request) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run(int argc, char** argv) {
     CLI::App app{"mocap-client: read poses from mocapd, query its stats, send control requests"};
     std::string connect = "127.0.0.1:7001";
     app.add_option("--connect", connect, "HOST:PORT of mocapd's pose service")->capture_default_str();
@@ -386,6 +387,8 @@ int main(int argc, char** argv) {
     if (*stats) return run_stats(client, stats_json);
 
     if (token.empty()) {
+        // Single-threaded here: no other thread exists yet to change the environment.
+        // NOLINTNEXTLINE(concurrency-mt-unsafe)
         if (const char* env = std::getenv("MOCAP_TOKEN")) token = env;
     }
     v1::ControlRequest request;
@@ -402,4 +405,8 @@ int main(int argc, char** argv) {
         request.mutable_reload();
     }
     return run_control(client, request);
+}
+
+int main(int argc, char** argv) {
+    return mocap::guarded_main("mocap-client", [&] { return run(argc, argv); });
 }

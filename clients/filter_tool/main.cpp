@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "core/guarded_main.hpp"
 #include "filter/filter_factory.hpp"
 #include "filter_tool/evaluation.hpp"
 #include "filter_tool/filter_run.hpp"
@@ -28,7 +29,7 @@ int fail(int code, const std::string& message) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run(int argc, char** argv) {
     CLI::App app{
         "mocap-filter: run one orientation filter over a recording, optionally evaluate it"};
     std::string filter_name;
@@ -113,4 +114,8 @@ int main(int argc, char** argv) {
         std::cout << mocap::tools::eval_json(result, filter->name()) << std::endl;
     }
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return mocap::guarded_main("mocap-filter", [&] { return run(argc, argv); });
 }

@@ -2,10 +2,11 @@
 // (csv_command, ...); main only dispatches.
 #include <CLI/CLI.hpp>
 
+#include "core/guarded_main.hpp"
 #include "sim/csv_command.hpp"
 #include "sim/stream_command.hpp"
 
-int main(int argc, char** argv) {
+static int run(int argc, char** argv) {
     CLI::App app{"mocap-sim: simulated IMU data for mocapd and its benchmarks"};
     app.require_subcommand(1);
 
@@ -18,4 +19,8 @@ int main(int argc, char** argv) {
     if (csv_cmd->parsed()) return mocap::sim::run_csv_command(csv);
     if (stream_cmd->parsed()) return mocap::sim::run_stream_command(stream);
     return 2;
+}
+
+int main(int argc, char** argv) {
+    return mocap::guarded_main("mocap-sim", [&] { return run(argc, argv); });
 }

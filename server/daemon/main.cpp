@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "core/guarded_main.hpp"
 #include "daemon/config.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/replay.hpp"
@@ -26,7 +27,7 @@ void protobuf_log(google::protobuf::LogLevel level, const char* file, int line, 
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run(int argc, char** argv) {
     using namespace mocap::daemon;
     CLI::App app{"mocapd — networked inertial motion capture daemon"};
     std::string config_path;
@@ -110,4 +111,8 @@ int main(int argc, char** argv) {
     }
     daemon.run();
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return mocap::guarded_main("mocapd", [&] { return run(argc, argv); });
 }
