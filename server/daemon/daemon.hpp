@@ -72,7 +72,7 @@ public:
     [[nodiscard]] serve::HealthStatus health() const;
 
 private:
-    void route(const SegmentSample& sample);
+    void route(const SegmentSample& in);
     void assembler_loop();
     void reload();
     void log_stats();

@@ -83,7 +83,8 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
             row.clear();
             serve::append_angles_csv_row(f.subject_id, f.sync, f.sample_us, p.joint_angles_rad.data(),
                                          p.joint_angle_count, row);
-            std::fwrite(row.data(), 1, row.size(), csv.get());
+            // A failed write sets the stream's error flag, checked once at the end.
+            (void)std::fwrite(row.data(), 1, row.size(), csv.get());
         }
     });
     for (const auto& line : solver.load_calibrations()) spdlog::info("{}", line);
@@ -97,7 +98,7 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
             return false;
         }
         const std::string header = serve::angles_csv_header(angle_names);
-        std::fwrite(header.data(), 1, header.size(), csv.get());
+        (void)std::fwrite(header.data(), 1, header.size(), csv.get());  // checked at the end
     }
 
     AssemblerConfig ac;
@@ -188,7 +189,9 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     }
     assemblers.flush(now_us);
     if (recorder.recording() && !recorder.stop(error, &result->bvh_frames)) return false;
-    if (csv && std::fflush(csv.get()) != 0) {
+    // fflush alone misses a write that failed earlier (ENOSPC while a full buffer went out):
+    // the stream's error flag keeps it.
+    if (csv && (std::fflush(csv.get()) != 0 || std::ferror(csv.get()) != 0)) {
         *error = "write " + options.angles_out + " failed";
         return false;
     }
