@@ -6,7 +6,7 @@
 
 namespace mocap::serve {
 
-BvhFrameEncoder::BvhFrameEncoder(skeleton::BodyModel model, BvhOutputOptions options)
+BvhFrameEncoder::BvhFrameEncoder(skeleton::BodyModel model, const BvhOutputOptions& options)
     : model_(std::move(model)),
       options_(options),
       hierarchy_(skeleton::bvh_hierarchy_text(model_, options_.write)),

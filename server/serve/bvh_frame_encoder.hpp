@@ -31,7 +31,7 @@ struct BvhOutputOptions {
 class BvhFrameEncoder {
 public:
     /// `model` must be valid (skeleton::validate); its segment order is the pose's.
-    BvhFrameEncoder(skeleton::BodyModel model, BvhOutputOptions options);
+    BvhFrameEncoder(skeleton::BodyModel model, const BvhOutputOptions& options);
 
     /// "HIERARCHY\n" ... the root's closing "}\n".
     [[nodiscard]] const std::string& hierarchy() const { return hierarchy_; }

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "skeleton/bvh.hpp"
+#include "core/errno_text.hpp"
 
 namespace mocap::serve {
 
@@ -73,13 +74,13 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
         fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
     }
     if (fd < 0) {
-        *error = "cannot create " + path + ": " + std::strerror(errno);
+        *error = "cannot create " + path + ": " + errno_text(errno);
         return false;
     }
     const std::string head = encoder_.hierarchy() + "MOTION\nFrames: ";
     const std::string header = head + count_digits(0) + "\n" + encoder_.frame_time_line();
     if (!write_all_at(fd, header.data(), header.size(), 0)) {
-        *error = "cannot write " + path + ": " + std::strerror(errno);
+        *error = "cannot write " + path + ": " + errno_text(errno);
         ::close(fd);
         return false;
     }
@@ -182,7 +183,7 @@ BvhRepairResult repair_bvh_file(const std::string& path) {
     {
         std::ifstream in(path, std::ios::binary);
         if (!in) {
-            r.error = path + ": " + std::strerror(errno);
+            r.error = path + ": " + errno_text(errno);
             return r;
         }
         std::ostringstream ss;
@@ -274,7 +275,7 @@ BvhRepairResult repair_bvh_file(const std::string& path) {
         }
     }
     if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-        r.error = "rename " + tmp + ": " + std::strerror(errno);
+        r.error = "rename " + tmp + ": " + errno_text(errno);
         return r;
     }
     r.ok = true;

@@ -47,10 +47,10 @@ public:
     BvhRecorder(const BvhRecorder&) = delete;
     BvhRecorder& operator=(const BvhRecorder&) = delete;
 
-    /// Any thread. Starts a recording to `path` ("" = <directory>/mocap-<first free n>.bvh).
+    /// Any thread. Starts a recording to `requested` ("" = <directory>/mocap-<first free n>.bvh).
     /// Fails if one is running or the file cannot be created (an existing file is not
     /// overwritten). On success *opened_path (if given) is the file.
-    bool start(const std::string& path, std::string* error, std::string* opened_path = nullptr);
+    bool start(const std::string& requested, std::string* error, std::string* opened_path = nullptr);
     /// Any thread. Writes the rest, patches the count, closes. False if none is running.
     bool stop(std::string* error, std::uint64_t* frames = nullptr);
 

@@ -10,6 +10,7 @@
 #include <ctime>
 
 #include "mocap/v1/recording.pb.h"
+#include "core/errno_text.hpp"
 
 namespace mocap::serve {
 
@@ -125,7 +126,7 @@ bool RawRecorder::open_next(std::string* error) {
     const std::string path = config_.directory + name;
     const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (fd < 0) {
-        *error = "raw recording: cannot create " + path + ": " + std::strerror(errno);
+        *error = "raw recording: cannot create " + path + ": " + errno_text(errno);
         return false;
     }
     fd_ = fd;
@@ -210,7 +211,7 @@ void RawRecorder::writer_loop() {
 bool RawRecordingReader::open(const std::string& path, std::string* error) {
     file_.reset(std::fopen(path.c_str(), "rb"));
     if (!file_) {
-        *error = path + ": " + std::strerror(errno);
+        *error = path + ": " + errno_text(errno);
         return false;
     }
     char magic[sizeof kRawMagic];
