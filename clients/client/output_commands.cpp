@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "pose_client.hpp"
+#include "core/errno_text.hpp"
 #include "serve/angles_csv.hpp"
 #include "serve/bvh_text.hpp"
 
@@ -41,7 +42,7 @@ int connect_blocking(const std::string& host, std::uint16_t port, std::chrono::m
         ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
         ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
         if (::connect(fd, ai->ai_addr, ai->ai_addrlen) != 0) {
-            error = std::string("connect: ") + std::strerror(errno);
+            error = std::string("connect: ") + errno_text(errno);
             ::close(fd);
             fd = -1;
         }
@@ -100,7 +101,7 @@ int run_record_bvh(const ExportOptions& o) {
             return kExitConnection;
         }
         if (n < 0) {
-            std::cerr << "mocap-client: " << (errno == EAGAIN ? "no data within the timeout" : std::strerror(errno)) << "\n";
+            std::cerr << "mocap-client: " << (errno == EAGAIN ? "no data within the timeout" : errno_text(errno)) << "\n";
             return kExitConnection;
         }
         buf.append(chunk, static_cast<std::size_t>(n));
@@ -139,7 +140,7 @@ int run_record_bvh(const ExportOptions& o) {
     }
     std::FILE* f = create_new(o.out);
     if (!f) {
-        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << std::strerror(errno) << "\n";
+        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << errno_text(errno) << "\n";
         return kExitFailed;
     }
     std::string text = header + "MOTION\nFrames: " + std::to_string(lines.size()) + "\n" + frame_time;
@@ -170,7 +171,7 @@ int run_angles_csv(const ExportOptions& o) {
     const auto& names = client.hello().skeleton().joint_angle_names();
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(create_new(o.out), &std::fclose);
     if (!f) {
-        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << std::strerror(errno) << "\n";
+        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << errno_text(errno) << "\n";
         return kExitFailed;
     }
     std::string text = serve::angles_csv_header(std::vector<std::string>(names.begin(), names.end()));

@@ -1,5 +1,6 @@
 // pose_client.cpp — POSIX sockets, non-blocking, every wait bounded by poll().
 #include "pose_client.hpp"
+#include "core/errno_text.hpp"
 
 #include <fcntl.h>
 #include <netdb.h>
@@ -124,7 +125,7 @@ bool PoseClient::connect(const std::string& host, std::uint16_t port,
             }
         }
         if (ok != 0) {
-            last_error = std::strerror(ok);
+            last_error = errno_text(ok);
             ::close(fd);
             continue;
         }
@@ -170,7 +171,7 @@ bool PoseClient::send(const v1::ClientMessage& message, std::string& error,
             continue;
         }
         if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
-            error = std::string("send: ") + std::strerror(errno);
+            error = std::string("send: ") + errno_text(errno);
             return false;
         }
         pollfd p{fd_, POLLOUT, 0};
@@ -199,7 +200,7 @@ ReadStatus PoseClient::fill(std::chrono::milliseconds timeout) {
         }
         if (errno == EINTR) continue;
         if (errno != EAGAIN && errno != EWOULDBLOCK) {
-            error_ = std::string("recv: ") + std::strerror(errno);
+            error_ = std::string("recv: ") + errno_text(errno);
             close();
             return ReadStatus::kError;
         }
@@ -207,7 +208,7 @@ ReadStatus PoseClient::fill(std::chrono::milliseconds timeout) {
         const int r = ::poll(&p, 1, remaining_ms(deadline));
         if (r == 0) return ReadStatus::kTimeout;
         if (r < 0 && errno != EINTR) {
-            error_ = std::string("poll: ") + std::strerror(errno);
+            error_ = std::string("poll: ") + errno_text(errno);
             return ReadStatus::kError;
         }
     }

@@ -282,7 +282,7 @@ void print_stats(const std::vector<std::unique_ptr<SimSink>>& sinks, const Strea
                 static_cast<unsigned long long>(lost), static_cast<unsigned long long>(dropout),
                 static_cast<unsigned long long>(skipped), static_cast<unsigned long long>(early),
                 elapsed_s > 0 ? 100.0 * cpu_s / elapsed_s : 0.0, per.c_str());
-    std::fflush(stdout);
+    (void)std::fflush(stdout);  // a progress line: nothing to do if stdout is gone
 }
 
 }  // namespace
@@ -375,7 +375,7 @@ int run_stream_command(const StreamCommandOptions& o) {
             std::fprintf(stderr, "mocap-sim stream: cannot write %s\n", o.truth_path.c_str());
             return 2;
         }
-        std::setvbuf(truth.get(), truth_buffer, _IOFBF, sizeof truth_buffer);
+        (void)std::setvbuf(truth.get(), truth_buffer, _IOFBF, sizeof truth_buffer);  // else default buffering
         std::fprintf(truth.get(), "t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,sensor_qx,"
                                   "sensor_qy,sensor_qz\n");
         shared.truth = truth.get();

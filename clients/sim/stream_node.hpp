@@ -54,8 +54,7 @@ struct SensorReading {
 
 /// The ideal reading of a sensor whose orientation went from q_prev to q over dt_s, with
 /// earth-frame linear acceleration lin_acc_earth.
-SensorReading ideal_reading(const Quat& q_earth_sensor_prev, const Quat& q_earth_sensor, double dt_s,
-                            const Vec3& lin_acc_earth_m_s2);
+SensorReading ideal_reading(const Quat& q_prev, const Quat& q, double dt_s, const Vec3& lin_acc_earth_m_s2);
 
 class SimulatedNode {
 public:

@@ -51,9 +51,9 @@ sink_uplink_state PosixUplink::state() {
     } else if (state_ == SINK_UPLINK_UP) {
         char byte;
         const ssize_t n = ::recv(fd_, &byte, 1, MSG_PEEK | MSG_DONTWAIT);
-        if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
-            close();  // the daemon never sends on this connection: 0 means it closed
-        } else if (!flush_pending()) {
+        // The daemon never sends on this connection: 0 means it closed.
+        if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) ||
+            !flush_pending()) {
             close();
         }
     }
