@@ -27,9 +27,9 @@ namespace websocket = beast::websocket;
 
 namespace {
 
-constexpr std::size_t kMaxRequestHeaderBytes = 8 * 1024;
-constexpr std::size_t kMaxRequestBodyBytes = 16 * 1024;
-constexpr std::size_t kMaxWsMessageBytes = 4 * 1024;
+constexpr std::size_t kMaxRequestHeaderBytes = std::size_t{8} * 1024;
+constexpr std::size_t kMaxRequestBodyBytes = std::size_t{16} * 1024;
+constexpr std::size_t kMaxWsMessageBytes = std::size_t{4} * 1024;
 
 bool peer_on_loopback(const asio::ip::tcp::socket& socket) {
     boost::system::error_code ec;
