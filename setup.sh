@@ -5,11 +5,14 @@
 #                     simulated walking subject, and print live poses
 #   ./setup.sh test   install, build, and run the whole test suite (CI calls this):
 #                     ctest (unit, integration, SocketCAN VM, real BVH consumers, viewer in
-#                     chromium, Python client, static analysis), libFuzzer targets for a
-#                     bounded time, then ThreadSanitizer and ASan+UBSan builds of the suite
+#                     chromium, Python client, static analysis), then the libFuzzer targets
+#                     for a bounded time
+#   ./setup.sh sanitize [tsan|asan|all]   ThreadSanitizer / ASan+UBSan builds of the suite
+#                     (tests/sanitize.sh; not yet part of the test command, see
+#                     docs/reliability.md)
 #   ./setup.sh deps   only install missing Debian packages
 #   ./setup.sh build  only configure and build (build/)
-#   ./setup.sh fuzz | sanitize   only those phases of the test command
+#   ./setup.sh fuzz   only the fuzz phase of the test command
 #
 # Environment: MOCAP_JOBS (parallelism), MOCAP_FUZZ_SECONDS (per fuzz target, default 30).
 # Needs root (or sudo) only when packages are missing.
@@ -108,10 +111,8 @@ case "$cmd" in
     phase build build
     phase ctest test_all
     phase fuzz fuzz
-    phase tsan sanitize tsan
-    phase asan sanitize asan
     ;;
   fuzz) deps; fuzz ;;
   sanitize) deps; sanitize "${2:-all}" ;;
-  *) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
+  *) sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
 esac
