@@ -114,5 +114,5 @@ case "$cmd" in
     ;;
   fuzz) deps; fuzz ;;
   sanitize) deps; sanitize "${2:-all}" ;;
-  *) sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
+  *) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
 esac
