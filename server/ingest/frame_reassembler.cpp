@@ -141,18 +141,25 @@ void FrameReassembler::on_frame(const mw_can_frame& frame, std::int64_t sink_tim
     }
 }
 
+// A frame for an instant at or before the node's last emitted sample can only be late or a
+// repeat: the filter must see each node's samples once and in order.
+bool FrameReassembler::admit(const Node& node, std::uint64_t s) {
+    if (s == 0 || (node.emitted_any && s < node.last_emitted)) {
+        counters_.late_frames.add();
+        return false;
+    }
+    if (node.emitted_any && s == node.last_emitted) {
+        counters_.duplicate_frames.add();
+        return false;
+    }
+    return true;
+}
+
 void FrameReassembler::on_raw(const mw_raw& raw, std::int64_t sink_time_us,
                               std::int64_t sink_send_us, std::int64_t received_us) {
     const std::uint64_t s = extend(raw.counter_low, MW_RAW_COUNTER_BITS);
     Node& node = nodes_[raw.node_id];
-    if (s == 0 || (node.emitted_any && s < node.last_emitted)) {
-        counters_.late_frames.add();
-        return;
-    }
-    if (node.emitted_any && s == node.last_emitted) {
-        counters_.duplicate_frames.add();
-        return;
-    }
+    if (!admit(node, s)) return;
     Slot& slot = node.slots[s % kSlots];
     if (slot.used && slot.sync != s) {
         if (slot.sync > s) {  // a newer instant already holds the slot: this one is too old
@@ -224,14 +231,7 @@ void FrameReassembler::on_attitude(const mw_attitude& att, std::int64_t sink_tim
                                    std::int64_t sink_send_us, std::int64_t received_us) {
     const std::uint64_t s = extend(att.counter_low, MW_ATT_COUNTER_BITS);
     Node& node = nodes_[att.node_id];
-    if (s == 0 || (node.emitted_any && s < node.last_emitted)) {
-        counters_.late_frames.add();
-        return;
-    }
-    if (node.emitted_any && s == node.last_emitted) {
-        counters_.duplicate_frames.add();
-        return;
-    }
+    if (!admit(node, s)) return;
     SegmentSample out;
     out.subject_id = subject_id_;
     out.node_id = att.node_id;

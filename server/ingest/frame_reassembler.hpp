@@ -108,6 +108,7 @@ private:
     };
 
     std::uint64_t extend(std::uint32_t low, unsigned bits);
+    bool admit(const Node& node, std::uint64_t sync);  // false (counted) if late or repeated
     void on_sync(std::uint32_t counter, std::int64_t sink_time_us);
     void on_raw(const mw_raw& raw, std::int64_t sink_time_us, std::int64_t sink_send_us,
                 std::int64_t received_us);
