@@ -20,6 +20,14 @@ struct ConfigError {
 
 std::size_t line_of(const toml::node& n) { return n.source().begin.line; }
 
+// A TOML number (integer or float) as a double. toml++'s value<double>() refuses an
+// integer that a double cannot hold exactly (above 2^53), so convert by hand: the range
+// checks that follow reject such values with a proper message.
+double number_of(const toml::node& n) {
+    if (const auto* i = n.as_integer()) return static_cast<double>(i->get());
+    return n.as_floating_point()->get();
+}
+
 // Reads one table: every key taken is remembered, and finish() rejects the rest.
 class TableReader {
 public:
@@ -48,7 +56,7 @@ public:
     void read(std::string_view key, double& out, double lo, double hi) {
         if (const auto* n = take(key)) {
             if (!n->is_number()) fail(key, n, "expected a number");
-            const double v = n->value<double>().value();
+            const double v = number_of(*n);
             if (!std::isfinite(v) || v < lo || v > hi) {
                 std::ostringstream s;
                 s << "must be between " << lo << " and " << hi;
@@ -150,7 +158,7 @@ std::string scalar_to_string(const toml::node& n) {
     if (n.is_floating_point()) {
         std::ostringstream s;
         s.precision(17);
-        s << n.value<double>().value();
+        s << n.as_floating_point()->get();
         return s.str();
     }
     if (n.is_boolean()) return n.value<bool>().value() ? "true" : "false";
@@ -177,7 +185,7 @@ void read_vec3(TableReader& t, std::string_view key, std::array<double, 3>& out,
         for (std::size_t i = 0; i < 3; ++i) {
             const auto* e = arr->get(i);
             if (!e->is_number()) t.fail(key, e, "expected numbers");
-            out[i] = e->value<double>().value();
+            out[i] = number_of(*e);
             if (!std::isfinite(out[i]) || std::abs(out[i]) > limit) {
                 std::ostringstream m;
                 m << "components must be within +-" << limit;

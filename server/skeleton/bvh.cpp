@@ -218,7 +218,11 @@ void append_number(std::string& out, double v, int decimals) {
     char buf[64];
     const double scaled = decimals >= 0 && decimals <= 9 ? std::round(v * kPow10[decimals]) : 0.0;
     if (decimals < 0 || decimals > 9 || !(std::abs(scaled) < 9e15)) {
-        const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::fixed, decimals);
+        // Out of fixed-point range (|v| above ~1e9 at 6 decimals): the shortest text that
+        // reads back to the same double ("-2e+73"), which from_chars, Python's float(),
+        // assimp and three.js all accept. Fixed notation would need up to 330 characters,
+        // more than a reader's token limit, and did not fit this buffer.
+        const auto r = std::to_chars(buf, buf + sizeof buf, v);
         out.append(buf, r.ptr);
         return;
     }

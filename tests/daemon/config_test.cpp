@@ -60,6 +60,19 @@ TEST(Config, WrongTypeAndRangeNameKeyAndLine) {
     EXPECT_EQ(err, "test.toml:2: log.level: must be one of trace, debug, info, warn, error, off");
 }
 
+// An integer too large for a double to hold exactly used to escape parse_config as
+// std::bad_optional_access (found by fuzz_config); it must be an ordinary range error.
+TEST(Config, HugeIntegerForAFloatKeyIsARangeError) {
+    std::string err;
+    EXPECT_FALSE(parse("[skeleton]\nfacing_heading_deg = 99999999999999030\n", &err));
+    EXPECT_EQ(err, "test.toml:2: skeleton.facing_heading_deg: must be between -360 and 360");
+    EXPECT_FALSE(parse("[skeleton]\nfacing_sensor_axis = [9007199254740993, 0, 0]\n", &err));
+    EXPECT_EQ(err, "test.toml:2: skeleton.facing_sensor_axis: components must be within +-1");
+    const auto ok = parse("[skeleton]\nfacing_heading_deg = 90\n", &err);
+    ASSERT_TRUE(ok) << err;
+    EXPECT_EQ(ok->facing_heading_deg, 90.0);
+}
+
 TEST(Config, AutoCalibrateChoices) {
     std::string err;
     auto c = parse("[skeleton]\nauto_calibrate = \"off\"\n", &err);

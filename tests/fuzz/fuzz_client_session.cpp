@@ -14,6 +14,8 @@
 // be empty while no error was returned.
 #include <spdlog/spdlog.h>
 
+#include <signal.h>
+
 #include <algorithm>
 #include <cstring>
 #include <memory>
@@ -73,6 +75,25 @@ struct Harness {
     }
 };
 
+// libFuzzer's -timeout watchdog is a SIGALRM timer; a blocking connect() it interrupts
+// fails with EINTR (and Asio throws). The signal is held while the loopback pair is made
+// and delivered as soon as it is released, so a real hang is still caught.
+class AlarmHeld {
+public:
+    AlarmHeld() {
+        sigset_t alarm;
+        sigemptyset(&alarm);
+        sigaddset(&alarm, SIGALRM);
+        pthread_sigmask(SIG_BLOCK, &alarm, &old_);
+    }
+    ~AlarmHeld() { pthread_sigmask(SIG_SETMASK, &old_, nullptr); }
+    AlarmHeld(const AlarmHeld&) = delete;
+    AlarmHeld& operator=(const AlarmHeld&) = delete;
+
+private:
+    sigset_t old_{};
+};
+
 // Every message (and a final error marker) the reader yields when fed `chunk` bytes at a time.
 std::vector<std::string> deframe(const std::uint8_t* data, std::size_t size, std::size_t chunk) {
     serve::DelimitedReader reader(serve::ServeConfig{}.max_client_message_bytes);
@@ -110,11 +131,14 @@ MOCAP_FUZZ_ENTRY(client_session) {
     static Harness* h = new Harness;
     asio::ip::tcp::socket client(h->io);
     asio::ip::tcp::socket server(h->io);
-    client.connect(h->acceptor.local_endpoint());
-    h->acceptor.accept(server);
-    // The input fits the loopback socket buffers (the fuzzer's -max_len is 16 KiB).
-    asio::write(client, asio::buffer(data, size));
-    client.shutdown(asio::ip::tcp::socket::shutdown_send);
+    {
+        const AlarmHeld held;
+        client.connect(h->acceptor.local_endpoint());
+        h->acceptor.accept(server);
+        // The input fits the loopback socket buffers (run_fuzzers.sh caps it at 8 KiB).
+        asio::write(client, asio::buffer(data, size));
+        client.shutdown(asio::ip::tcp::socket::shutdown_send);
+    }
 
     const std::uint64_t closed_before = h->closed;
     const std::uint64_t id = h->next_id++;

@@ -4,6 +4,7 @@
 // "<source>:<line>: ..." (line a positive number); an accepted one must parse the same
 // way twice (no hidden state).
 #include <cctype>
+#include <exception>
 #include <string>
 #include <string_view>
 
@@ -16,8 +17,10 @@ MOCAP_FUZZ_ENTRY(config) {
     std::optional<mocap::daemon::DaemonConfig> config;
     try {
         config = mocap::daemon::parse_config(text, "fuzz.toml", &error);
+    } catch (const std::exception& e) {
+        MOCAP_FUZZ_CHECK(false, e.what());
     } catch (...) {
-        MOCAP_FUZZ_CHECK(false, "parse_config threw");
+        MOCAP_FUZZ_CHECK(false, "parse_config threw a non-standard exception");
     }
     if (!config) {
         const std::string prefix = "fuzz.toml:";

@@ -312,6 +312,23 @@ const std::string kHead =
     " JOINT c\n {\n  OFFSET 1 0 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  }\n"
     " }\n}\n";
 
+// A value beyond fixed-point range once came out of write_bvh as the garbage left in a too
+// small buffer (found by fuzz_bvh); it must be written so that it reads back exactly.
+TEST(Bvh, ValuesBeyondFixedPointRangeRoundTrip) {
+    auto a = parse_bvh(read_text("cmu_131_01_walk.bvh"));
+    ASSERT_TRUE(a) << a.error;
+    BvhClip clip = *a.clip;
+    clip.values[3] = -2e73;
+    clip.values[4] = 1.7976931348623157e308;
+    clip.values[5] = 12345678901.25;
+    const std::string text = write_bvh(clip);
+    const auto b = parse_bvh(text);
+    ASSERT_TRUE(b) << b.error;
+    EXPECT_EQ(b.clip->values[3], -2e73);
+    EXPECT_EQ(b.clip->values[4], 1.7976931348623157e308);
+    EXPECT_EQ(b.clip->values[5], 12345678901.25);
+}
+
 std::string error_of(const std::string& text, const BvhLimits& limits = {}) {
     const auto r = parse_bvh(text, limits);
     EXPECT_FALSE(r) << text;
