@@ -16,6 +16,7 @@
 #include <numbers>
 #include <optional>
 
+#include "core/parse_number.hpp"
 #include "mocap_wire/mw_can.h"
 #include "sim/sim_rng.hpp"
 #include "sim/stream_motion.hpp"
@@ -289,9 +290,10 @@ void print_stats(const std::vector<std::unique_ptr<SimSink>>& sinks, const Strea
 
 bool parse_dropout(const std::string& text, NodeDropout* out, std::string* error) {
     NodeDropout d;
-    char tail = 0;
-    if (std::sscanf(text.c_str(), "%d:%lf:%lf%c", &d.node, &d.start_s, &d.end_s, &tail) != 3 ||
-        d.node < static_cast<int>(MW_NODE_ID_MIN) || d.node > static_cast<int>(MW_NODE_ID_MAX) ||
+    const auto f = core::split_fields(text, ':');
+    if (f.size() != 3 || !core::parse_number(f[0], d.node) || !core::parse_number(f[1], d.start_s) ||
+        !core::parse_number(f[2], d.end_s) || d.node < static_cast<int>(MW_NODE_ID_MIN) ||
+        d.node > static_cast<int>(MW_NODE_ID_MAX) ||
         !(d.start_s >= 0.0) || !(d.end_s > d.start_s)) {
         *error = "--dropout expects NODE:START_S:END_S with node 1..63 and 0 <= START < END, got '" + text + "'";
         return false;

@@ -82,15 +82,10 @@ static int run(int argc, char** argv) {
     if (!replay.files.empty()) {
         for (const std::string& spec : calibrate_at) {
             ReplayCalibration c;
-            char pose = 'T';
-            unsigned subject = 1;
-            if (std::sscanf(spec.c_str(), "%lf:%u:%c", &c.at_s, &subject, &pose) < 1) {
-                std::cerr << "mocapd: --calibrate-at " << spec << ": expected SECONDS[:SUBJECT[:T|N]]\n";
+            if (!parse_replay_calibration(spec, &c, &error)) {
+                std::cerr << "mocapd: " << error << "\n";
                 return 1;
             }
-            c.subject = subject;
-            c.pose = (pose == 'N' || pose == 'n') ? mocap::skeleton::CalibrationPose::kNPose
-                                                  : mocap::skeleton::CalibrationPose::kTPose;
             replay.calibrate.push_back(c);
         }
         ReplayResult r;

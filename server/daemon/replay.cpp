@@ -9,6 +9,7 @@
 #include <memory>
 #include <thread>
 
+#include "core/parse_number.hpp"
 #include "core/subject_assembler.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/filter_processor.hpp"
@@ -46,6 +47,24 @@ PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config) {
     if (config.auto_calibrate == "t-pose") so.auto_calibrate = skeleton::CalibrationPose::kTPose;
     if (config.auto_calibrate == "n-pose") so.auto_calibrate = skeleton::CalibrationPose::kNPose;
     return so;
+}
+
+bool parse_replay_calibration(std::string_view spec, ReplayCalibration* out, std::string* error) {
+    const auto f = core::split_fields(spec, ':');
+    ReplayCalibration c;
+    bool ok = f.size() <= 3 && core::parse_number(f[0], c.at_s) && c.at_s >= 0.0;
+    if (ok && f.size() >= 2) ok = core::parse_number(f[1], c.subject) && c.subject >= 1;
+    if (ok && f.size() == 3) {
+        if (f[2] == "N" || f[2] == "n") c.pose = skeleton::CalibrationPose::kNPose;
+        else ok = f[2] == "T" || f[2] == "t";
+    }
+    if (!ok) {
+        *error = "--calibrate-at " + std::string(spec) +
+                 ": expected SECONDS[:SUBJECT[:T|N]] with SECONDS >= 0 and SUBJECT >= 1";
+        return false;
+    }
+    *out = c;
+    return true;
 }
 
 bool run_replay(const DaemonConfig& config, const ReplayOptions& options, ReplayResult* result, std::string* error) {

@@ -18,6 +18,7 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "daemon/config.hpp"
@@ -38,6 +39,11 @@ struct ReplayCalibration {
     std::uint32_t subject = 1;
     skeleton::CalibrationPose pose = skeleton::CalibrationPose::kTPose;
 };
+
+/// Parses `--calibrate-at SECONDS[:SUBJECT[:T|N]]` (subject defaults to 1, pose to T).
+/// False + error naming the argument for anything else (a negative or non-finite time,
+/// subject 0, trailing characters, a pose other than T or N).
+bool parse_replay_calibration(std::string_view spec, ReplayCalibration* out, std::string* error);
 
 struct ReplayOptions {
     std::vector<std::string> files;  ///< raw recordings, replayed in this order

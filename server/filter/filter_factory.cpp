@@ -4,9 +4,11 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <sstream>
 #include <variant>
 
+#include "core/parse_number.hpp"
 #include "filter/csmo.hpp"
 #include "filter/madgwick.hpp"
 #include "filter/mahony.hpp"
@@ -23,12 +25,6 @@ struct Field {
     std::variant<double P::*, bool P::*, int P::*, std::uint64_t P::*> member;
 };
 
-bool parse_value(std::string_view text, double& out) {
-    const char* end = text.data() + text.size();
-    const auto r = std::from_chars(text.data(), end, out);
-    return r.ec == std::errc() && r.ptr == end;
-}
-
 bool parse_value(std::string_view text, bool& out) {
     for (std::string_view t : {"true", "1", "yes", "on"}) {
         if (text == t) return out = true, true;
@@ -39,11 +35,19 @@ bool parse_value(std::string_view text, bool& out) {
     return false;
 }
 
-template <class Int>
-bool parse_value(std::string_view text, Int& out) {
-    const char* end = text.data() + text.size();
-    const auto r = std::from_chars(text.data(), end, out);
-    return r.ec == std::errc() && r.ptr == end;
+// "nan" is a value, not an error: it is how a parameter says "not set" (dip_deg: use the
+// dip measured at start-up), and format_value() writes it so.
+bool parse_value(std::string_view text, double& out) {
+    if (text == "nan") {
+        out = std::numeric_limits<double>::quiet_NaN();
+        return true;
+    }
+    return core::parse_number(text, out);
+}
+
+template <class Number>
+bool parse_value(std::string_view text, Number& out) {
+    return core::parse_number(text, out);
 }
 
 std::string format_value(double v) {

@@ -15,6 +15,7 @@
 #include <deque>
 #include <optional>
 
+#include "core/parse_number.hpp"
 #include "serve/client_session.hpp"  // token_equal
 #include "serve/tcp_listen.hpp"
 #include "serve/viewer_assets.hpp"
@@ -80,8 +81,7 @@ std::optional<std::string_view> query_value(std::string_view query, std::string_
 
 std::optional<std::uint32_t> parse_u32(std::string_view s) {
     std::uint32_t v = 0;
-    const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec != std::errc() || ptr != s.data() + s.size() || s.empty()) return std::nullopt;
+    if (!core::parse_number(s, v)) return std::nullopt;
     return v;
 }
 

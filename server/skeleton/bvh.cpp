@@ -6,6 +6,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/parse_number.hpp"
+
 namespace mocap::skeleton {
 
 namespace {
@@ -69,19 +71,6 @@ private:
     bool too_long_ = false;
 };
 
-bool parse_double(std::string_view t, double& v) {
-    if (!t.empty() && t.front() == '+') t.remove_prefix(1);
-    if (t.empty()) return false;
-    const auto r = std::from_chars(t.data(), t.data() + t.size(), v);
-    return r.ec == std::errc() && r.ptr == t.data() + t.size() && std::isfinite(v);
-}
-
-bool parse_size(std::string_view t, std::size_t& v) {
-    if (t.empty()) return false;
-    const auto r = std::from_chars(t.data(), t.data() + t.size(), v);
-    return r.ec == std::errc() && r.ptr == t.data() + t.size();
-}
-
 bool valid_joint_name(std::string_view t) { return !t.empty() && t != "{" && t != "}"; }
 
 std::string at(const Lexer& lx, const std::string& msg) { return "line " + std::to_string(lx.line()) + ": " + msg; }
@@ -142,7 +131,7 @@ std::string parse_hierarchy_block(Lexer& lx, const BvhLimits& limits, BvhClip& c
             for (int k = 0; k < 3; ++k) {
                 const std::string_view n = lx.next();
                 if (lx.too_long()) return at(lx, "token too long");
-                if (!parse_double(n, v[k])) return at(lx, "OFFSET needs 3 finite numbers, found " + quoted(n));
+                if (!core::parse_number(n, v[k])) return at(lx, "OFFSET needs 3 finite numbers, found " + quoted(n));
             }
             (top.end_site ? joint.end_offset : joint.offset) = v;
             top.offset_seen = true;
@@ -152,7 +141,7 @@ std::string parse_hierarchy_block(Lexer& lx, const BvhLimits& limits, BvhClip& c
             std::size_t n = 0;
             const std::string_view ns = lx.next();
             if (lx.too_long()) return at(lx, "token too long");
-            if (!parse_size(ns, n) || n > 6) return at(lx, "CHANNELS count must be 0..6, found " + quoted(ns));
+            if (!core::parse_number(ns, n) || n > 6) return at(lx, "CHANNELS count must be 0..6, found " + quoted(ns));
             bool used[6] = {false, false, false, false, false, false};
             for (std::size_t k = 0; k < n; ++k) {
                 const std::string_view cs = lx.next();
@@ -351,7 +340,7 @@ std::string parse_bvh_motion_line(std::string_view line, std::span<double> out) 
         if (count >= out.size()) {
             return "too many values: expected " + std::to_string(out.size());
         }
-        if (!parse_double(tok, out[count])) return "not a finite number: " + quoted(tok.substr(0, 32));
+        if (!core::parse_number(tok, out[count])) return "not a finite number: " + quoted(tok.substr(0, 32));
         ++count;
     }
     if (count != out.size()) {
@@ -377,7 +366,7 @@ BvhParseResult parse_bvh(std::string_view text, const BvhLimits& limits) {
     if (!expect(lx, "Frames:", r.error)) return r;
     std::size_t frames = 0;
     t = lx.next();
-    if (!parse_size(t, frames)) return r.error = at(lx, "Frames: needs a non-negative integer"), r;
+    if (!core::parse_number(t, frames)) return r.error = at(lx, "Frames: needs a non-negative integer"), r;
     if (frames > limits.max_frames) {
         return r.error = at(lx, "more than " + std::to_string(limits.max_frames) + " frames"), r;
     }
@@ -387,7 +376,7 @@ BvhParseResult parse_bvh(std::string_view text, const BvhLimits& limits) {
     if (!expect(lx, "Frame", r.error) || !expect(lx, "Time:", r.error)) return r;
     t = lx.next();
     double ft = 0.0;
-    if (!parse_double(t, ft) || ft <= 0.0) return r.error = at(lx, "Frame Time: needs a positive number"), r;
+    if (!core::parse_number(t, ft) || ft <= 0.0) return r.error = at(lx, "Frame Time: needs a positive number"), r;
     if (!lx.finish_line()) return r.error = at(lx, "unexpected text after Frame Time"), r;
 
     clip.frame_count = frames;

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/parse_number.hpp"
+
 namespace mocap::skeleton {
 
 std::string_view to_string(CalibrationPose p) {
@@ -192,13 +194,7 @@ std::string_view trim(std::string_view s) {
     return s;
 }
 
-bool parse_number(std::string_view t, double& v) {
-    t = trim(t);
-    if (!t.empty() && t.front() == '+') t.remove_prefix(1);
-    if (t.empty()) return false;
-    const auto r = std::from_chars(t.data(), t.data() + t.size(), v);
-    return r.ec == std::errc() && r.ptr == t.data() + t.size() && std::isfinite(v);
-}
+bool parse_number(std::string_view t, double& v) { return core::parse_number(trim(t), v); }
 
 bool parse_string(std::string_view t, std::string_view& out) {
     t = trim(t);

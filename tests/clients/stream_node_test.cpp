@@ -146,6 +146,15 @@ TEST(StreamCommand, ParsesDropouts) {
     EXPECT_FALSE(parse_dropout("0:1:2", &d, &error));
     EXPECT_FALSE(parse_dropout("4:1:2x", &d, &error));
     EXPECT_FALSE(parse_dropout("4:1", &d, &error));
+    // What sscanf used to let through: a node number that overflows int, a field with
+    // trailing characters, a missing field, a fourth field, space before a number.
+    EXPECT_FALSE(parse_dropout("4294967300:1:2", &d, &error));
+    EXPECT_FALSE(parse_dropout("4x:1:2", &d, &error));
+    EXPECT_FALSE(parse_dropout("4::2", &d, &error));
+    EXPECT_FALSE(parse_dropout("4:1:2:3", &d, &error));
+    EXPECT_FALSE(parse_dropout(" 4:1:2", &d, &error));
+    EXPECT_FALSE(parse_dropout("4:nan:2", &d, &error));
+    EXPECT_NE(error.find("NODE:START_S:END_S"), std::string::npos);
 }
 
 }  // namespace
