@@ -3,7 +3,8 @@
 #include <spdlog/spdlog.h>
 
 #include <charconv>
-#include <deque>
+
+#include "serve/client_send_queue.hpp"
 
 namespace mocap::serve {
 
@@ -29,24 +30,22 @@ std::vector<NamedCounter> BvhServerCounters::snapshot() const {
 class BvhServer::Session : public std::enable_shared_from_this<Session> {
 public:
     Session(asio::ip::tcp::socket socket, BvhServer& server, std::uint64_t id)
-        : socket_(std::move(socket)), server_(server), id_(id), subject_(server.config_.subject) {}
+        : socket_(std::move(socket)),
+          server_(server),
+          id_(id),
+          subject_(server.config_.subject),
+          queue_(server.config_.queue_frames, server.counters_.frames_dropped) {}
 
     void start() {
-        boost::system::error_code ignored;
-        socket_.set_option(asio::ip::tcp::no_delay(true), ignored);
         do_write();
         do_read();
     }
 
-    void offer(const Line& line) {
+    void offer(const SubjectText& line) {
         if (closed_) return;
         if (subject_ == 0) subject_ = line.subject_id;  // first subject with a frame
         if (line.subject_id != subject_) return;
-        if (queue_.size() >= server_.config_.queue_frames) {
-            queue_.pop_front();
-            server_.counters_.frames_dropped.fetch_add(1, std::memory_order_relaxed);
-        }
-        queue_.push_back(line.text);
+        queue_.push(line.text);  // drops are not announced: BVH text has no line for them
         if (!writing_) do_write();
     }
 
@@ -56,7 +55,7 @@ public:
         boost::system::error_code ignored;
         socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
         socket_.close(ignored);
-        server_.on_closed(id_);
+        server_.sessions_.remove(id_);
     }
 
 private:
@@ -67,10 +66,7 @@ private:
             in_flight_.push_back(server_.greeting_);
             greeted_ = true;
         }
-        while (!queue_.empty() && in_flight_.size() < kMaxBatch) {
-            in_flight_.push_back(std::move(queue_.front()));
-            queue_.pop_front();
-        }
+        queue_.move_into(in_flight_, kMaxBatch);
         if (in_flight_.empty()) return;
         buffers_.clear();
         for (const auto& s : in_flight_) buffers_.emplace_back(s->data(), s->size());
@@ -148,7 +144,7 @@ private:
     bool greeted_ = false;
     bool writing_ = false;
     bool closed_ = false;
-    std::deque<std::shared_ptr<const std::string>> queue_;
+    ClientSendQueue queue_;  // MOTION lines only; the greeting is written apart
     std::vector<std::shared_ptr<const std::string>> in_flight_;
     std::vector<asio::const_buffer> buffers_;
     std::array<char, 256> read_buf_{};
@@ -156,115 +152,50 @@ private:
 };
 
 BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
-    : config_(std::move(config)), encoder_(encoder) {
+    : config_(std::move(config)),
+      encoder_(encoder),
+      serve_("mocap-bvh", config_.max_clients,
+             {counters_.connections_accepted, counters_.connections_rejected_full},
+             {[this] { return sessions_.size(); }, [this](asio::ip::tcp::socket s) { admit(std::move(s)); },
+              [this] { sessions_.close_all(); }}),
+      sessions_(counters_.connections_closed),
+      backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& line) { deliver(line); }) {
     greeting_ = std::make_shared<const std::string>(encoder_.hierarchy() + "MOTION\n" + encoder_.frame_time_line());
-    backlog_.reserve(config_.publish_backlog_frames);
-    draining_.reserve(config_.publish_backlog_frames);
 }
 
 BvhServer::~BvhServer() { stop(); }
 
 bool BvhServer::start(std::string& error) {
-    boost::system::error_code ec;
-    const auto address = asio::ip::make_address(config_.bind_address, ec);
-    if (ec) {
-        error = "bvh: bind address " + config_.bind_address + ": " + ec.message();
+    if (!serve_.start(config_.bind_address, config_.port, error)) {
+        error = "bvh: " + error;
         return false;
     }
-    const asio::ip::tcp::endpoint ep(address, config_.port);
-    acceptor_ = std::make_unique<asio::ip::tcp::acceptor>(io_);
-    acceptor_->open(ep.protocol(), ec);
-    if (!ec) acceptor_->set_option(asio::socket_base::reuse_address(true), ec);
-    if (!ec) acceptor_->bind(ep, ec);
-    if (!ec) acceptor_->listen(asio::socket_base::max_listen_connections, ec);
-    if (ec) {
-        error = "bvh: bind " + config_.bind_address + ":" + std::to_string(config_.port) + ": " + ec.message();
-        return false;
-    }
-    bound_port_ = acceptor_->local_endpoint().port();
-    running_ = true;
-    do_accept();
-    thread_ = std::thread([this] {
-        pthread_setname_np(pthread_self(), "mocap-bvh");
-        auto guard = asio::make_work_guard(io_);
-        io_.run();
-    });
-    spdlog::info("bvh: live BVH on {}:{}", config_.bind_address, bound_port_.load());
+    spdlog::info("bvh: live BVH on {}:{}", config_.bind_address, serve_.port());
     return true;
 }
 
-void BvhServer::stop() {
-    if (!running_.exchange(false)) {
-        if (thread_.joinable()) thread_.join();
-        return;
-    }
-    asio::post(io_, [this] {
-        boost::system::error_code ignored;
-        acceptor_->close(ignored);
-        auto sessions = sessions_;  // close() erases from sessions_
-        for (auto& [id, s] : sessions) s->close();
-        io_.stop();
-    });
-    if (thread_.joinable()) thread_.join();
-}
+void BvhServer::stop() { serve_.stop(); }
 
-void BvhServer::do_accept() {
-    acceptor_->async_accept([this](const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
-        if (ec == asio::error::operation_aborted || !running_.load()) return;
-        if (!ec) {
-            if (sessions_.size() >= config_.max_clients) {
-                counters_.connections_rejected_full.fetch_add(1, std::memory_order_relaxed);
-                boost::system::error_code ignored;
-                socket.close(ignored);
-            } else {
-                counters_.connections_accepted.fetch_add(1, std::memory_order_relaxed);
-                const std::uint64_t id = next_id_++;
-                auto s = std::make_shared<Session>(std::move(socket), *this, id);
-                sessions_.emplace(id, s);
-                clients_.store(sessions_.size());
-                s->start();
-            }
-        }
-        do_accept();
-    });
-}
-
-void BvhServer::on_closed(std::uint64_t id) {
-    if (sessions_.erase(id) != 0) counters_.connections_closed.fetch_add(1, std::memory_order_relaxed);
-    clients_.store(sessions_.size());
+void BvhServer::admit(asio::ip::tcp::socket socket) {
+    const std::uint64_t id = sessions_.next_id();
+    auto s = std::make_shared<Session>(std::move(socket), *this, id);
+    sessions_.put(id, s);
+    s->start();
 }
 
 void BvhServer::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
-    if (clients_.load(std::memory_order_relaxed) == 0 || !running_.load(std::memory_order_relaxed)) return;
+    if (sessions_.open() == 0 || !serve_.running()) return;
     auto text = std::make_shared<std::string>();
     text->reserve(16 * encoder_.values_per_frame());
     encoder_.append_motion_line(pose, *text);
     counters_.frames_published.fetch_add(1, std::memory_order_relaxed);
-    bool wake = false;
-    {
-        std::lock_guard lock(backlog_mutex_);
-        if (backlog_.size() >= config_.publish_backlog_frames) {
-            counters_.backlog_dropped.fetch_add(1, std::memory_order_relaxed);
-            return;
-        }
-        wake = backlog_.empty();
-        backlog_.push_back({frame.subject_id, std::move(text)});
+    if (!backlog_.push({frame.subject_id, std::move(text)})) {
+        counters_.backlog_dropped.fetch_add(1, std::memory_order_relaxed);
     }
-    if (wake) asio::post(io_, [this] { drain(); });
 }
 
-void BvhServer::drain() {
-    {
-        std::lock_guard lock(backlog_mutex_);
-        draining_.swap(backlog_);
-    }
-    for (const Line& line : draining_) {
-        for (auto it = sessions_.begin(); it != sessions_.end();) {
-            auto s = (it++)->second;  // offer() may close and erase the session
-            s->offer(line);
-        }
-    }
-    draining_.clear();
+void BvhServer::deliver(const SubjectText& line) {
+    sessions_.for_each([&](Session& s) { s.offer(line); });
 }
 
 }  // namespace mocap::serve

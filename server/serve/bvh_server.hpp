@@ -12,14 +12,15 @@
 // "subject <id>\n" at any time (a client may half-close its side after it; other
 // input: counted as bad lines; a line longer than
 // 64 bytes closes the connection).
-// Lag: each client has a bounded queue of queue_frames lines; when it is full the OLDEST
-// line is dropped and counted (frames_dropped), so a slow reader sees a gap, never a
-// stall of the pipeline. One write in flight per client.
+// Lag: each client has a ClientSendQueue of queue_frames lines; when it is full the
+// OLDEST line is dropped and counted (frames_dropped), so a slow reader sees a gap, never
+// a stall of the pipeline; the HIERARCHY greeting is never queued, so never dropped.
+// One write in flight per client.
 //
-// Threads: one serve thread (its own io_context) runs the acceptor and every session.
+// Threads: one ServeThread (its own io_context) runs the acceptor and every session.
 // publish() may be called from any thread (the assembler thread); it encodes the line
 // once (nothing when no client is connected) and hands it to the serve thread through a
-// mutex-guarded backlog of publish_backlog_frames (beyond: dropped, counted).
+// PublishBacklog of publish_backlog_frames (beyond: dropped, counted).
 // Ownership: the daemon owns the server; stop() (or the destructor) closes everything.
 #pragma once
 
@@ -27,17 +28,17 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <string>
-#include <thread>
-#include <unordered_map>
 #include <vector>
 
 #include "core/asio.hpp"
 #include "core/frame.hpp"
 #include "serve/bvh_frame_encoder.hpp"
 #include "serve/pose_frame.hpp"
+#include "serve/publish_backlog.hpp"
 #include "serve/serve_config.hpp"
+#include "serve/serve_thread.hpp"
+#include "serve/session_table.hpp"
 
 namespace mocap::serve {
 
@@ -81,39 +82,24 @@ public:
     /// Any thread; never blocks on a client.
     void publish(const SubjectFrame& frame, const SkeletonPose& pose);
 
-    [[nodiscard]] std::uint16_t port() const { return bound_port_.load(); }
-    [[nodiscard]] std::size_t client_count() const { return clients_.load(); }
+    [[nodiscard]] std::uint16_t port() const { return serve_.port(); }
+    [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }
     [[nodiscard]] const BvhServerCounters& counters() const { return counters_; }
 
     class Session;  // one client (bvh_server.cpp)
 
 private:
-    struct Line {
-        std::uint32_t subject_id = 0;
-        std::shared_ptr<const std::string> text;
-    };
-    void do_accept();
-    void drain();
-    void on_closed(std::uint64_t id);
+    void admit(asio::ip::tcp::socket socket);
+    void deliver(const SubjectText& line);
 
     BvhServerConfig config_;
     const BvhFrameEncoder& encoder_;
     std::shared_ptr<const std::string> greeting_;  // HIERARCHY + MOTION + Frame Time
     BvhServerCounters counters_;
 
-    asio::io_context io_{1};
-    std::unique_ptr<asio::ip::tcp::acceptor> acceptor_;
-    std::unordered_map<std::uint64_t, std::shared_ptr<Session>> sessions_;  // serve thread
-    std::thread thread_;
-    std::uint64_t next_id_ = 1;  // serve thread
-
-    std::mutex backlog_mutex_;
-    std::vector<Line> backlog_;  // guarded; reserved at construction
-    std::vector<Line> draining_;  // serve thread
-
-    std::atomic<std::size_t> clients_{0};
-    std::atomic<std::uint16_t> bound_port_{0};
-    std::atomic<bool> running_{false};
+    ServeThread serve_;  // before the sessions and the backlog, which use its io_context
+    SessionTable<Session> sessions_;  // serve thread (open(): any thread)
+    PublishBacklog backlog_;
 };
 
 }  // namespace mocap::serve

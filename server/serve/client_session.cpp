@@ -52,7 +52,7 @@ ClientSession::ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx,
       reader_(ctx.config.max_client_message_bytes),
       in_(std::make_unique<v1::ClientMessage>()),
       reply_(std::make_unique<v1::ServerMessage>()),
-      ring_(std::max<std::size_t>(ctx.config.queue_frames, 1)),
+      frames_(ctx.config.queue_frames, ctx.counters.frames_dropped),
       request_tokens_(static_cast<double>(ctx.config.client_message_burst)),
       last_refill_(std::chrono::steady_clock::now()) {
     in_flight_.reserve(kMaxBatch);
@@ -195,7 +195,7 @@ void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
     for (std::uint32_t s : subjects_) ack->add_subject_ids(s);
     ack->set_decimation(decimation_);
     ack->set_fields(fields_);
-    ack->set_queue_frames(static_cast<std::uint32_t>(ring_.size()));
+    ack->set_queue_frames(static_cast<std::uint32_t>(frames_.capacity()));
     send_reply(*reply_);
 }
 
@@ -203,7 +203,7 @@ void ClientSession::unsubscribe() {
     if (!subscribed_) return;
     ctx_.broadcaster.unsubscribe(lane_, this, subjects_, fields_);
     subscribed_ = false;
-    ring_clear();
+    frames_.clear();
 }
 
 void ClientSession::handle_stats(const v1::ClientMessage& message) {
@@ -322,13 +322,7 @@ void ClientSession::deliver(const EncodedFrame& frame) {
     }
     const SharedBytes& bytes = frame.by_fields[fields_];
     if (!bytes) return;  // subscribed after this frame was encoded
-    if (ring_full()) {
-        ring_pop();
-        ++dropped_unreported_;
-        ++dropped_total_;
-        ctx_.counters.frames_dropped.fetch_add(1, std::memory_order_relaxed);
-    }
-    ring_push(bytes);
+    frames_.push(bytes);
     if (!writing_) do_write();
 }
 
@@ -337,21 +331,17 @@ void ClientSession::do_write() {
     in_flight_.clear();
     buffers_.clear();
     in_flight_frames_ = 0;
-    if (dropped_unreported_ > 0 && !closing_) {
+    if (const std::uint64_t dropped = closing_ ? 0 : frames_.take_unreported_drops(); dropped > 0) {
         reply_->Clear();
-        reply_->mutable_drops()->set_dropped(dropped_unreported_);
-        reply_->mutable_drops()->set_dropped_total(dropped_total_);
-        dropped_unreported_ = 0;
+        reply_->mutable_drops()->set_dropped(dropped);
+        reply_->mutable_drops()->set_dropped_total(frames_.dropped_total());
         if (SharedBytes notice = encode_server_message(*reply_)) in_flight_.push_back(notice);
     }
     while (!replies_.empty() && in_flight_.size() < kMaxBatch) {
         in_flight_.push_back(std::move(replies_.front()));
         replies_.pop_front();
     }
-    while (ring_size_ > 0 && in_flight_.size() < kMaxBatch) {
-        in_flight_.push_back(ring_pop());
-        ++in_flight_frames_;
-    }
+    in_flight_frames_ = frames_.move_into(in_flight_, kMaxBatch);
     if (in_flight_.empty()) {
         if (closing_ && !send_shut_) {
             // Goodbye written: FIN, then wait for the client's close (or the timer).
@@ -380,25 +370,6 @@ void ClientSession::on_write(const boost::system::error_code& ec, std::size_t n)
     ctx_.counters.frames_sent.fetch_add(in_flight_frames_, std::memory_order_relaxed);
     in_flight_.clear();  // release the shared buffers now, not at the next write
     do_write();
-}
-
-// ------------------------------------------------------------------- ring buffer
-
-void ClientSession::ring_push(SharedBytes bytes) {
-    ring_[(ring_head_ + ring_size_) % ring_.size()] = std::move(bytes);
-    ++ring_size_;
-}
-
-SharedBytes ClientSession::ring_pop() {
-    SharedBytes out = std::move(ring_[ring_head_]);
-    ring_head_ = (ring_head_ + 1) % ring_.size();
-    --ring_size_;
-    return out;
-}
-
-void ClientSession::ring_clear() {
-    while (ring_size_ > 0) ring_pop();
-    ring_head_ = 0;
 }
 
 // ------------------------------------------------------------- timers and closing
@@ -439,7 +410,7 @@ void ClientSession::fail(const boost::system::error_code& ec, const char* what) 
 void ClientSession::close_with_goodbye(CloseReason reason, std::string_view text) {
     if (closing_ || closed_) return;
     closing_ = true;
-    ring_clear();
+    frames_.clear();
     if (SharedBytes bye = encode_goodbye(reason, text)) replies_.push_back(std::move(bye));
     arm_timer(std::chrono::milliseconds(ctx_.config.close_grace_ms));
     if (!writing_) do_write();

@@ -7,7 +7,7 @@
 // Conversation (docs/client-protocol.md): the server sends Hello at once; the client
 // must send a valid message within subscribe_timeout_ms, and keep doing so until it
 // has subscribed (then it may only read). Every write is a batch of whole messages
-// and there is ONE write in flight per client. Frames wait in a bounded queue of
+// and there is ONE write in flight per client. Frames wait in a ClientSendQueue of
 // queue_frames; when it is full the OLDEST frame is dropped, counted, and announced
 // to this client by a DropNotice written before its next frame. Replies (Subscribed,
 // Stats, ControlReply, Pong) use a separate small queue and are never dropped.
@@ -17,7 +17,7 @@
 //
 // Ownership: shared_ptr (enable_shared_from_this); the server's session table, the
 // broadcaster's index and pending handlers hold it. Cost per delivered frame: a
-// shared_ptr copy into the ring; per write: one writev of up to kMaxBatch messages.
+// shared_ptr copy into its send queue; per write: one writev of up to kMaxBatch messages.
 #pragma once
 
 #include <chrono>
@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "core/asio.hpp"
+#include "serve/client_send_queue.hpp"
 #include "serve/framing.hpp"
 #include "serve/pose_broadcaster.hpp"
 #include "serve/serve_config.hpp"
@@ -90,7 +91,7 @@ public:
     void close_with_goodbye(CloseReason reason, std::string_view text);
 
     [[nodiscard]] std::uint64_t id() const { return id_; }
-    [[nodiscard]] std::uint64_t dropped_total() const { return dropped_total_; }
+    [[nodiscard]] std::uint64_t dropped_total() const { return frames_.dropped_total(); }
 
 private:
     void do_read();
@@ -112,12 +113,6 @@ private:
     void protocol_error(CloseReason reason, LogLimiter::Kind kind, const char* what);
     void unsubscribe();
 
-    // Bounded ring of frames waiting to be written (capacity queue_frames).
-    bool ring_full() const { return ring_size_ == ring_.size(); }
-    void ring_push(SharedBytes bytes);
-    SharedBytes ring_pop();
-    void ring_clear();
-
     asio::ip::tcp::socket socket_;
     asio::steady_timer timer_;
     SessionContext& ctx_;
@@ -135,9 +130,7 @@ private:
     std::uint32_t fields_ = 0;
     std::vector<std::pair<std::uint32_t, std::uint64_t>> decimation_counts_;  ///< per subject
 
-    std::vector<SharedBytes> ring_;
-    std::size_t ring_head_ = 0;
-    std::size_t ring_size_ = 0;
+    ClientSendQueue frames_;  ///< capacity queue_frames; drops counted in frames_dropped
     std::deque<SharedBytes> replies_;
     std::vector<SharedBytes> in_flight_;
     std::vector<asio::const_buffer> buffers_;
@@ -146,9 +139,6 @@ private:
     bool closing_ = false;
     bool closed_ = false;
     bool send_shut_ = false;  ///< Goodbye written and FIN sent
-
-    std::uint64_t dropped_unreported_ = 0;
-    std::uint64_t dropped_total_ = 0;
 
     double request_tokens_ = 0;
     std::chrono::steady_clock::time_point last_refill_{};

@@ -2,7 +2,6 @@
 // answers them or hands its socket to a WsSession after an Upgrade on /ws.
 #include "serve/http_server.hpp"
 
-#include <pthread.h>
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
@@ -16,8 +15,8 @@
 #include <optional>
 
 #include "core/parse_number.hpp"
+#include "serve/client_send_queue.hpp"
 #include "serve/client_session.hpp"  // token_equal
-#include "serve/tcp_listen.hpp"
 #include "serve/viewer_assets.hpp"
 
 namespace mocap::serve {
@@ -122,7 +121,11 @@ public:
 class HttpServer::WsSession : public Session, public std::enable_shared_from_this<WsSession> {
 public:
     WsSession(asio::ip::tcp::socket socket, HttpServer& server, std::uint64_t id, std::uint32_t subject)
-        : ws_(std::move(socket)), server_(server), id_(id), subject_(subject) {}
+        : ws_(std::move(socket)),
+          server_(server),
+          id_(id),
+          subject_(subject),
+          frames_(server.config_.ws_queue_frames, server.counters_.ws_frames_dropped) {}
 
     void run(http::request<http::string_body> request) {
         request_ = std::move(request);
@@ -137,17 +140,11 @@ public:
     }
 
     // A frame for whoever watches its subject; oldest queued frame dropped when full.
-    void offer(const Encoded& frame) {
+    void offer(const SubjectText& frame) {
         if (closed_ || !open_) return;
         if (subject_ == 0) subject_ = frame.subject_id;  // first subject with a frame
         if (frame.subject_id != subject_) return;
-        if (frames_.size() >= server_.config_.ws_queue_frames) {
-            frames_.pop_front();
-            ++dropped_unreported_;
-            ++dropped_total_;
-            server_.counters_.ws_frames_dropped.fetch_add(1, std::memory_order_relaxed);
-        }
-        frames_.push_back(frame.json);
+        frames_.push(frame.text);
         if (!writing_) do_write();
     }
 
@@ -187,16 +184,14 @@ private:
     void do_write() {
         if (closed_ || writing_) return;
         in_flight_is_frame_ = false;
-        if (dropped_unreported_ > 0) {
+        if (const std::uint64_t dropped = frames_.take_unreported_drops(); dropped > 0) {
             in_flight_ = std::make_shared<const std::string>(fmt::format(
-                R"({{"type":"drops","dropped":{},"dropped_total":{}}})", dropped_unreported_, dropped_total_));
-            dropped_unreported_ = 0;
+                R"({{"type":"drops","dropped":{},"dropped_total":{}}})", dropped, frames_.dropped_total()));
         } else if (!replies_.empty()) {
             in_flight_ = std::move(replies_.front());
             replies_.pop_front();
         } else if (!frames_.empty()) {
-            in_flight_ = std::move(frames_.front());
-            frames_.pop_front();
+            in_flight_ = frames_.pop();
             in_flight_is_frame_ = true;
         } else {
             return;
@@ -236,11 +231,9 @@ private:
     std::uint32_t subject_;
     http::request<http::string_body> request_;
     beast::flat_buffer read_buf_;
-    std::deque<std::shared_ptr<const std::string>> frames_;   // bounded by ws_queue_frames
+    ClientSendQueue frames_;  // capacity ws_queue_frames; drops announced before the next frame
     std::deque<std::shared_ptr<const std::string>> replies_;  // hello only
     std::shared_ptr<const std::string> in_flight_;
-    std::uint64_t dropped_unreported_ = 0;
-    std::uint64_t dropped_total_ = 0;
     bool in_flight_is_frame_ = false;
     bool writing_ = false;
     bool open_ = false;
@@ -301,7 +294,7 @@ private:
         stream_.expires_never();
         closed_ = true;
         auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, id_, subject);
-        server_.sessions_[id_] = ws;
+        server_.sessions_.put(id_, ws);
         ws->run(std::move(request));
     }
 
@@ -461,7 +454,15 @@ private:
 // --------------------------------------------------------------------------- server
 
 HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, HttpHandlers handlers)
-    : config_(std::move(config)), description_(std::move(description)), handlers_(std::move(handlers)) {
+    : config_(std::move(config)),
+      description_(std::move(description)),
+      handlers_(std::move(handlers)),
+      serve_("mocap-http", config_.max_clients,
+             {counters_.connections_accepted, counters_.connections_rejected_full},
+             {[this] { return sessions_.size(); }, [this](asio::ip::tcp::socket s) { admit(std::move(s)); },
+              [this] { sessions_.close_all(); }}),
+      sessions_(counters_.connections_closed),
+      backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& frame) { deliver(frame); }) {
     if (!config_.wall_clock_us) {
         config_.wall_clock_us = [] {
             return std::chrono::duration_cast<std::chrono::microseconds>(
@@ -469,66 +470,26 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
                 .count();
         };
     }
-    backlog_.reserve(config_.publish_backlog_frames);
-    draining_.reserve(config_.publish_backlog_frames);
 }
 
 HttpServer::~HttpServer() { stop(); }
 
 bool HttpServer::start(std::string& error) {
-    acceptor_ = listen_tcp(io_, config_.bind_address, config_.port, error);
-    if (!acceptor_) {
+    if (!serve_.start(config_.bind_address, config_.port, error)) {
         error = "http: " + error;
         return false;
     }
-    bound_port_ = acceptor_->local_endpoint().port();
-    running_ = true;
-    do_accept();
-    thread_ = std::thread([this] {
-        pthread_setname_np(pthread_self(), "mocap-http");
-        auto guard = asio::make_work_guard(io_);
-        io_.run();
-    });
-    spdlog::info("http: viewer, /metrics and /healthz on {}:{}", config_.bind_address, bound_port_.load());
+    spdlog::info("http: viewer, /metrics and /healthz on {}:{}", config_.bind_address, serve_.port());
     return true;
 }
 
-void HttpServer::stop() {
-    if (!running_.exchange(false)) {
-        if (thread_.joinable()) thread_.join();
-        return;
-    }
-    asio::post(io_, [this] {
-        boost::system::error_code ignored;
-        acceptor_->close(ignored);
-        auto sessions = sessions_;  // close() erases from sessions_
-        for (auto& [id, s] : sessions) s->close();
-        io_.stop();
-    });
-    if (thread_.joinable()) thread_.join();
-}
+void HttpServer::stop() { serve_.stop(); }
 
-void HttpServer::do_accept() {
-    acceptor_->async_accept([this](const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
-        if (ec == asio::error::operation_aborted || !running_.load()) return;
-        if (!ec) {
-            if (sessions_.size() >= config_.max_clients) {
-                counters_.connections_rejected_full.fetch_add(1, std::memory_order_relaxed);
-                boost::system::error_code ignored;
-                socket.close(ignored);
-            } else {
-                counters_.connections_accepted.fetch_add(1, std::memory_order_relaxed);
-                boost::system::error_code ignored;
-                socket.set_option(asio::ip::tcp::no_delay(true), ignored);
-                const std::uint64_t id = next_id_++;
-                auto s = std::make_shared<HttpSession>(std::move(socket), *this, id);
-                sessions_.emplace(id, s);
-                clients_.store(sessions_.size());
-                s->start();
-            }
-        }
-        do_accept();
-    });
+void HttpServer::admit(asio::ip::tcp::socket socket) {
+    const std::uint64_t id = sessions_.next_id();
+    auto s = std::make_shared<HttpSession>(std::move(socket), *this, id);
+    sessions_.put(id, s);
+    s->start();
 }
 
 void HttpServer::on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& session) {
@@ -538,9 +499,8 @@ void HttpServer::on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& 
 }
 
 void HttpServer::on_closed(std::uint64_t id) {
-    if (sessions_.erase(id) != 0) counters_.connections_closed.fetch_add(1, std::memory_order_relaxed);
+    sessions_.remove(id);
     ws_sessions_.erase(id);
-    clients_.store(sessions_.size());
     ws_clients_.store(ws_sessions_.size());
 }
 
@@ -581,7 +541,7 @@ std::string HttpServer::hello_json(std::uint32_t subject) const {
 std::string HttpServer::metrics_text() {
     MetricsSnapshot m = handlers_.metrics ? handlers_.metrics() : MetricsSnapshot{};
     for (NamedCounter& c : counters_.snapshot()) m.counters.push_back(std::move(c));
-    m.gauges.push_back({"http_clients", "HTTP and WebSocket connections open now", static_cast<double>(clients_.load())});
+    m.gauges.push_back({"http_clients", "HTTP and WebSocket connections open now", static_cast<double>(sessions_.open())});
     m.gauges.push_back({"http_ws_clients", "Viewer WebSocket connections open now", static_cast<double>(ws_clients_.load())});
     m.gauges.push_back({"subjects_active", "Subjects that delivered a frame in the last 2 s",
                         static_cast<double>(active_subjects(2'000'000))});
@@ -601,7 +561,7 @@ void HttpServer::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
             it->second = now;
         }
     }
-    if (ws_clients_.load(std::memory_order_relaxed) == 0 || !running_.load(std::memory_order_relaxed)) return;
+    if (ws_clients_.load(std::memory_order_relaxed) == 0 || !serve_.running()) return;
 
     const std::size_t n = std::min<std::size_t>(frame.segment_count, pose.segment_count);
     auto json = std::make_shared<std::string>();
@@ -634,31 +594,16 @@ void HttpServer::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
     out += "]}";
     counters_.ws_frames_encoded.fetch_add(1, std::memory_order_relaxed);
 
-    bool wake = false;
-    {
-        std::lock_guard lock(backlog_mutex_);
-        if (backlog_.size() >= config_.publish_backlog_frames) {
-            counters_.ws_backlog_dropped.fetch_add(1, std::memory_order_relaxed);
-            return;
-        }
-        wake = backlog_.empty();
-        backlog_.push_back({frame.subject_id, std::move(json)});
+    if (!backlog_.push({frame.subject_id, std::move(json)})) {
+        counters_.ws_backlog_dropped.fetch_add(1, std::memory_order_relaxed);
     }
-    if (wake) asio::post(io_, [this] { drain(); });
 }
 
-void HttpServer::drain() {
-    {
-        std::lock_guard lock(backlog_mutex_);
-        draining_.swap(backlog_);
+void HttpServer::deliver(const SubjectText& frame) {
+    for (auto it = ws_sessions_.begin(); it != ws_sessions_.end();) {
+        auto s = (it++)->second;  // offer() may close and erase the session
+        s->offer(frame);
     }
-    for (const Encoded& e : draining_) {
-        for (auto it = ws_sessions_.begin(); it != ws_sessions_.end();) {
-            auto s = (it++)->second;  // offer() may close and erase the session
-            s->offer(e);
-        }
-    }
-    draining_.clear();
 }
 
 }  // namespace mocap::serve

@@ -26,15 +26,15 @@
 // A segment's distal tip is pos_i + rotate(q_i, end_m_i). Client messages are read and
 // ignored (counted); the subject is chosen by reconnecting.
 //
-// Lag: each WebSocket has a queue of ws_queue_frames encoded frames; when it is full the
-// OLDEST is dropped (counted), so a slow browser sees gaps, never stalls the pipeline.
+// Lag: each WebSocket has a ClientSendQueue of ws_queue_frames encoded frames; when it is
+// full the OLDEST is dropped (counted, and announced by a "drops" message), so a slow
+// browser sees gaps, never stalls the pipeline; the hello is never queued with frames.
 // One write in flight per connection. Frames are encoded once, shared by every client.
 //
-// Threads: one serve thread (own io_context) runs the acceptor, every HTTP and WebSocket
+// Threads: one ServeThread (own io_context) runs the acceptor, every HTTP and WebSocket
 // session, and the metrics/health/control callbacks. publish() may be called from any
 // thread (the assembler): it encodes only while a WebSocket is open and hands the frame
-// over through a mutex-guarded backlog of publish_backlog_frames (beyond: dropped,
-// counted). Ownership: the daemon owns the server; stop() or the destructor closes all.
+// over through a PublishBacklog of publish_backlog_frames (beyond: dropped, counted). Ownership: the daemon owns the server; stop() or the destructor closes all.
 #pragma once
 
 #include <atomic>
@@ -44,7 +44,6 @@
 #include <memory>
 #include <mutex>
 #include <string>
-#include <thread>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -53,8 +52,11 @@
 #include "core/frame.hpp"
 #include "serve/pose_frame.hpp"
 #include "serve/prometheus_text.hpp"
+#include "serve/publish_backlog.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_counters.hpp"
+#include "serve/serve_thread.hpp"
+#include "serve/session_table.hpp"
 
 namespace mocap::serve {
 
@@ -136,8 +138,8 @@ public:
     /// Any thread; never blocks on a client. Also records the subject as active.
     void publish(const SubjectFrame& frame, const SkeletonPose& pose);
 
-    [[nodiscard]] std::uint16_t port() const { return bound_port_.load(); }
-    [[nodiscard]] std::size_t client_count() const { return clients_.load(); }
+    [[nodiscard]] std::uint16_t port() const { return serve_.port(); }
+    [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }
     [[nodiscard]] std::size_t ws_client_count() const { return ws_clients_.load(); }
     [[nodiscard]] const HttpServerCounters& counters() const { return counters_; }
     /// Subjects whose last frame is at most `window_us` old (wall clock); any thread.
@@ -152,12 +154,8 @@ public:
 private:
     friend class HttpSession;
     friend class WsSession;
-    struct Encoded {
-        std::uint32_t subject_id = 0;
-        std::shared_ptr<const std::string> json;
-    };
-    void do_accept();
-    void drain();
+    void admit(asio::ip::tcp::socket socket);
+    void deliver(const SubjectText& frame);
     void on_closed(std::uint64_t id);
     void on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& session);
     std::string hello_json(std::uint32_t subject) const;
@@ -170,25 +168,16 @@ private:
     HttpServerCounters counters_;
     LogLimiter log_;  ///< one refusal line per 10 s, not one per request
 
-    asio::io_context io_{1};
-    std::unique_ptr<asio::ip::tcp::acceptor> acceptor_;
-    std::unordered_map<std::uint64_t, std::shared_ptr<Session>> sessions_;  // serve thread
+    ServeThread serve_;  // before the sessions and the backlog, which use its io_context
+    SessionTable<Session> sessions_;  // HTTP and WebSocket; serve thread (open(): any thread)
     std::unordered_map<std::uint64_t, std::shared_ptr<WsSession>> ws_sessions_;  // serve thread
-    std::thread thread_;
-    std::uint64_t next_id_ = 1;  // serve thread
-
-    std::mutex backlog_mutex_;
-    std::vector<Encoded> backlog_;   // guarded; reserved at construction
-    std::vector<Encoded> draining_;  // serve thread
+    PublishBacklog backlog_;
 
     mutable std::mutex subjects_mutex_;
     std::vector<std::pair<std::uint32_t, std::int64_t>> subject_last_us_;  // guarded
 
     std::atomic<std::int64_t> last_frame_us_{0};
-    std::atomic<std::size_t> clients_{0};
     std::atomic<std::size_t> ws_clients_{0};
-    std::atomic<std::uint16_t> bound_port_{0};
-    std::atomic<bool> running_{false};
 };
 
 }  // namespace mocap::serve

@@ -7,6 +7,7 @@
 #include <chrono>
 
 #include "mocap/v1/mocap.pb.h"
+#include "serve/tcp_listen.hpp"
 
 namespace mocap::serve {
 
@@ -79,23 +80,10 @@ bool PoseServer::start(std::string& error) {
         error = "pose server already started";
         return false;
     }
+    acceptor_ = listen_tcp(lanes_[0]->io, config_.bind_address, config_.port, error);
+    if (!acceptor_) return false;
     boost::system::error_code ec;
-    const auto address = asio::ip::make_address(config_.bind_address, ec);
-    if (ec) {
-        error = "bind address '" + config_.bind_address + "': " + ec.message();
-        return false;
-    }
-    const asio::ip::tcp::endpoint endpoint(address, config_.port);
-    const std::string where = config_.bind_address + ":" + std::to_string(config_.port);
-    auto acceptor = std::make_unique<asio::ip::tcp::acceptor>(lanes_[0]->io);
-    if (acceptor->open(endpoint.protocol(), ec) ||
-        acceptor->set_option(asio::socket_base::reuse_address(true), ec) ||
-        acceptor->bind(endpoint, ec) || acceptor->listen(asio::socket_base::max_listen_connections, ec)) {
-        error = "bind " + where + ": " + ec.message();
-        return false;
-    }
-    bound_port_ = acceptor->local_endpoint(ec).port();
-    acceptor_ = std::move(acceptor);
+    bound_port_ = acceptor_->local_endpoint(ec).port();
     accept_retry_ = std::make_unique<asio::steady_timer>(lanes_[0]->io);
     running_ = true;
     do_accept();

@@ -1,0 +1,68 @@
+// session_table.hpp — the open sessions of one serve thread, by id: what the live BVH
+// server and the HTTP server keep for their ServeThread (the pose server has one table
+// per lane in pose_server.cpp).
+//
+// `Session` must have close(), which ends (at once or later) in remove(id). Each
+// remove() of a listed session counts one closed connection in the counter given at
+// construction; open() mirrors size() for other threads.
+// Thread-safety: the serve thread only, except open() (any thread).
+// Ownership: the table holds the sessions; a session's own handlers may hold it longer.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+namespace mocap::serve {
+
+template <class Session>
+class SessionTable {
+public:
+    /// `closed_counter` (e.g. connections_closed) must outlive the table.
+    explicit SessionTable(std::atomic<std::uint64_t>& closed_counter) : closed_counter_(closed_counter) {}
+
+    /// A fresh id for a new session (never 0, never reused).
+    [[nodiscard]] std::uint64_t next_id() { return next_id_++; }
+    /// Lists `session` under `id`, or replaces the one listed there (an HTTP connection
+    /// that became a WebSocket keeps its id and its slot).
+    void put(std::uint64_t id, std::shared_ptr<Session> session) {
+        sessions_[id] = std::move(session);
+        open_.store(sessions_.size(), std::memory_order_relaxed);
+    }
+    /// Unlists `id`; counts a closed connection if it was listed.
+    void remove(std::uint64_t id) {
+        if (sessions_.erase(id) != 0) closed_counter_.fetch_add(1, std::memory_order_relaxed);
+        open_.store(sessions_.size(), std::memory_order_relaxed);
+    }
+    /// Closes every session (each close() removes it).
+    void close_all() {
+        std::vector<std::shared_ptr<Session>> all;
+        all.reserve(sessions_.size());
+        for (auto& [id, session] : sessions_) all.push_back(session);
+        for (auto& session : all) session->close();
+    }
+    /// Calls `f(Session&)` for each listed session; `f` may close (and so remove) it.
+    template <class F>
+    void for_each(F&& f) {
+        for (auto it = sessions_.begin(); it != sessions_.end();) {
+            const std::shared_ptr<Session> session = (it++)->second;
+            f(*session);
+        }
+    }
+
+    [[nodiscard]] std::size_t size() const { return sessions_.size(); }
+    /// Sessions listed now; any thread (relaxed: a gauge, and a "skip work" hint).
+    [[nodiscard]] std::size_t open() const { return open_.load(std::memory_order_relaxed); }
+
+private:
+    std::unordered_map<std::uint64_t, std::shared_ptr<Session>> sessions_;
+    std::atomic<std::uint64_t>& closed_counter_;
+    std::uint64_t next_id_ = 1;
+    std::atomic<std::size_t> open_{0};
+};
+
+}  // namespace mocap::serve
