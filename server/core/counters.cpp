@@ -1,12 +1,12 @@
-// counters.cpp — CounterGroup bookkeeping. Nothing here is on a hot path: Counter::add is
-// inline in the header, the group only maps names to counters for the stats reader.
+// counters.cpp — CounterGroup bookkeeping. Nothing here is on a hot path: the counters' add()
+// is inline in the header, the group only maps names to counters for the stats reader.
 #include "core/counters.hpp"
 
 #include <algorithm>
 
 namespace mocap {
 
-void CounterGroup::add(std::string_view name, const Counter& counter) {
+void CounterGroup::add(std::string_view name, const CounterBase& counter) {
     auto it = std::find_if(entries_.begin(), entries_.end(),
                            [&](const Entry& e) { return e.name == name; });
     if (it == entries_.end()) {
@@ -18,7 +18,7 @@ void CounterGroup::add(std::string_view name, const Counter& counter) {
 
 std::uint64_t CounterGroup::Entry::sum() const noexcept {
     std::uint64_t total = 0;
-    for (const Counter* part : parts)
+    for (const CounterBase* part : parts)
         total += part->value();
     return total;
 }

@@ -7,7 +7,8 @@
 
 namespace mocap {
 
-LatencySnapshot LatencyHistogram::snapshot() const noexcept {
+template <bool SingleWriter>
+LatencySnapshot BasicLatencyHistogram<SingleWriter>::snapshot() const noexcept {
     LatencySnapshot s;
     for (std::size_t i = 0; i < kLatencyBuckets; ++i) {
         s.buckets[i] = buckets_[i].load(std::memory_order_relaxed);
@@ -18,6 +19,9 @@ LatencySnapshot LatencyHistogram::snapshot() const noexcept {
     s.negative = negative_.load(std::memory_order_relaxed);
     return s;
 }
+
+template class BasicLatencyHistogram<false>;
+template class BasicLatencyHistogram<true>;
 
 std::uint64_t LatencySnapshot::percentile_us(double p) const noexcept {
     if (count == 0) return 0;

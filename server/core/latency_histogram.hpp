@@ -8,9 +8,14 @@
 // host) are not bucketed: they are counted in `negative`.
 //
 // Contract
-// - record(): any thread, lock-free, never allocates (relaxed fetch_add on the bucket, count
-//   and sum, a CAS loop on max). Cost ~5–10 ns uncontended; threads recording into the same
-//   histogram bounce its lines, so give each thread its own and merge snapshots.
+// - LatencyHistogram::record(): any thread, lock-free, never allocates (relaxed fetch_add on
+//   the bucket and the sum, a CAS loop on max). Cost ~5–10 ns uncontended; threads recording
+//   into the same histogram bounce its lines, so give each thread its own and merge snapshots.
+// - SingleWriterLatencyHistogram::record(): the same buckets and snapshot, but every update
+//   is a relaxed load + relaxed store (no locked instruction). SINGLE-WRITER RULE (as for
+//   SingleWriterCounter, core/counters.hpp): all record() calls of one histogram happen on
+//   one thread, or on threads handed over with a happens-before edge; a second concurrent
+//   writer loses values silently. snapshot() stays correct on any thread.
 // - snapshot(): any thread. Reads every bucket once (relaxed): concurrent records may or
 //   may not be included, the snapshot's count is always the sum of its buckets.
 // - LatencySnapshot is a plain value (8 KiB); percentile math runs on it, off the hot path.
@@ -22,6 +27,8 @@
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+
+#include "core/counters.hpp"
 
 namespace mocap {
 
@@ -74,23 +81,31 @@ struct LatencySnapshot {
     [[nodiscard]] LatencySnapshot since(const LatencySnapshot& earlier) const noexcept;
 };
 
-class LatencyHistogram {
+/// SingleWriter = false: LatencyHistogram (any thread records); true:
+/// SingleWriterLatencyHistogram (one writer thread, see the contract above).
+template <bool SingleWriter>
+class BasicLatencyHistogram {
   public:
-    LatencyHistogram() = default;
-    LatencyHistogram(const LatencyHistogram&) = delete;
-    LatencyHistogram& operator=(const LatencyHistogram&) = delete;
+    BasicLatencyHistogram() = default;
+    BasicLatencyHistogram(const BasicLatencyHistogram&) = delete;
+    BasicLatencyHistogram& operator=(const BasicLatencyHistogram&) = delete;
 
-    /// Any thread; lock-free, no allocation.
+    /// Lock-free, no allocation. LatencyHistogram: any thread; SingleWriterLatencyHistogram:
+    /// its one writer thread only.
     void record(std::int64_t value_us) noexcept {
         if (value_us < 0) {
-            negative_.fetch_add(1, std::memory_order_relaxed);
+            add(negative_, 1);
             return;
         }
         const auto v = static_cast<std::uint64_t>(value_us);
-        buckets_[latency_bucket_index(v)].fetch_add(1, std::memory_order_relaxed);
-        sum_us_.fetch_add(v, std::memory_order_relaxed);
+        add(buckets_[latency_bucket_index(v)], 1);
+        add(sum_us_, v);
         std::uint64_t seen = max_us_.load(std::memory_order_relaxed);
-        while (v > seen && !max_us_.compare_exchange_weak(seen, v, std::memory_order_relaxed)) {
+        if constexpr (SingleWriter) {
+            if (v > seen) max_us_.store(v, std::memory_order_relaxed);
+        } else {
+            while (v > seen && !max_us_.compare_exchange_weak(seen, v, std::memory_order_relaxed)) {
+            }
         }
     }
 
@@ -98,10 +113,23 @@ class LatencyHistogram {
     [[nodiscard]] LatencySnapshot snapshot() const noexcept;
 
   private:
+    static void add(std::atomic<std::uint64_t>& cell, std::uint64_t n) noexcept {
+        if constexpr (SingleWriter) {
+            single_writer_add(cell, n);
+        } else {
+            cell.fetch_add(n, std::memory_order_relaxed);
+        }
+    }
+
     std::array<std::atomic<std::uint64_t>, kLatencyBuckets> buckets_{};
     std::atomic<std::uint64_t> sum_us_{0};
     std::atomic<std::uint64_t> max_us_{0};
     std::atomic<std::uint64_t> negative_{0};
 };
+
+using LatencyHistogram = BasicLatencyHistogram<false>;
+using SingleWriterLatencyHistogram = BasicLatencyHistogram<true>;
+extern template class BasicLatencyHistogram<false>;
+extern template class BasicLatencyHistogram<true>;
 
 }  // namespace mocap

@@ -20,7 +20,9 @@
 // Time: sample t_us is the sink timestamp of that instant's SYNC frame when it was seen,
 // else the receive time of the sample's first frame. Nothing here reads a clock.
 // Threading: one bus's reassembler is used by one thread (the ingest thread); counters
-// may be read from any thread. Cost: O(1) per frame, no allocation after construction.
+// may be read from any thread. The counters are SingleWriterCounter (core/counters.hpp: no
+// locked instruction per frame): every reassembler sharing one ReassemblyCounters must run
+// on the same single thread. Cost: O(1) per frame, no allocation after construction.
 #pragma once
 
 #include <array>
@@ -34,20 +36,21 @@
 namespace mocap::ingest {
 
 /// Counters shared by every bus of one transport (add them to a CounterGroup once).
+/// Single writer: the one thread that runs all of that transport's reassemblers.
 struct ReassemblyCounters {
-    Counter frames;
-    Counter sync_frames;
-    Counter status_frames;
-    Counter config_frames;
-    Counter malformed_frames;
-    Counter duplicate_frames;
-    Counter late_frames;
-    Counter incomplete_samples;
-    Counter samples;
-    Counter attitude_samples;
-    Counter samples_no_mag;
-    Counter node_error_reports;  ///< STATUS frames carrying any error flag
-    Counter sync_wraps;
+    SingleWriterCounter frames;
+    SingleWriterCounter sync_frames;
+    SingleWriterCounter status_frames;
+    SingleWriterCounter config_frames;
+    SingleWriterCounter malformed_frames;
+    SingleWriterCounter duplicate_frames;
+    SingleWriterCounter late_frames;
+    SingleWriterCounter incomplete_samples;
+    SingleWriterCounter samples;
+    SingleWriterCounter attitude_samples;
+    SingleWriterCounter samples_no_mag;
+    SingleWriterCounter node_error_reports;  ///< STATUS frames carrying any error flag
+    SingleWriterCounter sync_wraps;
 
     void register_in(CounterGroup& group) const;
 };

@@ -10,8 +10,10 @@
 //
 // Threading: every method and handler runs on the io_context passed in, which must be run
 // by ONE thread (the ingest thread: SampleSink is called from it, in packet order).
-// counters() may be read from any thread. Cost per packet: O(bytes) decoding plus the
-// reassembler; buffers are allocated per connection at accept, never per packet.
+// counters() may be read from any thread; they are SingleWriterCounter, written only on
+// that thread (the destructor's stop() writes `connections_closed` after it has finished).
+// Cost per packet: O(bytes) decoding plus the reassembler; buffers are allocated per
+// connection at accept, never per packet.
 #pragma once
 
 #include <array>
@@ -69,9 +71,9 @@ public:
 
 private:
     friend class SinkConnection;
-    struct Counters {
-        Counter accepted, refused, closed, idle_timeouts, garbage_closes, bytes, packets,
-            malformed, crc_failures, discarded, sequence_gaps, unknown_sink, takeovers;
+    struct Counters {  // written on the io thread only (single writer)
+        SingleWriterCounter accepted, refused, closed, idle_timeouts, garbage_closes, bytes,
+            packets, malformed, crc_failures, discarded, sequence_gaps, unknown_sink, takeovers;
     };
 
     void do_accept();

@@ -10,7 +10,8 @@
 // ignored. Frames go to one FrameReassembler whose subject is given by the config.
 //
 // Threading: runs on the io_context passed in (the single ingest thread). counters() may be
-// read from any thread. Cost: one recvmsg per frame; no allocation after open().
+// read from any thread; they are SingleWriterCounter, written only on that thread.
+// Cost: one recvmsg per frame; no allocation after open().
 #pragma once
 
 #include <cstdint>
@@ -59,8 +60,8 @@ private:
     FrameReassembler reassembler_;
     std::uint32_t last_kernel_drops_ = 0;
     bool stopped_ = false;
-    Counter frames_read_, fd_frames_, error_frames_, rtr_frames_, foreign_frames_, kernel_drops_,
-        read_errors_;
+    SingleWriterCounter frames_read_, fd_frames_, error_frames_, rtr_frames_, foreign_frames_,
+        kernel_drops_, read_errors_;
     CounterGroup group_;
 };
 

@@ -1,5 +1,6 @@
 // Pipeline micro-benchmarks: ring throughput, worker-pool sample->pose latency (hot and
-// after sleeping, i.e. including the futex wake-up), histogram record and frame assembly.
+// after sleeping, i.e. including the futex wake-up), counter add and histogram record (any-
+// thread vs single-writer forms) and frame assembly.
 // Run: build/tests/bench/core_bench --benchmark_min_time=0.2
 #include <benchmark/benchmark.h>
 
@@ -11,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/counters.hpp"
 #include "core/latency_histogram.hpp"
 #include "core/spsc_ring.hpp"
 #include "core/subject_assembler.hpp"
@@ -117,8 +119,10 @@ void BM_WorkerPoolSampleToPose(benchmark::State& state) {
 }
 BENCHMARK(BM_WorkerPoolSampleToPose)->Arg(0)->Arg(1)->Arg(2)->UseRealTime();
 
-void BM_LatencyHistogramRecord(benchmark::State& state) {
-    LatencyHistogram h;
+// Any-thread (locked RMW) against single-writer (load + store) forms, same work.
+template <class Histogram>
+void latency_histogram_record(benchmark::State& state) {
+    Histogram h;
     std::int64_t v = 1;
     for (auto _ : state) {
         h.record(v);
@@ -127,7 +131,35 @@ void BM_LatencyHistogramRecord(benchmark::State& state) {
     benchmark::DoNotOptimize(h.snapshot().count);
     state.SetItemsProcessed(state.iterations());
 }
+void BM_LatencyHistogramRecord(benchmark::State& state) {
+    latency_histogram_record<LatencyHistogram>(state);
+}
 BENCHMARK(BM_LatencyHistogramRecord);
+void BM_SingleWriterLatencyHistogramRecord(benchmark::State& state) {
+    latency_histogram_record<SingleWriterLatencyHistogram>(state);
+}
+BENCHMARK(BM_SingleWriterLatencyHistogramRecord);
+
+// Four counters bumped per iteration, as the reassembler does per raw sample (3 frames + 1
+// sample); the counters are read once at the end so the adds cannot be dropped.
+template <class C>
+void counter_add4(benchmark::State& state) {
+    C frames, samples;
+    for (auto _ : state) {
+        frames.add();
+        frames.add();
+        frames.add();
+        samples.add();
+    }
+    benchmark::DoNotOptimize(frames.value() + samples.value());
+    state.SetItemsProcessed(state.iterations() * 4);
+}
+void BM_CounterAdd(benchmark::State& state) { counter_add4<Counter>(state); }
+BENCHMARK(BM_CounterAdd);
+void BM_SingleWriterCounterAdd(benchmark::State& state) {
+    counter_add4<SingleWriterCounter>(state);
+}
+BENCHMARK(BM_SingleWriterCounterAdd);
 
 void BM_LatencySnapshotP99(benchmark::State& state) {
     LatencyHistogram h;

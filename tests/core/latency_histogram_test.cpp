@@ -128,5 +128,56 @@ TEST(LatencyHistogram, ConcurrentRecordsAreAllCounted) {
     EXPECT_EQ(s.max_us, 1099u);
 }
 
+// The single-writer form records exactly what the any-thread form records.
+TEST(SingleWriterLatencyHistogram, SameSnapshotAsLatencyHistogram) {
+    LatencyHistogram shared;
+    SingleWriterLatencyHistogram own;
+    std::mt19937_64 rng(5);
+    std::uniform_int_distribution<std::int64_t> small(-50, 5000);
+    std::uniform_int_distribution<std::int64_t> large(0, std::int64_t{1} << 40);
+    for (int i = 0; i < 20'000; ++i) {
+        const std::int64_t v = i % 10 == 0 ? large(rng) : small(rng);
+        shared.record(v);
+        own.record(v);
+    }
+    const LatencySnapshot a = shared.snapshot();
+    const LatencySnapshot b = own.snapshot();
+    EXPECT_EQ(a.buckets, b.buckets);
+    EXPECT_EQ(a.count, b.count);
+    EXPECT_EQ(a.sum_us, b.sum_us);
+    EXPECT_EQ(a.max_us, b.max_us);
+    EXPECT_EQ(a.negative, b.negative);
+    EXPECT_GT(b.negative, 0u);
+    EXPECT_EQ(b.percentile_us(99), a.percentile_us(99));
+}
+
+// One writer, a snapshotting reader meanwhile: counts only go up, the snapshot's count is the
+// sum of its buckets, and the end result is exact (TSan-clean: all accesses are atomic).
+TEST(SingleWriterLatencyHistogram, ReaderSeesItsOneWriter) {
+    SingleWriterLatencyHistogram h;
+    constexpr int kValues = 200'000;
+    std::thread writer([&] {
+        for (int i = 0; i < kValues; ++i)
+            h.record(i % 3000);
+    });
+    std::uint64_t last = 0;
+    bool monotonic = true;
+    for (int i = 0; i < 200; ++i) {
+        const LatencySnapshot s = h.snapshot();
+        if (s.count < last) monotonic = false;
+        last = s.count;
+        ASSERT_LE(s.max_us, 2999u);
+    }
+    writer.join();
+    const LatencySnapshot s = h.snapshot();
+    EXPECT_TRUE(monotonic);
+    EXPECT_EQ(s.count, std::uint64_t{kValues});
+    EXPECT_EQ(s.max_us, 2999u);
+    std::uint64_t sum = 0;
+    for (int i = 0; i < kValues; ++i)
+        sum += static_cast<std::uint64_t>(i % 3000);
+    EXPECT_EQ(s.sum_us, sum);
+}
+
 }  // namespace
 }  // namespace mocap
