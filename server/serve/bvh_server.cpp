@@ -1,7 +1,5 @@
 #include "serve/bvh_server.hpp"
 
-#include <spdlog/spdlog.h>
-
 #include <charconv>
 
 #include "serve/client_send_queue.hpp"
@@ -154,7 +152,7 @@ private:
 BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
     : config_(std::move(config)),
       encoder_(encoder),
-      serve_("mocap-bvh", config_.max_clients,
+      serve_({"bvh", "mocap-bvh", "live BVH"}, config_.max_clients,
              {counters_.connections_accepted, counters_.connections_rejected_full},
              {[this] { return sessions_.size(); }, [this](asio::ip::tcp::socket s) { admit(std::move(s)); },
               [this] { sessions_.close_all(); }}),
@@ -165,14 +163,7 @@ BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
 
 BvhServer::~BvhServer() { stop(); }
 
-bool BvhServer::start(std::string& error) {
-    if (!serve_.start(config_.bind_address, config_.port, error)) {
-        error = "bvh: " + error;
-        return false;
-    }
-    spdlog::info("bvh: live BVH on {}:{}", config_.bind_address, serve_.port());
-    return true;
-}
+bool BvhServer::start(std::string& error) { return serve_.start(config_.bind_address, config_.port, error); }
 
 void BvhServer::stop() { serve_.stop(); }
 

@@ -457,7 +457,7 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
     : config_(std::move(config)),
       description_(std::move(description)),
       handlers_(std::move(handlers)),
-      serve_("mocap-http", config_.max_clients,
+      serve_({"http", "mocap-http", "viewer, /metrics and /healthz"}, config_.max_clients,
              {counters_.connections_accepted, counters_.connections_rejected_full},
              {[this] { return sessions_.size(); }, [this](asio::ip::tcp::socket s) { admit(std::move(s)); },
               [this] { sessions_.close_all(); }}),
@@ -474,14 +474,7 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
 
 HttpServer::~HttpServer() { stop(); }
 
-bool HttpServer::start(std::string& error) {
-    if (!serve_.start(config_.bind_address, config_.port, error)) {
-        error = "http: " + error;
-        return false;
-    }
-    spdlog::info("http: viewer, /metrics and /healthz on {}:{}", config_.bind_address, serve_.port());
-    return true;
-}
+bool HttpServer::start(std::string& error) { return serve_.start(config_.bind_address, config_.port, error); }
 
 void HttpServer::stop() { serve_.stop(); }
 

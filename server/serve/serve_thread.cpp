@@ -2,6 +2,7 @@
 #include "serve/serve_thread.hpp"
 
 #include <pthread.h>
+#include <spdlog/spdlog.h>
 
 #include <utility>
 
@@ -9,8 +10,8 @@
 
 namespace mocap::serve {
 
-ServeThread::ServeThread(std::string thread_name, std::size_t max_clients, Counters counters, Hooks hooks)
-    : thread_name_(std::move(thread_name)),
+ServeThread::ServeThread(Names names, std::size_t max_clients, Counters counters, Hooks hooks)
+    : names_(std::move(names)),
       max_clients_(max_clients),
       counters_(counters),
       hooks_(std::move(hooks)) {}
@@ -19,15 +20,19 @@ ServeThread::~ServeThread() { stop(); }
 
 bool ServeThread::start(const std::string& bind_address, std::uint16_t port, std::string& error) {
     acceptor_ = listen_tcp(io_, bind_address, port, error);
-    if (!acceptor_) return false;
+    if (!acceptor_) {
+        error = names_.service + ": " + error;
+        return false;
+    }
     bound_port_ = acceptor_->local_endpoint().port();
     running_ = true;
     do_accept();
     thread_ = std::thread([this] {
-        pthread_setname_np(pthread_self(), thread_name_.c_str());
+        pthread_setname_np(pthread_self(), names_.thread_name.c_str());
         auto guard = asio::make_work_guard(io_);
         io_.run();
     });
+    spdlog::info("{}: {} on {}:{}", names_.service, names_.serves, bind_address, bound_port_.load());
     return true;
 }
 

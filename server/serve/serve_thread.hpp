@@ -2,8 +2,9 @@
 // admits at most max_clients connections at once: what the live BVH server and the
 // HTTP server share (each keeps its own session table and sessions).
 //
-// start() binds through listen_tcp (same error text as every service), then runs the
-// io_context on a thread called `thread_name`. Accept loop, on the serve thread: when
+// start() binds through listen_tcp (same error text as every service, prefixed with
+// "<service>: "), runs the io_context on a thread called `thread_name` and logs
+// "<service>: <serves> on <address>:<port>". Accept loop, on the serve thread: when
 // `open_clients()` is at max_clients the new socket is closed at once and counted in
 // `rejected_full`; otherwise it is counted in `accepted`, gets TCP_NODELAY (poses are
 // small and urgent) and goes to `admit`, which starts a session. Any other accept error
@@ -37,20 +38,25 @@ public:
         std::atomic<std::uint64_t>& accepted;
         std::atomic<std::uint64_t>& rejected_full;
     };
+    struct Names {
+        std::string service;      ///< prefix of the log line and errors: "bvh", "http"
+        std::string thread_name;  ///< at most 15 characters: "mocap-bvh"
+        std::string serves;       ///< what the start-up line says is served: "live BVH"
+    };
     struct Hooks {
         std::function<std::size_t()> open_clients;                 ///< connections open now
         std::function<void(asio::ip::tcp::socket socket)> admit;  ///< start a session
         std::function<void()> close_all;                           ///< at stop()
     };
 
-    ServeThread(std::string thread_name, std::size_t max_clients, Counters counters, Hooks hooks);
+    ServeThread(Names names, std::size_t max_clients, Counters counters, Hooks hooks);
     /// Calls stop().
     ~ServeThread();
     ServeThread(const ServeThread&) = delete;
     ServeThread& operator=(const ServeThread&) = delete;
 
     /// Binds bind_address:port and starts the thread. False with `error` set on failure
-    /// (e.g. "bind 0.0.0.0:7002: Address already in use"). Call once.
+    /// (e.g. "bvh: bind 0.0.0.0:7002: Address already in use"). Call once.
     [[nodiscard]] bool start(const std::string& bind_address, std::uint16_t port, std::string& error);
     /// Closes the acceptor and every session, joins the thread. Idempotent.
     void stop();
@@ -64,7 +70,7 @@ private:
     void do_accept();
     void on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket);
 
-    std::string thread_name_;
+    Names names_;
     std::size_t max_clients_;
     Counters counters_;
     Hooks hooks_;
