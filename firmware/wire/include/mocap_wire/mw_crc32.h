@@ -5,7 +5,7 @@
  * 0xFFFFFFFF, input and output reflected, final XOR 0xFFFFFFFF. Check value:
  * CRC of the ASCII bytes "123456789" = 0xCBF43926.
  * Implementation: slicing-by-8, eight 256-entry const tables (8 KiB of flash), 8 bytes per
- * step with 8 independent lookups; ~4x the byte-at-a-time speed on x86 (docs/performance.md).
+ * step with 8 independent lookups; ~5x the byte-at-a-time speed on x86 (docs/performance.md).
  * Built with MW_CRC32_SLICE_BY=1 the library keeps only the byte-at-a-time table (1 KiB) and
  * mw_crc32_update() uses it; the results are identical either way. Any length, any alignment.
  * Reentrant, no state.
