@@ -5,10 +5,10 @@
 #                     simulated walking subject, and print live poses
 #   ./setup.sh test   install, build, and run the whole test suite (CI calls this):
 #                     ctest (unit, integration, SocketCAN VM, real BVH consumers, viewer in
-#                     chromium, Python client, static analysis), then the libFuzzer targets
-#                     for a bounded time
-#   ./setup.sh sanitize [tsan|asan|all]   ThreadSanitizer / ASan+UBSan builds of the suite
-#                     (tests/sanitize.sh; not yet part of the test command, see
+#                     chromium, Python client, static analysis), the libFuzzer targets for
+#                     a bounded time, the whole suite again under ASan+UBSan, and the
+#                     threaded code's tests under ThreadSanitizer
+#   ./setup.sh sanitize [tsan|asan|all]   only the sanitizer phases (tests/sanitize.sh,
 #                     docs/reliability.md)
 #   ./setup.sh deps   only install missing Debian packages
 #   ./setup.sh build  only configure and build (build/)
@@ -111,6 +111,8 @@ case "$cmd" in
     phase build build
     phase ctest test_all
     phase fuzz fuzz
+    phase asan sanitize asan
+    phase tsan sanitize tsan
     ;;
   fuzz) deps; fuzz ;;
   sanitize) deps; sanitize "${2:-all}" ;;

@@ -2,12 +2,15 @@
 # sanitize.sh [asan|tsan|all] — builds the project with g++ sanitizers and runs the tests.
 #
 #   asan  -DMOCAP_SANITIZE=address,undefined, whole project; the whole ctest suite except the
-#         SocketCAN VM test and the ARM cross-compiles (they run no host code of ours).
+#         SocketCAN VM test, the ARM cross-compiles and static analysis (they run no
+#         instrumented host code of ours).
 #         The fuzz replay test runs here too, so every seed and regression input is
 #         replayed under ASan/UBSan built by g++ as well.
-#   tsan  -DMOCAP_SANITIZE=thread; only the threaded code's tests: core (rings, worker pool,
-#         assembler), ingest (sink listener), serve (pose server, broadcaster, clients) and
-#         daemon (the wired pipeline). ctest -R selects their test suites by name.
+#   tsan  -DMOCAP_SANITIZE=thread; the threaded code's tests: core (rings, worker pool,
+#         assembler), ingest (sink listener), serve (pose server, broadcaster, clients, live
+#         BVH, HTTP/WebSocket) and the integration tests, which run the TSan-built mocapd
+#         itself (the wired pipeline: ingest, workers, assembler, servers, signals).
+#         ctest -R selects their test suites by name.
 #   all   both (default).
 #
 # Environment: MOCAP_SANITIZE_BUILD_ROOT (default: the repository root) holds build-asan/ and
@@ -24,7 +27,8 @@ export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 export TSAN_OPTIONS="${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}"
 
-tsan_executables=(core_tests ingest_tests serve_tests daemon_tests)
+tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_http_tests
+                  daemon_integration_tests faults_integration_tests http_integration_tests)
 
 status=0
 phase() {  # phase NAME COMMAND... — runs, times and reports one step
@@ -61,7 +65,7 @@ run_asan() {
     phase "asan configure" configure "$b" address,undefined
     # -k: a target that fails to build does not stop the others (the failure is reported).
     phase "asan build" cmake --build "$b" -j"$jobs" -- -k
-    phase "asan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -E 'socketcan_vm|_arm_'"
+    phase "asan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -E 'socketcan_vm|_arm_|static_analysis'"
 }
 
 run_tsan() {
