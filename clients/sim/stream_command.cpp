@@ -82,6 +82,7 @@ public:
             nodes_.emplace_back(static_cast<std::uint8_t>(seg.node_id), seg.parent < 0, o.seed,
                                 static_cast<std::uint64_t>(subject) * 64u + static_cast<std::uint64_t>(seg.node_id), noise);
         }
+        last_sample_.resize(nodes_.size());
         pending_.resize(static_cast<std::size_t>(o.nodes) * 3u * 8u);
         core_ = std::make_unique<sink_node>();
     }
@@ -168,7 +169,10 @@ private:
     // The motion is sampled at the SYNC's real send time, not at counter × period: when the
     // loop runs late the sink core skips instants (the counter does not), and the daemon
     // integrates with the SYNC timestamps, so motion and time must agree or every filter
-    // drifts. prev/next are one nominal period away for the rate and linear acceleration.
+    // drifts. The gyro reads the mean rate since the node's previous sample (as a
+    // delta-angle IMU reports it), so a late SYNC or a dropout does not turn into an
+    // orientation error the filter then has to work off; prev/next, one nominal period
+    // away, give the linear acceleration.
     void on_sync(std::uint32_t counter) {
         const std::uint64_t now = realtime_us();
         if (!motion_started_) {
@@ -194,10 +198,14 @@ private:
             }
             const Vec3 lin_acc =
                 (next.sensor_position_m[j] - 2.0 * cur.sensor_position_m[j] + prev.sensor_position_m[j]) * inv_dt2;
+            LastSample& last = last_sample_[j];
+            const bool have_last = last.valid && t_s > last.t_s;
             const int n = shared_.attitude
                               ? node.attitude_frame(cur.q_earth_segment[j], counter, frames)
-                              : node.raw_frames(prev.q_earth_segment[j], cur.q_earth_segment[j], shared_.dt_s, lin_acc,
-                                                counter, frames);
+                              : node.raw_frames(have_last ? last.q_earth_segment : prev.q_earth_segment[j],
+                                                cur.q_earth_segment[j], have_last ? t_s - last.t_s : shared_.dt_s,
+                                                lin_acc, counter, frames);
+            last = {true, t_s, cur.q_earth_segment[j]};
             const std::uint64_t release = now + (o.jitter_us > 0.0 ? static_cast<std::uint64_t>(rng_.uniform(0.0, o.jitter_us)) : 0u);
             for (int f = 0; f < n; ++f) {
                 if (o.loss > 0.0 && rng_.uniform() < o.loss) {
@@ -233,6 +241,12 @@ private:
     Vec3 origin_m_ = Vec3::Zero();
     std::vector<SimulatedNode> nodes_;
     BodyPose prev_{}, cur_{}, next_{};
+    struct LastSample {  // per node: the previous sample's time and orientation
+        bool valid = false;
+        double t_s = 0.0;
+        Quat q_earth_segment = Quat::Identity();
+    };
+    std::vector<LastSample> last_sample_;
     bool motion_started_ = false;
     std::uint64_t start_us_ = 0;
     std::vector<PendingFrame> pending_;

@@ -155,15 +155,15 @@ write_config "$DIR/madgwick.toml" "$DIR" madgwick
   --angles-out "$DIR/replay_madgwick.csv" --calibrate-at 0.8:1:T > "$DIR/replay_m.log" 2>&1 || fail "replay madgwick"
 cmp -s "$DIR/replay1.bvh" "$DIR/replay_madgwick.bvh" && fail "another filter gave the same BVH"
 check_bvh "$DIR/replay_madgwick.bvh"
-# The simulator's motion advances 10 ms per SYNC while its timestamps are wall time: on a
-# starved machine (SYNCs sent late) the gyro integrates over longer intervals than the motion
-# took, and every filter drifts. Judge the round trip only when the SYNCs kept their rate.
+# The simulator samples the motion at each SYNC's real send time and its gyro reads the mean
+# rate since the node's previous sample, so late SYNCs cost little (measured: 4-6 deg at
+# 50-57 Hz of 100, docs/outputs.md). Below 50 Hz the frames get too few to judge.
 SYNC_RATE=$(awk -F, '$3 == "pelvis" && $2 == 1 { if (!n) t0 = $1; t1 = $1; n++ }
   END { if (n > 1) printf "%.1f", (n - 1) / ((t1 - t0) / 1e6); else print 0 }' "$DIR/truth.csv")
 RT=$("$ROUNDTRIP" --truth "$DIR/truth.csv" --bvh "$DIR/replay1.bvh" --angles "$DIR/replay1.csv" \
   --skip-s 3 --exclude right_hand --max-rms-deg 8) && RT_OK=1 || RT_OK=0
 echo "round trip (mocap filter, SYNCs at $SYNC_RATE Hz of 100): $RT"
-if awk -v r="$SYNC_RATE" 'BEGIN { exit !(r >= 97) }'; then
+if awk -v r="$SYNC_RATE" 'BEGIN { exit !(r >= 50) }'; then
   [[ $RT_OK == 1 ]] || fail "round trip error above 8 deg"
 else
   echo "round trip NOT JUDGED: the simulator sent SYNCs at $SYNC_RATE Hz instead of 100 (machine overloaded)"
