@@ -231,7 +231,10 @@ bool Daemon::start(std::string* error) {
         can_readers_.push_back(std::make_unique<ingest::SocketCanReader>(ingest_io_, cc, clock_, sink));
     }
 
-    // Bind everything before announcing readiness: a failure here exits non-zero.
+    // Bind everything before announcing readiness: a failure here exits non-zero. The start
+    // time is set before any thread starts: /metrics reads it from the HTTP thread.
+    start_us_ = clock_.now_us();
+    assembler_alive_us_ = start_us_;
     pool_->start();
     if (!server_->start(*error)) return false;
     if (bvh_server_ && !bvh_server_->start(*error)) return false;
@@ -243,8 +246,6 @@ bool Daemon::start(std::string* error) {
             http_server_.reset();
         }
     }
-    start_us_ = clock_.now_us();
-    assembler_alive_us_ = start_us_;
     if (raw_recorder_ && !raw_recorder_->start(error)) return false;
     if (!sink_listener_->start(error)) return false;
     for (auto& r : can_readers_) {

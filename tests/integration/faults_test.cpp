@@ -820,7 +820,13 @@ TEST_F(Faults, ConnectStormLeavesDescriptorsAndMemoryBounded) {
               << count_lines(daemon_->log(), "") << "\n";
     EXPECT_EQ(subscribed, kClients / 2);
     EXPECT_LE(fd1, fd0) << "every descriptor of the storm is closed";
+#if defined(__SANITIZE_ADDRESS__)
+    // ASan's quarantine keeps freed blocks (up to 256 MiB) out of reuse, so RSS says nothing
+    // about leaks here; LeakSanitizer does, at mocapd's exit (TearDown requires status 0).
+    std::cout << "[ metrics  ] RSS bound not judged under AddressSanitizer\n";
+#else
     EXPECT_LT(rss1, rss0 + 16 * 1024) << "RSS grows by less than 16 MiB";
+#endif
     EXPECT_LE(gaps(ref.syncs(1)), sim_skipped(*s)) << "the normal client saw every frame during the storm";
     const auto c = counters();
     EXPECT_GE(c.at("serve.connections_accepted"), static_cast<std::uint64_t>(kClients));
