@@ -29,7 +29,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib
   clang-14 libclang-rt-14-dev clang-tidy-14 cppcheck
-  assimp-utils qemu-system-x86 busybox-static cpio kmod
+  assimp-utils qemu-system-x86 qemu-user busybox-static cpio kmod
   blender nodejs
   python3-protobuf python3-numpy python3-matplotlib python3-pytest
   chromium
