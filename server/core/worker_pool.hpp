@@ -177,16 +177,16 @@ class WorkerPool {
         std::vector<SegmentProcessor*> processors;  // read-only once started
         std::uint64_t weight = 0;                   // set-up only
         std::thread thread;
-        // Written by the worker thread.
-        alignas(kCacheLineBytes) Counter processed;
-        Counter rejected;
-        Counter output_dropped;
-        Counter sleeps;
-        LatencyHistogram queue_wait;
-        LatencyHistogram filter;
-        // Written by the ingest thread (own cache line).
-        alignas(kCacheLineBytes) Counter submitted;
-        Counter dropped_full;
+        // Written by the worker thread only (single-writer: no locked add per sample).
+        alignas(kCacheLineBytes) SingleWriterCounter processed;
+        SingleWriterCounter rejected;
+        SingleWriterCounter output_dropped;
+        SingleWriterCounter sleeps;
+        SingleWriterLatencyHistogram queue_wait;
+        SingleWriterLatencyHistogram filter;
+        // Written by the ingest thread only (own cache line).
+        alignas(kCacheLineBytes) SingleWriterCounter submitted;
+        SingleWriterCounter dropped_full;
     };
 
     static std::uint64_t route_key(std::uint32_t subject_id, std::uint16_t segment) noexcept {
@@ -208,9 +208,9 @@ class WorkerPool {
     bool started_ = false;                  // set-up/control thread only
     bool joined_ = false;                   // set-up/control thread only
 
-    Counter unknown_segment_;  // ingest thread
-    Counter after_stop_;       // ingest thread
-    Counter pin_failures_;     // set-up thread
+    SingleWriterCounter unknown_segment_;  // ingest thread
+    SingleWriterCounter after_stop_;       // ingest thread
+    SingleWriterCounter pin_failures_;     // set-up thread
     CounterGroup counters_{"worker_pool"};
 };
 

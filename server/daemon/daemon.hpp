@@ -118,8 +118,8 @@ private:
     std::uint64_t watchdog_usec_ = 0;
 
     // Written by the ingest thread only.
-    LatencyHistogram ingest_latency_;  // sink_send_us -> received_us
-    Counter unknown_nodes_, samples_routed_, samples_rejected_;
+    SingleWriterLatencyHistogram ingest_latency_;  // sink_send_us -> received_us
+    SingleWriterCounter unknown_nodes_, samples_routed_, samples_rejected_;
     bool wake_posted_ = false;  // a wake_workers() is posted to ingest_io_ (see route())
     CounterGroup route_counters_{"route"};
 };
