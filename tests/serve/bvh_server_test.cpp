@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "bvh_outputs_fixture.hpp"
+#include "wait_until.hpp"
 #include "skeleton/bvh.hpp"
 
 namespace mocap::serve {
@@ -58,14 +59,7 @@ std::size_t greeting_line_count(const BvhFrameEncoder& e) {
 }
 
 bool wait_clients(const BvhServer& s, std::size_t n) {
-    for (int i = 0; i < 200 && s.client_count() != n; ++i) std::this_thread::sleep_for(5ms);
-    return s.client_count() == n;
-}
-
-// The client can read the lines before the server's write completion has counted them.
-std::uint64_t wait_frames_sent(const BvhServer& s, std::uint64_t n) {
-    for (int i = 0; i < 200 && s.counters().frames_sent.load() < n; ++i) std::this_thread::sleep_for(5ms);
-    return s.counters().frames_sent.load();
+    return wait_until([&] { return s.client_count() == n; });
 }
 
 std::vector<std::string> motion_lines(const std::string& text, std::size_t skip) {
@@ -116,7 +110,9 @@ TEST(BvhServer, GreetingIsHierarchyMotionFrameTimeThenOneLinePerFrame) {
     const auto clip = skeleton::parse_bvh(file);
     ASSERT_TRUE(clip) << clip.error;
     EXPECT_EQ(clip.clip->frame_count, 5u);
-    EXPECT_EQ(wait_frames_sent(server, 5), 5u);
+    // The client can read the lines before the server's write completion has counted them.
+    EXPECT_TRUE(wait_until([&] { return server.counters().frames_sent.load() >= 5; }));
+    EXPECT_EQ(server.counters().frames_sent.load(), 5u);
 }
 
 TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
@@ -140,7 +136,7 @@ TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
     std::string text = conn.read_until_lines(g, 4);
     EXPECT_EQ(text.substr(text.size() - expect_7.size()), expect_7);  // only subject 7's lines
     conn.send_text("bogus\nsubject 2\n");
-    for (int i = 0; i < 200 && server.counters().bad_client_lines.load() == 0; ++i) std::this_thread::sleep_for(5ms);
+    wait_until([&] { return server.counters().bad_client_lines.load() != 0; });
     EXPECT_EQ(server.counters().bad_client_lines.load(), 1u);
     std::this_thread::sleep_for(50ms);  // the switch is processed on the serve thread
     for (std::uint64_t k = 0; k < 3; ++k) {

@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "http_test_client.hpp"
+#include "wait_until.hpp"
 
 namespace mocap::serve {
 namespace {
@@ -134,13 +135,6 @@ TEST(HttpServer, ControlRefusedWithoutConfiguredToken) {
     EXPECT_EQ(f.server->counters().control_refused_disabled.load(), 1u);
 }
 
-// Waits until `pred` holds or 5 s pass.
-template <typename Pred>
-bool eventually(Pred pred) {
-    for (int i = 0; i < 500 && !pred(); ++i) std::this_thread::sleep_for(10ms);
-    return pred();
-}
-
 TEST(HttpServer, WebSocketStreamsTheChosenSubject) {
     Fixture f("");
     WsTestClient ws;
@@ -150,7 +144,7 @@ TEST(HttpServer, WebSocketStreamsTheChosenSubject) {
     EXPECT_NE(hello->find("\"type\":\"hello\",\"subject\":2,\"subjects\":[1,2]"), std::string::npos) << *hello;
     EXPECT_NE(hello->find("{\"name\":\"trunk\",\"parent\":0,\"end_m\":[0.0000,0.0000,0.5000]}"), std::string::npos)
         << *hello;
-    ASSERT_TRUE(eventually([&] { return f.server->ws_client_count() == 1; }));
+    ASSERT_TRUE(wait_until([&] { return f.server->ws_client_count() == 1; }));
     f.server->publish(frame(1, 10), pose(9.0));  // another subject: not sent
     f.server->publish(frame(2, 11), pose(0.5));
     const auto m = ws.read();
@@ -169,7 +163,7 @@ TEST(HttpServer, StalledBrowserDropsOldestAndOthersKeepUp) {
     ASSERT_TRUE(stalled.connect(f.port(), "/ws?subject=1"));
     ASSERT_TRUE(reader.connect(f.port(), "/ws?subject=1"));
     ASSERT_TRUE(reader.read());  // hello
-    ASSERT_TRUE(eventually([&] { return f.server->ws_client_count() == 2; }));
+    ASSERT_TRUE(wait_until([&] { return f.server->ws_client_count() == 2; }));
     // ~2 KB frames (32 segments): 12 MB fill the stalled client's kernel buffers, then
     // its queue drops.
     SubjectFrame big_frame = frame(1, 0);
@@ -191,7 +185,7 @@ TEST(HttpServer, StalledBrowserDropsOldestAndOthersKeepUp) {
         }
     }
     EXPECT_EQ(received, kFrames) << "the reading browser must not lose a frame to the stalled one";
-    EXPECT_TRUE(eventually([&] { return f.server->counters().ws_frames_dropped.load() > 0; }))
+    EXPECT_TRUE(wait_until([&] { return f.server->counters().ws_frames_dropped.load() > 0; }))
         << "the stalled browser's queue must drop its oldest frames";
     EXPECT_EQ(f.server->counters().ws_backlog_dropped.load(), 0u);
 }

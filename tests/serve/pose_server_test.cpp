@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "pose_client.hpp"
+#include "wait_until.hpp"
 
 namespace mocap::serve {
 namespace {
@@ -24,16 +25,6 @@ namespace {
 using namespace std::chrono_literals;
 using client::PoseClient;
 using client::ReadStatus;
-
-template <typename Pred>
-bool wait_until(Pred pred, std::chrono::milliseconds limit = 5s) {
-    const auto deadline = std::chrono::steady_clock::now() + limit;
-    while (!pred()) {
-        if (std::chrono::steady_clock::now() > deadline) return false;
-        std::this_thread::sleep_for(1ms);
-    }
-    return true;
-}
 
 ServeConfig test_config() {
     ServeConfig c;
