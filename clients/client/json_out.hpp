@@ -38,7 +38,11 @@ inline void json_number(std::string& out, double v, int digits = 9) {
     out += buf;
 }
 
-inline void json_int(std::string& out, std::int64_t v) { out += std::to_string(v); }
-inline void json_uint(std::string& out, std::uint64_t v) { out += std::to_string(v); }
+inline void json_int(std::string& out, std::int64_t v) {
+    out += std::to_string(v);
+}
+inline void json_uint(std::string& out, std::uint64_t v) {
+    out += std::to_string(v);
+}
 
 }  // namespace mocap::client

@@ -71,7 +71,8 @@ LoadResult run_load(const LoadOptions& options) {
     // Subscribe everyone first, then wait for the acknowledgements in the read loop's
     // way (frames for early clients queue in the server meanwhile, within its bound).
     v1::ClientMessage subscribe;
-    for (std::uint32_t id : options.subject_ids) subscribe.mutable_subscribe()->add_subject_ids(id);
+    for (std::uint32_t id : options.subject_ids)
+        subscribe.mutable_subscribe()->add_subject_ids(id);
     subscribe.mutable_subscribe()->set_decimation(decimation);
     subscribe.mutable_subscribe()->set_fields(options.fields);
     for (auto& s : states) {
@@ -87,10 +88,8 @@ LoadResult run_load(const LoadOptions& options) {
     std::vector<PoseClient> stalled(options.stalled);
     for (PoseClient& c : stalled) {
         std::string error;
-        if (c.connect(options.host, options.port, options.connect_timeout, error) &&
-            shrink_receive_buffer(c.fd()) &&
-            c.subscribe({options.subject_ids, decimation, options.fields}, options.connect_timeout,
-                        error)) {
+        if (c.connect(options.host, options.port, options.connect_timeout, error) && shrink_receive_buffer(c.fd()) &&
+            c.subscribe({options.subject_ids, decimation, options.fields}, options.connect_timeout, error)) {
             ++result.stalled;
         } else if (result.error.empty()) {
             result.error = "stalled client: " + error;
@@ -107,16 +106,14 @@ LoadResult run_load(const LoadOptions& options) {
     }
 
     std::vector<std::int32_t> latencies_us;
-    latencies_us.reserve(std::min<std::size_t>(kMaxLatencySamples,
-                                               options.clients * 100 *
-                                                   static_cast<std::size_t>(options.duration.count() / 1000 + 1)));
+    latencies_us.reserve(std::min<std::size_t>(
+        kMaxLatencySamples, options.clients * 100 * static_cast<std::size_t>(options.duration.count() / 1000 + 1)));
     std::vector<epoll_event> events(256);
     v1::ServerMessage message;
     const auto start = Clock::now();
     const auto deadline = start + options.duration;
     for (;;) {
-        const auto left =
-            std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
         if (left <= 0) break;
         const int n = epoll_wait(ep, events.data(), static_cast<int>(events.size()),
                                  static_cast<int>(std::min<long long>(left, 100)));
@@ -140,8 +137,7 @@ LoadResult run_load(const LoadOptions& options) {
                     if (lat < 0) {
                         ++result.negative_latencies;
                     } else if (latencies_us.size() < kMaxLatencySamples) {
-                        latencies_us.push_back(static_cast<std::int32_t>(
-                            std::min<std::int64_t>(lat, INT32_MAX)));
+                        latencies_us.push_back(static_cast<std::int32_t>(std::min<std::int64_t>(lat, INT32_MAX)));
                     }
                 }
                 auto it = std::find_if(s.last_sync.begin(), s.last_sync.end(),
@@ -201,19 +197,32 @@ std::string load_result_json(const LoadResult& r) {
             out += "null";
         }
     };
-    key("clients"); json_uint(out, r.clients);
-    key("connected"); json_uint(out, r.connected);
-    key("stalled"); json_uint(out, r.stalled);
-    key("closed_early"); json_uint(out, r.closed_early);
-    key("duration_s"); json_number(out, r.duration_s, 6);
-    key("frames"); json_uint(out, r.frames);
-    key("frames_per_client_min"); json_uint(out, r.frames_per_client_min);
-    key("frames_per_client_max"); json_uint(out, r.frames_per_client_max);
-    key("gaps"); json_uint(out, r.gaps);
-    key("missing_frames"); json_uint(out, r.missing_frames);
-    key("drops"); json_uint(out, r.drops);
-    key("latency_samples"); json_uint(out, r.latency_samples);
-    key("negative_latencies"); json_uint(out, r.negative_latencies);
+    key("clients");
+    json_uint(out, r.clients);
+    key("connected");
+    json_uint(out, r.connected);
+    key("stalled");
+    json_uint(out, r.stalled);
+    key("closed_early");
+    json_uint(out, r.closed_early);
+    key("duration_s");
+    json_number(out, r.duration_s, 6);
+    key("frames");
+    json_uint(out, r.frames);
+    key("frames_per_client_min");
+    json_uint(out, r.frames_per_client_min);
+    key("frames_per_client_max");
+    json_uint(out, r.frames_per_client_max);
+    key("gaps");
+    json_uint(out, r.gaps);
+    key("missing_frames");
+    json_uint(out, r.missing_frames);
+    key("drops");
+    json_uint(out, r.drops);
+    key("latency_samples");
+    json_uint(out, r.latency_samples);
+    key("negative_latencies");
+    json_uint(out, r.negative_latencies);
     opt("p50_ms", r.p50_ms);
     opt("p90_ms", r.p90_ms);
     opt("p99_ms", r.p99_ms);

@@ -32,21 +32,21 @@ struct LoadOptions {
 };
 
 struct LoadResult {
-    std::size_t clients = 0;        ///< requested
-    std::size_t stalled = 0;        ///< never-reading connections that were subscribed
-    std::size_t connected = 0;      ///< subscribed successfully
-    std::size_t closed_early = 0;   ///< connections the server closed during the run
-    double duration_s = 0;          ///< measured length of the read loop
-    std::uint64_t frames = 0;       ///< frames received, all clients
+    std::size_t clients = 0;       ///< requested
+    std::size_t stalled = 0;       ///< never-reading connections that were subscribed
+    std::size_t connected = 0;     ///< subscribed successfully
+    std::size_t closed_early = 0;  ///< connections the server closed during the run
+    double duration_s = 0;         ///< measured length of the read loop
+    std::uint64_t frames = 0;      ///< frames received, all clients
     std::uint64_t frames_per_client_min = 0;
     std::uint64_t frames_per_client_max = 0;
     std::uint64_t gaps = 0;            ///< SYNC jumps beyond the decimation
     std::uint64_t missing_frames = 0;  ///< frames those jumps skipped
     std::uint64_t drops = 0;           ///< frames the server announced as dropped
     std::uint64_t latency_samples = 0;
-    std::uint64_t negative_latencies = 0;  ///< receive before send: clocks disagree
+    std::uint64_t negative_latencies = 0;                  ///< receive before send: clocks disagree
     std::optional<double> p50_ms, p90_ms, p99_ms, max_ms;  ///< empty without samples
-    std::string error;  ///< first connection error, if any
+    std::string error;                                     ///< first connection error, if any
 };
 
 LoadResult run_load(const LoadOptions& options);

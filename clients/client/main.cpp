@@ -123,32 +123,28 @@ std::string frame_text(const v1::SkeletonFrame& f, const v1::Hello& hello, std::
         never += (flags & v1::SEGMENT_NEVER_SEEN) ? 1 : 0;
     }
     char head[256];
-    const double latency_ms =
-        f.times().sink_send_us() ? (receive_us - f.times().sink_send_us()) / 1000.0 : 0.0;
-    std::snprintf(head, sizeof head,
-                  "subject %u sync %llu t=%.3fs latency=%.2fms segments=%u stale=%d never=%d",
-                  f.subject_id(), static_cast<unsigned long long>(f.sync()), f.sample_us() / 1e6,
-                  latency_ms, f.segment_count(), stale, never);
+    const double latency_ms = f.times().sink_send_us() ? (receive_us - f.times().sink_send_us()) / 1000.0 : 0.0;
+    std::snprintf(head, sizeof head, "subject %u sync %llu t=%.3fs latency=%.2fms segments=%u stale=%d never=%d",
+                  f.subject_id(), static_cast<unsigned long long>(f.sync()), f.sample_us() / 1e6, latency_ms,
+                  f.segment_count(), stale, never);
     std::string line = head;
     if (f.segment_count() > 0 && f.q_world_segment_wxyz_size() >= 4) {
         const std::string root =
             hello.skeleton().segments_size() > 0 ? hello.skeleton().segments(0).name() : "segment0";
         char seg[160];
-        std::snprintf(seg, sizeof seg, " | %s q=(%.3f %.3f %.3f %.3f)", root.c_str(),
-                      f.q_world_segment_wxyz(0), f.q_world_segment_wxyz(1),
-                      f.q_world_segment_wxyz(2), f.q_world_segment_wxyz(3));
+        std::snprintf(seg, sizeof seg, " | %s q=(%.3f %.3f %.3f %.3f)", root.c_str(), f.q_world_segment_wxyz(0),
+                      f.q_world_segment_wxyz(1), f.q_world_segment_wxyz(2), f.q_world_segment_wxyz(3));
         line += seg;
         if (f.position_m_size() >= 3) {
-            std::snprintf(seg, sizeof seg, " p=(%.3f %.3f %.3f)", f.position_m(0), f.position_m(1),
-                          f.position_m(2));
+            std::snprintf(seg, sizeof seg, " p=(%.3f %.3f %.3f)", f.position_m(0), f.position_m(1), f.position_m(2));
             line += seg;
         }
     }
     return line;
 }
 
-int run_cat(PoseClient& client, const mocap::client::SubscribeOptions& sub, std::uint64_t frames,
-            bool json, double idle_timeout_s) {
+int run_cat(PoseClient& client, const mocap::client::SubscribeOptions& sub, std::uint64_t frames, bool json,
+            double idle_timeout_s) {
     std::string error;
     if (!client.subscribe(sub, 3s, error)) {
         std::cerr << "mocap-client: " << error << "\n";
@@ -170,8 +166,7 @@ int run_cat(PoseClient& client, const mocap::client::SubscribeOptions& sub, std:
         }
         if (s != ReadStatus::kMessage) {
             std::cerr << "mocap-client: connection ended"
-                      << (client.goodbye() ? ": " + client.goodbye()->message() : std::string())
-                      << "\n";
+                      << (client.goodbye() ? ": " + client.goodbye()->message() : std::string()) << "\n";
             return frames == 0 ? 0 : kExitConnection;
         }
         std::cout << (json ? frame_json(f, client.hello(), client.last_receive_us())
@@ -213,8 +208,10 @@ int run_stats(PoseClient& client, bool json) {
             json_string(out, l.stage());
             out += ",\"count\":";
             json_uint(out, l.count());
-            for (const auto& [name, value] : {std::pair{"p50_us", l.p50_us()}, {"p90_us", l.p90_us()},
-                                              {"p99_us", l.p99_us()}, {"max_us", l.max_us()}}) {
+            for (const auto& [name, value] : {std::pair{"p50_us", l.p50_us()},
+                                              {"p90_us", l.p90_us()},
+                                              {"p99_us", l.p99_us()},
+                                              {"max_us", l.max_us()}}) {
                 out += ",\"";
                 out += name;
                 out += "\":";
@@ -231,12 +228,10 @@ int run_stats(PoseClient& client, bool json) {
         std::printf("%-44s %llu\n", c.name().c_str(), static_cast<unsigned long long>(c.value()));
     }
     if (stats.latencies_size() > 0) {
-        std::printf("\n%-16s %10s %10s %10s %10s %10s\n", "stage", "count", "p50_us", "p90_us",
-                    "p99_us", "max_us");
+        std::printf("\n%-16s %10s %10s %10s %10s %10s\n", "stage", "count", "p50_us", "p90_us", "p99_us", "max_us");
         for (const auto& l : stats.latencies()) {
             std::printf("%-16s %10llu %10.1f %10.1f %10.1f %10.1f\n", l.stage().c_str(),
-                        static_cast<unsigned long long>(l.count()), l.p50_us(), l.p90_us(),
-                        l.p99_us(), l.max_us());
+                        static_cast<unsigned long long>(l.count()), l.p50_us(), l.p90_us(), l.p99_us(), l.max_us());
         }
     }
     return 0;
@@ -264,8 +259,7 @@ static int run(int argc, char** argv) {
     std::string connect = "127.0.0.1:7001";
     app.add_option("--connect", connect, "HOST:PORT of mocapd's pose service")->capture_default_str();
     double connect_timeout_s = 3.0;
-    app.add_option("--connect-timeout", connect_timeout_s, "seconds to connect and get Hello")
-        ->capture_default_str();
+    app.add_option("--connect-timeout", connect_timeout_s, "seconds to connect and get Hello")->capture_default_str();
     app.require_subcommand(1);
 
     mocap::client::SubscribeOptions sub;
@@ -279,10 +273,8 @@ static int run(int argc, char** argv) {
     cat->add_flag("--json", cat_json, "one JSON object per frame per line");
     cat->add_option("--subject", sub.subject_ids, "subject id (repeatable; default all)");
     cat->add_option("--decimation", sub.decimation, "every n-th frame per subject")->capture_default_str();
-    cat->add_option("--fields", field_names, "orientations, positions, joints, raw, all")
-        ->delimiter(',');
-    cat->add_option("--timeout", cat_idle_s, "give up after this many seconds without a frame")
-        ->capture_default_str();
+    cat->add_option("--fields", field_names, "orientations, positions, joints, raw, all")->delimiter(',');
+    cat->add_option("--timeout", cat_idle_s, "give up after this many seconds without a frame")->capture_default_str();
 
     auto* stats = app.add_subcommand("stats", "print the server's counters and stage latencies");
     bool stats_json = false;
@@ -296,7 +288,8 @@ static int run(int argc, char** argv) {
     std::uint32_t cal_subject = 0;
     std::string cal_pose = "T";
     calibrate->add_option("--subject", cal_subject, "subject id")->required();
-    calibrate->add_option("--pose", cal_pose, "T or N")->check(CLI::IsMember({"T", "N", "t", "n"}))
+    calibrate->add_option("--pose", cal_pose, "T or N")
+        ->check(CLI::IsMember({"T", "N", "t", "n"}))
         ->capture_default_str();
     auto* record_start = control->add_subcommand("record-start", "start recording");
     std::string record_path;
@@ -312,10 +305,8 @@ static int run(int argc, char** argv) {
     load->add_option("--duration", load_duration_s, "seconds of measurement")->capture_default_str();
     load->add_flag("--json", load_json, "one JSON object");
     load->add_option("--subject", load_options.subject_ids, "subject id (repeatable; default all)");
-    load->add_option("--decimation", load_options.decimation, "every n-th frame per subject")
-        ->capture_default_str();
-    load->add_option("--stalled", load_options.stalled,
-                     "extra subscribed connections that never read (not measured)")
+    load->add_option("--decimation", load_options.decimation, "every n-th frame per subject")->capture_default_str();
+    load->add_option("--stalled", load_options.stalled, "extra subscribed connections that never read (not measured)")
         ->capture_default_str();
 
     // File exports (output_commands.hpp, docs/outputs.md).
@@ -339,8 +330,7 @@ static int run(int argc, char** argv) {
         std::cerr << "mocap-client: --connect: " << error << "\n";
         return kExitConnection;
     }
-    const auto connect_timeout =
-        std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
+    const auto connect_timeout = std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
 
     if (*record || *angles) {
         export_options.host = endpoint->host;
@@ -357,15 +347,13 @@ static int run(int argc, char** argv) {
         if (load_json) {
             std::cout << mocap::client::load_result_json(r) << std::endl;
         } else {
-            std::printf("clients %zu (connected %zu, closed early %zu, stalled %zu), %.2f s\n",
-                        r.clients, r.connected, r.closed_early, r.stalled, r.duration_s);
-            std::printf("frames %llu (per client %llu..%llu), gaps %llu (missing %llu), drops %llu\n",
-                        static_cast<unsigned long long>(r.frames),
-                        static_cast<unsigned long long>(r.frames_per_client_min),
-                        static_cast<unsigned long long>(r.frames_per_client_max),
-                        static_cast<unsigned long long>(r.gaps),
-                        static_cast<unsigned long long>(r.missing_frames),
-                        static_cast<unsigned long long>(r.drops));
+            std::printf("clients %zu (connected %zu, closed early %zu, stalled %zu), %.2f s\n", r.clients, r.connected,
+                        r.closed_early, r.stalled, r.duration_s);
+            std::printf(
+                "frames %llu (per client %llu..%llu), gaps %llu (missing %llu), drops %llu\n",
+                static_cast<unsigned long long>(r.frames), static_cast<unsigned long long>(r.frames_per_client_min),
+                static_cast<unsigned long long>(r.frames_per_client_max), static_cast<unsigned long long>(r.gaps),
+                static_cast<unsigned long long>(r.missing_frames), static_cast<unsigned long long>(r.drops));
             if (r.p50_ms) {
                 std::printf("latency sink-send -> receive: p50 %.3f ms, p90 %.3f ms, p99 %.3f ms, max %.3f ms\n",
                             *r.p50_ms, *r.p90_ms, *r.p99_ms, *r.max_ms);
@@ -395,8 +383,7 @@ static int run(int argc, char** argv) {
     request.set_token(token);
     if (*calibrate) {
         request.mutable_calibrate()->set_subject_id(cal_subject);
-        request.mutable_calibrate()->set_pose(cal_pose == "N" || cal_pose == "n" ? v1::POSE_N
-                                                                                 : v1::POSE_T);
+        request.mutable_calibrate()->set_pose(cal_pose == "N" || cal_pose == "n" ? v1::POSE_N : v1::POSE_T);
     } else if (*record_start) {
         request.mutable_start_recording()->set_path(record_path);
     } else if (*record_stop) {

@@ -11,8 +11,8 @@
 #include <memory>
 #include <sstream>
 
-#include "pose_client.hpp"
 #include "core/errno_text.hpp"
+#include "pose_client.hpp"
 #include "serve/angles_csv.hpp"
 #include "serve/bvh_text.hpp"
 
@@ -38,7 +38,8 @@ int connect_blocking(const std::string& host, std::uint16_t port, std::chrono::m
     for (addrinfo* ai = found; ai && fd < 0; ai = ai->ai_next) {
         fd = ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC, ai->ai_protocol);
         if (fd < 0) continue;
-        timeval tv{static_cast<time_t>(timeout.count() / 1000), static_cast<suseconds_t>((timeout.count() % 1000) * 1000)};
+        timeval tv{static_cast<time_t>(timeout.count() / 1000),
+                   static_cast<suseconds_t>((timeout.count() % 1000) * 1000)};
         ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
         ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
         if (::connect(fd, ai->ai_addr, ai->ai_addrlen) != 0) {
@@ -52,7 +53,9 @@ int connect_blocking(const std::string& host, std::uint16_t port, std::chrono::m
     return fd;
 }
 
-std::FILE* create_new(const std::string& path) { return std::fopen(path.c_str(), "wx"); }
+std::FILE* create_new(const std::string& path) {
+    return std::fopen(path.c_str(), "wx");
+}
 
 }  // namespace
 
@@ -101,7 +104,8 @@ int run_record_bvh(const ExportOptions& o) {
             return kExitConnection;
         }
         if (n < 0) {
-            std::cerr << "mocap-client: " << (errno == EAGAIN ? "no data within the timeout" : errno_text(errno)) << "\n";
+            std::cerr << "mocap-client: " << (errno == EAGAIN ? "no data within the timeout" : errno_text(errno))
+                      << "\n";
             return kExitConnection;
         }
         buf.append(chunk, static_cast<std::size_t>(n));
@@ -113,9 +117,10 @@ int run_record_bvh(const ExportOptions& o) {
                     frame_time = line;
                     have_header = true;
                     values = bvh_channel_count(header);
-                    if (header.rfind("HIERARCHY", 0) != 0 || values == 0 ||
-                        header.size() < 7 || header.compare(header.size() - 7, 7, "MOTION\n") != 0) {
-                        std::cerr << "mocap-client: not a live BVH stream (expected HIERARCHY ... MOTION, Frame Time)\n";
+                    if (header.rfind("HIERARCHY", 0) != 0 || values == 0 || header.size() < 7 ||
+                        header.compare(header.size() - 7, 7, "MOTION\n") != 0) {
+                        std::cerr
+                            << "mocap-client: not a live BVH stream (expected HIERARCHY ... MOTION, Frame Time)\n";
                         return kExitFailed;
                     }
                     header.resize(header.size() - 7);  // "MOTION\n" is written again with the count
@@ -130,8 +135,8 @@ int run_record_bvh(const ExportOptions& o) {
             }
             const std::size_t count = serve::bvh_value_count(line);
             if (count != values) {
-                std::cerr << "mocap-client: MOTION line " << lines.size() + 1 << " has " << count << " values, the hierarchy declares "
-                          << values << "\n";
+                std::cerr << "mocap-client: MOTION line " << lines.size() + 1 << " has " << count
+                          << " values, the hierarchy declares " << values << "\n";
                 return kExitFailed;
             }
             lines.push_back(std::move(line));
@@ -144,7 +149,8 @@ int run_record_bvh(const ExportOptions& o) {
         return kExitFailed;
     }
     std::string text = header + "MOTION\nFrames: " + std::to_string(lines.size()) + "\n" + frame_time;
-    for (const auto& l : lines) text += l;
+    for (const auto& l : lines)
+        text += l;
     const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
     if (std::fclose(f) != 0 || !ok) {
         std::cerr << "mocap-client: writing " << o.out << " failed\n";
@@ -180,8 +186,9 @@ int run_angles_csv(const ExportOptions& o) {
     while (written < o.frames) {
         const ReadStatus s = client.next_frame(frame, o.timeout);
         if (s != ReadStatus::kMessage) {
-            std::cerr << "mocap-client: " << (s == ReadStatus::kTimeout ? "no frame within the timeout" : "connection ended")
-                      << " after " << written << " frames\n";
+            std::cerr << "mocap-client: "
+                      << (s == ReadStatus::kTimeout ? "no frame within the timeout" : "connection ended") << " after "
+                      << written << " frames\n";
             return kExitConnection;
         }
         if (frame.joint_angles_rad_size() != names.size()) {
@@ -189,7 +196,8 @@ int run_angles_csv(const ExportOptions& o) {
                       << names.size() << "\n";
             return kExitFailed;
         }
-        serve::append_angles_csv_row(frame.subject_id(), frame.sync(), frame.sample_us(), frame.joint_angles_rad().data(),
+        serve::append_angles_csv_row(frame.subject_id(), frame.sync(), frame.sample_us(),
+                                     frame.joint_angles_rad().data(),
                                      static_cast<std::size_t>(frame.joint_angles_rad_size()), text);
         ++written;
     }

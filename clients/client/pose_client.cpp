@@ -22,8 +22,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 int remaining_ms(Clock::time_point deadline) {
-    const auto left =
-        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
     return left <= 0 ? 0 : static_cast<int>(std::min<long long>(left, 1 << 30));
 }
 
@@ -66,9 +65,13 @@ std::optional<Endpoint> parse_endpoint(std::string_view text, std::string& error
 }
 
 PoseClient::PoseClient() = default;
-PoseClient::~PoseClient() { close(); }
+PoseClient::~PoseClient() {
+    close();
+}
 
-PoseClient::PoseClient(PoseClient&& other) noexcept { *this = std::move(other); }
+PoseClient::PoseClient(PoseClient&& other) noexcept {
+    *this = std::move(other);
+}
 
 PoseClient& PoseClient::operator=(PoseClient&& other) noexcept {
     if (this != &other) {
@@ -91,8 +94,8 @@ void PoseClient::close() {
     fd_ = -1;
 }
 
-bool PoseClient::connect(const std::string& host, std::uint16_t port,
-                         std::chrono::milliseconds timeout, std::string& error) {
+bool PoseClient::connect(const std::string& host, std::uint16_t port, std::chrono::milliseconds timeout,
+                         std::string& error) {
     close();
     goodbye_.reset();
     drops_announced_ = 0;
@@ -110,8 +113,7 @@ bool PoseClient::connect(const std::string& host, std::uint16_t port,
     }
     std::string last_error = "no address";
     for (addrinfo* ai = found; ai != nullptr && fd_ < 0; ai = ai->ai_next) {
-        const int fd = ::socket(ai->ai_family, ai->ai_socktype | SOCK_NONBLOCK | SOCK_CLOEXEC,
-                                ai->ai_protocol);
+        const int fd = ::socket(ai->ai_family, ai->ai_socktype | SOCK_NONBLOCK | SOCK_CLOEXEC, ai->ai_protocol);
         if (fd < 0) continue;
         int ok = ::connect(fd, ai->ai_addr, ai->ai_addrlen) == 0 ? 0 : errno;
         if (ok == EINPROGRESS) {
@@ -139,20 +141,21 @@ bool PoseClient::connect(const std::string& host, std::uint16_t port,
         return false;
     }
     v1::ServerMessage message;
-    const ReadStatus s = wait_for(message, std::chrono::duration_cast<std::chrono::milliseconds>(
-                                               deadline - Clock::now()),
-                                  [](const v1::ServerMessage& m) { return m.has_hello(); });
+    const ReadStatus s =
+        wait_for(message, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()),
+                 [](const v1::ServerMessage& m) { return m.has_hello(); });
     if (s != ReadStatus::kMessage) {
         error = "no Hello from " + host + ":" + service +
-                (goodbye_ ? " (" + goodbye_->message() + ")" : error_.empty() ? "" : ": " + error_);
+                (goodbye_         ? " (" + goodbye_->message() + ")"
+                 : error_.empty() ? ""
+                                  : ": " + error_);
         close();
         return false;
     }
     return true;
 }
 
-bool PoseClient::send(const v1::ClientMessage& message, std::string& error,
-                      std::chrono::milliseconds timeout) {
+bool PoseClient::send(const v1::ClientMessage& message, std::string& error, std::chrono::milliseconds timeout) {
     if (fd_ < 0) {
         error = "not connected";
         return false;
@@ -255,8 +258,7 @@ void PoseClient::note(const v1::ServerMessage& message) {
 }
 
 template <typename Accept>
-ReadStatus PoseClient::wait_for(v1::ServerMessage& out, std::chrono::milliseconds timeout,
-                                Accept accept) {
+ReadStatus PoseClient::wait_for(v1::ServerMessage& out, std::chrono::milliseconds timeout, Accept accept) {
     const auto deadline = Clock::now() + timeout;
     for (;;) {
         const ReadStatus s = pop(out);
@@ -286,28 +288,28 @@ ReadStatus PoseClient::next(v1::ServerMessage& out, std::chrono::milliseconds ti
 
 ReadStatus PoseClient::next_frame(v1::SkeletonFrame& out, std::chrono::milliseconds timeout) {
     v1::ServerMessage message;
-    const ReadStatus s =
-        wait_for(message, timeout, [](const v1::ServerMessage& m) { return m.has_frame(); });
+    const ReadStatus s = wait_for(message, timeout, [](const v1::ServerMessage& m) { return m.has_frame(); });
     if (s == ReadStatus::kMessage) out.Swap(message.mutable_frame());
     return s;
 }
 
 template <typename Accept>
-bool PoseClient::exchange(const v1::ClientMessage& request, v1::ServerMessage& reply,
-                          std::chrono::milliseconds timeout, std::string& error,
-                          const char* awaited, Accept accept) {
+bool PoseClient::exchange(const v1::ClientMessage& request, v1::ServerMessage& reply, std::chrono::milliseconds timeout,
+                          std::string& error, const char* awaited, Accept accept) {
     if (!send(request, error, timeout)) return false;
     if (wait_for(reply, timeout, accept) == ReadStatus::kMessage) return true;
     error = std::string("no ") + awaited + " reply" +
-            (goodbye_ ? " (" + goodbye_->message() + ")" : error_.empty() ? "" : ": " + error_);
+            (goodbye_         ? " (" + goodbye_->message() + ")"
+             : error_.empty() ? ""
+                              : ": " + error_);
     return false;
 }
 
-bool PoseClient::subscribe(const SubscribeOptions& options, std::chrono::milliseconds timeout,
-                           std::string& error) {
+bool PoseClient::subscribe(const SubscribeOptions& options, std::chrono::milliseconds timeout, std::string& error) {
     v1::ClientMessage request;
     v1::Subscribe* sub = request.mutable_subscribe();
-    for (std::uint32_t s : options.subject_ids) sub->add_subject_ids(s);
+    for (std::uint32_t s : options.subject_ids)
+        sub->add_subject_ids(s);
     sub->set_decimation(options.decimation);
     sub->set_fields(options.fields);
     v1::ServerMessage reply;
@@ -315,23 +317,21 @@ bool PoseClient::subscribe(const SubscribeOptions& options, std::chrono::millise
                     [](const v1::ServerMessage& m) { return m.has_subscribed(); });
 }
 
-bool PoseClient::request_stats(v1::Stats& out, std::chrono::milliseconds timeout,
-                               std::string& error) {
+bool PoseClient::request_stats(v1::Stats& out, std::chrono::milliseconds timeout, std::string& error) {
     v1::ClientMessage request;
     const std::uint64_t id = next_request_id_++;
     request.mutable_stats_request()->set_request_id(id);
     v1::ServerMessage reply;
-    if (!exchange(request, reply, timeout, error, "Stats", [id](const v1::ServerMessage& m) {
-            return m.has_stats() && m.stats().request_id() == id;
-        })) {
+    if (!exchange(request, reply, timeout, error, "Stats",
+                  [id](const v1::ServerMessage& m) { return m.has_stats() && m.stats().request_id() == id; })) {
         return false;
     }
     out.Swap(reply.mutable_stats());
     return true;
 }
 
-bool PoseClient::control(const v1::ControlRequest& request, v1::ControlReply& reply,
-                         std::chrono::milliseconds timeout, std::string& error) {
+bool PoseClient::control(const v1::ControlRequest& request, v1::ControlReply& reply, std::chrono::milliseconds timeout,
+                         std::string& error) {
     v1::ClientMessage message;
     *message.mutable_control() = request;
     const std::uint64_t id = request.request_id() != 0 ? request.request_id() : next_request_id_++;

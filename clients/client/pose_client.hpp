@@ -67,11 +67,9 @@ public:
     PoseClient& operator=(const PoseClient&) = delete;
 
     /// Resolves, connects (TCP_NODELAY) and waits for the server's Hello.
-    bool connect(const std::string& host, std::uint16_t port, std::chrono::milliseconds timeout,
-                 std::string& error);
+    bool connect(const std::string& host, std::uint16_t port, std::chrono::milliseconds timeout, std::string& error);
     /// Sends Subscribe and waits for Subscribed (frames only flow after it).
-    bool subscribe(const SubscribeOptions& options, std::chrono::milliseconds timeout,
-                   std::string& error);
+    bool subscribe(const SubscribeOptions& options, std::chrono::milliseconds timeout, std::string& error);
     /// Sends one ClientMessage (blocking until written or `timeout`).
     bool send(const v1::ClientMessage& message, std::string& error,
               std::chrono::milliseconds timeout = std::chrono::seconds(5));
@@ -83,8 +81,8 @@ public:
     /// StatsRequest -> Stats.
     bool request_stats(v1::Stats& out, std::chrono::milliseconds timeout, std::string& error);
     /// ControlRequest -> ControlReply (a refused request is a reply with ok=false).
-    bool control(const v1::ControlRequest& request, v1::ControlReply& reply,
-                 std::chrono::milliseconds timeout, std::string& error);
+    bool control(const v1::ControlRequest& request, v1::ControlReply& reply, std::chrono::milliseconds timeout,
+                 std::string& error);
 
     // Low level, for poll()-driven use.
     [[nodiscard]] int fd() const { return fd_; }
@@ -111,9 +109,8 @@ private:
     ReadStatus wait_for(v1::ServerMessage& out, std::chrono::milliseconds timeout, Accept accept);
     /// send(request), then wait_for(reply, accept); `awaited` names it in the error.
     template <typename Accept>
-    bool exchange(const v1::ClientMessage& request, v1::ServerMessage& reply,
-                  std::chrono::milliseconds timeout, std::string& error, const char* awaited,
-                  Accept accept);
+    bool exchange(const v1::ClientMessage& request, v1::ServerMessage& reply, std::chrono::milliseconds timeout,
+                  std::string& error, const char* awaited, Accept accept);
     void note(const v1::ServerMessage& message);
 
     int fd_ = -1;

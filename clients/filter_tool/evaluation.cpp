@@ -110,12 +110,10 @@ std::string eval_json(const EvalResult& r, std::string_view filter_name) {
     out += ',';
     append_number(out, "max_total_deg", r.max_total_deg);
     out += ",\"samples\":" + std::to_string(r.samples) + ',';
-    append_number(
-        out, "convergence_time_s",
-        r.convergence_time_s ? *r.convergence_time_s : std::numeric_limits<double>::quiet_NaN());
+    append_number(out, "convergence_time_s",
+                  r.convergence_time_s ? *r.convergence_time_s : std::numeric_limits<double>::quiet_NaN());
     out += ',';
-    append_number(out, "first_below_s",
-                  r.first_below_s ? *r.first_below_s : std::numeric_limits<double>::quiet_NaN());
+    append_number(out, "first_below_s", r.first_below_s ? *r.first_below_s : std::numeric_limits<double>::quiet_NaN());
     out += ',';
     append_number(out, "convergence_threshold_deg", r.convergence_threshold_deg);
     out += ",\"filter\":";

@@ -13,8 +13,7 @@ Quat from_enu(const Quat& q_enu_sensor, EarthFrame frame) {
     return frame == EarthFrame::ned ? filter::mul(filter::q_enu_ned(), q_enu_sensor) : q_enu_sensor;
 }
 
-RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording,
-                     const RunOptions& options) {
+RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, const RunOptions& options) {
     RunOutput out;
     out.estimates.reserve(recording.rows.size());
     out.compared.reserve(recording.rows.size());

@@ -40,7 +40,6 @@ struct RunOutput {
 
 /// Resets the filter, feeds every row in order and collects the estimates. Evaluated
 /// samples: movement = 1 (or no movement column), t - t_first >= skip_seconds, a reference.
-RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording,
-                     const RunOptions& options);
+RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, const RunOptions& options);
 
 }  // namespace mocap::tools

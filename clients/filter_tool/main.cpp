@@ -30,8 +30,7 @@ int fail(int code, const std::string& message) {
 }  // namespace
 
 static int run(int argc, char** argv) {
-    CLI::App app{
-        "mocap-filter: run one orientation filter over a recording, optionally evaluate it"};
+    CLI::App app{"mocap-filter: run one orientation filter over a recording, optionally evaluate it"};
     std::string filter_name;
     std::vector<std::string> param_args;
     std::string frame_name = "enu";
@@ -40,23 +39,18 @@ static int run(int argc, char** argv) {
     bool eval = false;
     double skip_seconds = 0.0;
     bool list = false;
-    app.add_flag("--list", list,
-                 "Print every filter name with its parameters (key=default) and exit");
+    app.add_flag("--list", list, "Print every filter name with its parameters (key=default) and exit");
     app.add_option("--filter", filter_name, "Filter name (see --list)");
     app.add_option("--param", param_args, "Filter parameter key=value (repeatable)")
         ->allow_extra_args(false)
         ->take_all();
-    app.add_option("--frame", frame_name,
-                   "Earth frame of the reference and of the output: enu | ned")
+    app.add_option("--frame", frame_name, "Earth frame of the reference and of the output: enu | ned")
         ->check(CLI::IsMember({"enu", "ned"}))
         ->capture_default_str();
-    app.add_option("--in", in_path,
-                   "Input CSV: t,gx,gy,gz,ax,ay,az,mx,my,mz[,qw,qx,qy,qz][,movement]");
+    app.add_option("--in", in_path, "Input CSV: t,gx,gy,gz,ax,ay,az,mx,my,mz[,qw,qx,qy,qz][,movement]");
     app.add_option("--out", out_path, "Output CSV: t,qw,qx,qy,qz");
-    app.add_flag("--eval", eval,
-                 "Print the error metrics against the reference as one JSON object");
-    app.add_option("--skip-seconds", skip_seconds,
-                   "Do not evaluate the first S seconds (convergence)")
+    app.add_flag("--eval", eval, "Print the error metrics against the reference as one JSON object");
+    app.add_option("--skip-seconds", skip_seconds, "Do not evaluate the first S seconds (convergence)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
@@ -79,14 +73,12 @@ static int run(int argc, char** argv) {
     mocap::filter::FilterParamList params;
     for (const std::string& kv : param_args) {
         const auto eq = kv.find('=');
-        if (eq == std::string::npos || eq == 0)
-            return fail(2, "--param '" + kv + "' is not key=value");
+        if (eq == std::string::npos || eq == 0) return fail(2, "--param '" + kv + "' is not key=value");
         params.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
     }
 
     std::string error;
-    std::unique_ptr<mocap::filter::OrientationFilter> filter =
-        mocap::filter::make_filter(filter_name, params, &error);
+    std::unique_ptr<mocap::filter::OrientationFilter> filter = mocap::filter::make_filter(filter_name, params, &error);
     if (!filter) return fail(2, error);
 
     std::ifstream in(in_path, std::ios::binary);

@@ -8,22 +8,18 @@
 namespace mocap::sim {
 
 CLI::App* add_csv_command(CLI::App& app, CsvCommandOptions& options) {
-    CLI::App* cmd = app.add_subcommand(
-        "csv", "Write one sensor's benchmark recording with its reference orientation");
+    CLI::App* cmd = app.add_subcommand("csv", "Write one sensor's benchmark recording with its reference orientation");
     cmd->add_option("--scenario", options.scenario, "fourati | realistic | magnetic")
         ->required()
         ->check(CLI::IsMember({"fourati", "realistic", "magnetic"}));
-    cmd->add_option("--seed", options.seed, "Random seed (same seed, same file)")
-        ->capture_default_str();
+    cmd->add_option("--seed", options.seed, "Random seed (same seed, same file)")->capture_default_str();
     cmd->add_option("--frame", options.frame, "Earth frame of the reference columns: enu | ned")
         ->check(CLI::IsMember({"enu", "ned"}))
         ->capture_default_str();
-    cmd->add_option("--noise-scale", options.noise_scale,
-                    "Multiply every sensor noise sigma (study knob)")
+    cmd->add_option("--noise-scale", options.noise_scale, "Multiply every sensor noise sigma (study knob)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
-    cmd->add_option("--mag-noise-scale", options.mag_noise_scale,
-                    "Multiply the magnetometer noise sigma (study knob)")
+    cmd->add_option("--mag-noise-scale", options.mag_noise_scale, "Multiply the magnetometer noise sigma (study knob)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
     cmd->add_option("--out", options.out_path, "Output CSV file")->required();
@@ -62,8 +58,7 @@ int run_csv_command(const CsvCommandOptions& options) {
         std::cerr << "mocap-sim csv: cannot open '" << options.out_path << "' for writing\n";
         return 1;
     }
-    if (!tools::write_recording_csv(out, to_recording(scenario, options.frame == "ned")) ||
-        !out.flush()) {
+    if (!tools::write_recording_csv(out, to_recording(scenario, options.frame == "ned")) || !out.flush()) {
         std::cerr << "mocap-sim csv: write to '" << options.out_path << "' failed\n";
         return 1;
     }

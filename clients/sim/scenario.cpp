@@ -40,8 +40,7 @@ Vec3 fourati_rate_rad_s(double t_s) {
     // ZYX kinematics: body rate = E(roll, pitch) · [roll_dot, pitch_dot, yaw_dot].
     const double sr = std::sin(roll), cr = std::cos(roll);
     const double sp = std::sin(pitch), cp = std::cos(pitch);
-    return {roll_dot - yaw_dot * sp, pitch_dot * cr + yaw_dot * sr * cp,
-            -pitch_dot * sr + yaw_dot * cr * cp};
+    return {roll_dot - yaw_dot * sp, pitch_dot * cr + yaw_dot * sr * cp, -pitch_dot * sr + yaw_dot * cr * cp};
 }
 
 // ---------------------------------------------------------------- realistic / magnetic
@@ -173,9 +172,7 @@ struct Disturbance {
     Vec3 delta_ut = Vec3::Zero();
     double t0_s = 0.0;
     double t1_s = 0.0;
-    [[nodiscard]] Vec3 at(double t_s) const {
-        return smooth_window(t_s, t0_s, t1_s, kDisturbanceRampS) * delta_ut;
-    }
+    [[nodiscard]] Vec3 at(double t_s) const { return smooth_window(t_s, t0_s, t1_s, kDisturbanceRampS) * delta_ut; }
 };
 
 Disturbance make_disturbance(SimRng& rng, const ScenarioSpec& spec) {
@@ -261,8 +258,7 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
 
     if (options.gyro_bias && spec.gyro_bias_max_rad_s > 0.0) {
         for (int i = 0; i < 3; ++i) {
-            sc.gyro_bias_rad_s[i] =
-                bias_rng.sign() * bias_rng.uniform(0.25, 1.0) * spec.gyro_bias_max_rad_s;
+            sc.gyro_bias_rad_s[i] = bias_rng.sign() * bias_rng.uniform(0.25, 1.0) * spec.gyro_bias_max_rad_s;
         }
     }
 
@@ -273,8 +269,7 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
     if (!fourati) {
         const double yaw = start_rng.uniform(-kPi, kPi);
         const Vec3 tilt(start_rng.uniform(-0.35, 0.35), start_rng.uniform(-0.35, 0.35), 0.0);
-        q = (Quat(Eigen::AngleAxisd(yaw, Vec3::UnitZ())) * filter::quat_from_rotvec(tilt))
-                .normalized();
+        q = (Quat(Eigen::AngleAxisd(yaw, Vec3::UnitZ())) * filter::quat_from_rotvec(tilt)).normalized();
     }
 
     const double dt = 1.0 / spec.rate_hz;
@@ -297,9 +292,8 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
         const Quat q_sensor_earth = filter::conj(q);
         const double ns = options.noise_scale;
         const Vec3 gyro = w + sc.gyro_bias_rad_s + noise_vec(noise_rng, ns * spec.gyro_noise_rad_s);
-        const Vec3 accel =
-            filter::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
-            noise_vec(noise_rng, ns * spec.accel_noise_m_s2);
+        const Vec3 accel = filter::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
+                           noise_vec(noise_rng, ns * spec.accel_noise_m_s2);
         const Vec3 mag = filter::rotate(q_sensor_earth, row.mag_earth_ut) +
                          noise_vec(noise_rng, ns * options.mag_noise_scale * spec.mag_noise_ut);
 

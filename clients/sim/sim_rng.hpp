@@ -22,7 +22,7 @@ inline std::uint64_t splitmix64(std::uint64_t x) {
 }
 
 class SimRng {
-  public:
+public:
     /// stream: independent sub-sequences from one user seed (motion, noise, ...), so that
     /// changing how many numbers one concern draws does not shift the others.
     explicit SimRng(std::uint64_t seed, std::uint64_t stream = 0)
@@ -50,7 +50,7 @@ class SimRng {
         return r * std::cos(a);
     }
 
-  private:
+private:
     std::mt19937_64 engine_;
     bool has_spare_ = false;
     double spare_ = 0.0;

@@ -29,7 +29,9 @@ namespace mocap::sim {
 namespace {
 
 std::atomic<bool> g_stop{false};
-extern "C" void on_stop_signal(int) { g_stop.store(true); }
+extern "C" void on_stop_signal(int) {
+    g_stop.store(true);
+}
 
 std::uint64_t realtime_us() {
     timespec ts{};
@@ -70,7 +72,10 @@ struct PendingFrame {
 class SimSink {
 public:
     SimSink(const Shared& shared, int subject, const sockaddr_in& peer)
-        : shared_(shared), subject_(subject), uplink_(peer), rng_(shared.options->seed, 1000u + static_cast<unsigned>(subject)) {
+        : shared_(shared),
+          subject_(subject),
+          uplink_(peer),
+          rng_(shared.options->seed, 1000u + static_cast<unsigned>(subject)) {
         const StreamCommandOptions& o = *shared.options;
         SimRng placement(o.seed, 2000u + static_cast<unsigned>(subject));
         heading_rad_ = placement.uniform(-std::numbers::pi, std::numbers::pi);
@@ -80,7 +85,8 @@ public:
         for (int j = 0; j < o.nodes; ++j) {
             const auto& seg = model.segments[static_cast<std::size_t>(j)];
             nodes_.emplace_back(static_cast<std::uint8_t>(seg.node_id), seg.parent < 0, o.seed,
-                                static_cast<std::uint64_t>(subject) * 64u + static_cast<std::uint64_t>(seg.node_id), noise);
+                                static_cast<std::uint64_t>(subject) * 64u + static_cast<std::uint64_t>(seg.node_id),
+                                noise);
         }
         last_sample_.resize(nodes_.size());
         pending_.resize(static_cast<std::size_t>(o.nodes) * 3u * 8u);
@@ -191,7 +197,8 @@ private:
         mw_can_frame frames[3];
         for (std::size_t j = 0; j < nodes_.size(); ++j) {
             SimulatedNode& node = nodes_[j];
-            if (shared_.truth != nullptr) write_truth(now, counter, j, cur.q_earth_segment[j] * node.q_segment_sensor());
+            if (shared_.truth != nullptr)
+                write_truth(now, counter, j, cur.q_earth_segment[j] * node.q_segment_sensor());
             if (dropped_out(node.node_id(), t_s)) {
                 ++stats_.dropout_samples;
                 continue;
@@ -206,7 +213,8 @@ private:
                                                 cur.q_earth_segment[j], have_last ? t_s - last.t_s : shared_.dt_s,
                                                 lin_acc, counter, frames);
             last = {true, t_s, cur.q_earth_segment[j]};
-            const std::uint64_t release = now + (o.jitter_us > 0.0 ? static_cast<std::uint64_t>(rng_.uniform(0.0, o.jitter_us)) : 0u);
+            const std::uint64_t release =
+                now + (o.jitter_us > 0.0 ? static_cast<std::uint64_t>(rng_.uniform(0.0, o.jitter_us)) : 0u);
             for (int f = 0; f < n; ++f) {
                 if (o.loss > 0.0 && rng_.uniform() < o.loss) {
                     ++stats_.lost_can_frames;
@@ -229,8 +237,8 @@ private:
         const Quat& q = cur_.q_earth_segment[j];
         const auto& seg = shared_.motion->model().segments[j];
         std::fprintf(shared_.truth, "%llu,%d,%s,%d,%u,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n",
-                     static_cast<unsigned long long>(t_us), subject_, seg.name.c_str(), seg.node_id, counter, q.w(), q.x(),
-                     q.y(), q.z(), q_sensor.w(), q_sensor.x(), q_sensor.y(), q_sensor.z());
+                     static_cast<unsigned long long>(t_us), subject_, seg.name.c_str(), seg.node_id, counter, q.w(),
+                     q.x(), q.y(), q.z(), q_sensor.w(), q_sensor.x(), q_sensor.y(), q_sensor.z());
     }
 
     const Shared& shared_;
@@ -259,7 +267,8 @@ private:
 
 void print_stats(const std::vector<std::unique_ptr<SimSink>>& sinks, const StreamCommandOptions& o, double elapsed_s,
                  double cpu_s) {
-    std::uint64_t samples = 0, frames = 0, packets = 0, pdrop = 0, fdrop = 0, lost = 0, dropout = 0, skipped = 0, early = 0;
+    std::uint64_t samples = 0, frames = 0, packets = 0, pdrop = 0, fdrop = 0, lost = 0, dropout = 0, skipped = 0,
+                  early = 0;
     std::string per;
     for (const auto& s : sinks) {
         const auto& c = s->counters();
@@ -285,18 +294,19 @@ void print_stats(const std::vector<std::unique_ptr<SimSink>>& sinks, const Strea
                       c.disconnects, c.packets_busy);
         per += buf;
     }
-    std::printf("{\"subjects\":%d,\"nodes\":%d,\"rate_hz\":%d,\"mode\":\"%s\",\"elapsed_s\":%.3f,"
-                "\"requested_samples_per_s\":%d,\"samples\":%llu,\"samples_per_s\":%.1f,\"can_frames\":%llu,"
-                "\"packets\":%llu,\"packets_dropped\":%llu,\"frames_dropped\":%llu,\"lost_can_frames\":%llu,"
-                "\"dropout_samples\":%llu,\"syncs_skipped\":%llu,\"early_closes\":%llu,\"cpu_percent\":%.1f,"
-                "\"per_subject\":[%s]}\n",
-                o.subjects, o.nodes, o.rate_hz, o.mode.c_str(), elapsed_s, o.subjects * o.nodes * o.rate_hz,
-                static_cast<unsigned long long>(samples), elapsed_s > 0 ? static_cast<double>(samples) / elapsed_s : 0.0,
-                static_cast<unsigned long long>(frames), static_cast<unsigned long long>(packets),
-                static_cast<unsigned long long>(pdrop), static_cast<unsigned long long>(fdrop),
-                static_cast<unsigned long long>(lost), static_cast<unsigned long long>(dropout),
-                static_cast<unsigned long long>(skipped), static_cast<unsigned long long>(early),
-                elapsed_s > 0 ? 100.0 * cpu_s / elapsed_s : 0.0, per.c_str());
+    std::printf(
+        "{\"subjects\":%d,\"nodes\":%d,\"rate_hz\":%d,\"mode\":\"%s\",\"elapsed_s\":%.3f,"
+        "\"requested_samples_per_s\":%d,\"samples\":%llu,\"samples_per_s\":%.1f,\"can_frames\":%llu,"
+        "\"packets\":%llu,\"packets_dropped\":%llu,\"frames_dropped\":%llu,\"lost_can_frames\":%llu,"
+        "\"dropout_samples\":%llu,\"syncs_skipped\":%llu,\"early_closes\":%llu,\"cpu_percent\":%.1f,"
+        "\"per_subject\":[%s]}\n",
+        o.subjects, o.nodes, o.rate_hz, o.mode.c_str(), elapsed_s, o.subjects * o.nodes * o.rate_hz,
+        static_cast<unsigned long long>(samples), elapsed_s > 0 ? static_cast<double>(samples) / elapsed_s : 0.0,
+        static_cast<unsigned long long>(frames), static_cast<unsigned long long>(packets),
+        static_cast<unsigned long long>(pdrop), static_cast<unsigned long long>(fdrop),
+        static_cast<unsigned long long>(lost), static_cast<unsigned long long>(dropout),
+        static_cast<unsigned long long>(skipped), static_cast<unsigned long long>(early),
+        elapsed_s > 0 ? 100.0 * cpu_s / elapsed_s : 0.0, per.c_str());
     (void)std::fflush(stdout);  // a progress line: nothing to do if stdout is gone
 }
 
@@ -307,8 +317,7 @@ bool parse_dropout(const std::string& text, NodeDropout* out, std::string* error
     const auto f = core::split_fields(text, ':');
     if (f.size() != 3 || !core::parse_number(f[0], d.node) || !core::parse_number(f[1], d.start_s) ||
         !core::parse_number(f[2], d.end_s) || d.node < static_cast<int>(MW_NODE_ID_MIN) ||
-        d.node > static_cast<int>(MW_NODE_ID_MAX) ||
-        !(d.start_s >= 0.0) || !(d.end_s > d.start_s)) {
+        d.node > static_cast<int>(MW_NODE_ID_MAX) || !(d.start_s >= 0.0) || !(d.end_s > d.start_s)) {
         *error = "--dropout expects NODE:START_S:END_S with node 1..63 and 0 <= START < END, got '" + text + "'";
         return false;
     }
@@ -317,9 +326,12 @@ bool parse_dropout(const std::string& text, NodeDropout* out, std::string* error
 }
 
 CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
-    CLI::App* cmd = app.add_subcommand("stream", "Act as K sink nodes with simulated sensor nodes, streaming to mocapd");
+    CLI::App* cmd =
+        app.add_subcommand("stream", "Act as K sink nodes with simulated sensor nodes, streaming to mocapd");
     cmd->add_option("--connect", o.connect, "mocapd sink port, HOST:PORT")->required();
-    cmd->add_option("--subjects", o.subjects, "Subjects = sinks, sink ids 1..K")->check(CLI::Range(1, 255))->capture_default_str();
+    cmd->add_option("--subjects", o.subjects, "Subjects = sinks, sink ids 1..K")
+        ->check(CLI::Range(1, 255))
+        ->capture_default_str();
     cmd->add_option("--nodes", o.nodes, "Sensor nodes per subject (first N segments of the body)")
         ->check(CLI::Range(1, 15))
         ->capture_default_str();
@@ -329,11 +341,15 @@ CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
         ->capture_default_str();
     cmd->add_option("--duration", o.duration_s, "Seconds to run")->check(CLI::PositiveNumber)->capture_default_str();
     cmd->add_option("--motion", o.motion, "walk | FILE.bvh")->capture_default_str();
-    cmd->add_option("--loss", o.loss, "Probability that a node CAN frame is lost")->check(CLI::Range(0.0, 1.0))->capture_default_str();
+    cmd->add_option("--loss", o.loss, "Probability that a node CAN frame is lost")
+        ->check(CLI::Range(0.0, 1.0))
+        ->capture_default_str();
     cmd->add_option("--seed", o.seed, "Random seed (mounting, noise, loss, headings)")->capture_default_str();
     cmd->add_option("--truth", o.truth_path, "Write the truth CSV here");
     cmd->add_option("--dropout", o.dropouts, "NODE:START_S:END_S: node silent in that window (repeatable)");
-    cmd->add_option("--jitter-us", o.jitter_us, "Node answer delay drawn in [0, J] us")->check(CLI::NonNegativeNumber)->capture_default_str();
+    cmd->add_option("--jitter-us", o.jitter_us, "Node answer delay drawn in [0, J] us")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
     cmd->add_option("--calibrate-s", o.calibrate_s, "Seconds of still T-pose before the motion")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
@@ -392,13 +408,15 @@ int run_stream_command(const StreamCommandOptions& o) {
             return 2;
         }
         (void)std::setvbuf(truth.get(), truth_buffer, _IOFBF, sizeof truth_buffer);  // else default buffering
-        std::fprintf(truth.get(), "t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,sensor_qx,"
-                                  "sensor_qy,sensor_qz\n");
+        std::fprintf(truth.get(),
+                     "t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,sensor_qx,"
+                     "sensor_qy,sensor_qz\n");
         shared.truth = truth.get();
     }
 
     std::vector<std::unique_ptr<SimSink>> sinks;
-    for (int k = 1; k <= o.subjects; ++k) sinks.push_back(std::make_unique<SimSink>(shared, k, peer));
+    for (int k = 1; k <= o.subjects; ++k)
+        sinks.push_back(std::make_unique<SimSink>(shared, k, peer));
 
     g_stop.store(false);
     std::signal(SIGINT, on_stop_signal);
@@ -442,7 +460,8 @@ int run_stream_command(const StreamCommandOptions& o) {
     int rc = 0;
     for (const auto& s : sinks) {
         if (s->counters().connects == 0) {
-            std::fprintf(stderr, "mocap-sim stream: subject %d never connected to %s\n", s->subject(), o.connect.c_str());
+            std::fprintf(stderr, "mocap-sim stream: subject %d never connected to %s\n", s->subject(),
+                         o.connect.c_str());
             rc = 1;
         }
     }

@@ -65,7 +65,7 @@ struct StreamCommandOptions {
     double calibrate_s = 2.0;
     double noise_scale = 1.0;
     bool sink_rate_stats = false;
-    bool early_close = true;  ///< the sink core's early batch close (--no-early-close: off)
+    bool early_close = true;          ///< the sink core's early batch close (--no-early-close: off)
     std::uint32_t first_counter = 0;  ///< SYNC counter of the first instant (--first-counter)
 };
 

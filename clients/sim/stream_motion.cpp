@@ -17,14 +17,20 @@ namespace mocap::sim {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-constexpr double kStrideHz = 0.9;      // strides (left + right step) per second
+constexpr double kStrideHz = 0.9;  // strides (left + right step) per second
 constexpr double kWalkSpeedM_S = 1.2;
 constexpr double kCircleRadiusM = 4.0;
-constexpr double kLoopFadeS = 0.3;     // BVH loop cross-fade
+constexpr double kLoopFadeS = 0.3;  // BVH loop cross-fade
 
-Quat rot_x(double a) { return Quat(std::cos(a / 2), std::sin(a / 2), 0, 0); }
-Quat rot_y(double a) { return Quat(std::cos(a / 2), 0, std::sin(a / 2), 0); }
-Quat rot_z(double a) { return Quat(std::cos(a / 2), 0, 0, std::sin(a / 2)); }
+Quat rot_x(double a) {
+    return Quat(std::cos(a / 2), std::sin(a / 2), 0, 0);
+}
+Quat rot_y(double a) {
+    return Quat(std::cos(a / 2), 0, std::sin(a / 2), 0);
+}
+Quat rot_z(double a) {
+    return Quat(std::cos(a / 2), 0, 0, std::sin(a / 2));
+}
 
 double smoothstep(double u) {
     u = std::clamp(u, 0.0, 1.0);
@@ -118,10 +124,9 @@ void StreamMotion::clip_frame(std::size_t f, std::array<Quat, kMaxSegments>& q_e
     const std::size_t n = clip.joints.size();
     skeleton::bvh_global_pose(clip, clip.frame(f), 1.0, std::span(q_joint.data(), n), std::span(p_joint.data(), n));
     std::array<Vec3, kMaxSegments> p_seg = skeleton::zero_vec3s();
-    skeleton::bvh_segment_pose(mapping_, std::span<const Quat>(q_joint.data(), n),
-                               std::span<const Vec3>(p_joint.data(), n),
-                               std::span(q_enu_segment.data(), mapping_.segment_count),
-                               std::span(p_seg.data(), mapping_.segment_count));
+    skeleton::bvh_segment_pose(
+        mapping_, std::span<const Quat>(q_joint.data(), n), std::span<const Vec3>(p_joint.data(), n),
+        std::span(q_enu_segment.data(), mapping_.segment_count), std::span(p_seg.data(), mapping_.segment_count));
     if (root_m != nullptr) *root_m = p_seg[0];
 }
 
@@ -135,7 +140,8 @@ void StreamMotion::clip_at(double clip_t_s, std::array<Quat, kMaxSegments>& q, V
     Vec3 r1;
     clip_frame(f0, q, &root);
     clip_frame(f0 + 1, q1, &r1);
-    for (std::size_t i = 0; i < mapping_.segment_count; ++i) q[i] = filter::slerp(q[i], q1[i], a);
+    for (std::size_t i = 0; i < mapping_.segment_count; ++i)
+        q[i] = filter::slerp(q[i], q1[i], a);
     root = (1.0 - a) * root + a * r1;
 }
 
@@ -152,7 +158,8 @@ void StreamMotion::clip_orientations(double t_s, std::array<Quat, kMaxSegments>&
         Vec3 root_end;
         clip_at(tau + P, q_end, root_end);
         const double a = tau / kLoopFadeS;
-        for (std::size_t i = 0; i < mapping_.segment_count; ++i) q[i] = filter::slerp(q_end[i], q[i], a);
+        for (std::size_t i = 0; i < mapping_.segment_count; ++i)
+            q[i] = filter::slerp(q_end[i], q[i], a);
         root = (1.0 - a) * (root_end - clip_loop_shift_m_) + a * root;
     }
     root += loops * clip_loop_shift_m_;
@@ -161,7 +168,8 @@ void StreamMotion::clip_orientations(double t_s, std::array<Quat, kMaxSegments>&
     const Quat facing = rot_z(clip_heading_rad_);
     const Vec3 t_pose_root(clip_root0_m_.x(), clip_root0_m_.y(), model_.root_height_m);
     const Vec3 clip_root(root.x(), root.y(), model_.root_height_m + (root.z() - clip_root0_m_.z()));
-    for (std::size_t i = 0; i < mapping_.segment_count; ++i) q[i] = filter::slerp(facing, q[i], w);
+    for (std::size_t i = 0; i < mapping_.segment_count; ++i)
+        q[i] = filter::slerp(facing, q[i], w);
     root = (1.0 - w) * t_pose_root + w * clip_root - Vec3(clip_root0_m_.x(), clip_root0_m_.y(), 0.0);
 }
 
@@ -173,7 +181,8 @@ void StreamMotion::walk_orientations(double t_s, std::array<Quat, kMaxSegments>&
     const double phi = 2.0 * std::numbers::pi * kStrideHz * tm;
     const Quat heading = rot_z(psi);
 
-    for (std::size_t i = 0; i < model_.size(); ++i) q[i] = heading;
+    for (std::size_t i = 0; i < model_.size(); ++i)
+        q[i] = heading;
     const double pelvis_yaw = w * 5.0 * kDeg * std::sin(phi);
     const Quat base = heading * rot_z(pelvis_yaw);
     auto set = [&](int index, const Quat& value) {
@@ -185,8 +194,8 @@ void StreamMotion::walk_orientations(double t_s, std::array<Quat, kMaxSegments>&
     set(walk_.head, trunk * rot_y(w * (-4.0 * kDeg + 2.0 * kDeg * std::sin(2 * phi))));
     const Quat trunk_yaw = heading * rot_z(-0.8 * pelvis_yaw);
     for (int side = 0; side < 2; ++side) {
-        const double phase = phi + side * std::numbers::pi;  // right leg half a stride later
-        const double hip = w * (5.0 + 22.0 * std::sin(phase)) * kDeg;           // flexion: thigh forward
+        const double phase = phi + side * std::numbers::pi;            // right leg half a stride later
+        const double hip = w * (5.0 + 22.0 * std::sin(phase)) * kDeg;  // flexion: thigh forward
         const double knee = w * (35.0 + 30.0 * std::sin(phase - 0.5 * std::numbers::pi)) * kDeg;
         const double ankle = w * 10.0 * kDeg * std::sin(phase + std::numbers::pi / 3.0);
         const Quat thigh = base * rot_y(-hip);
@@ -216,7 +225,8 @@ void StreamMotion::orientations(double t_s, double heading_rad, const Vec3& orig
         walk_orientations(t_s, q_earth_segment, root_m);
     }
     const Quat turn = rot_z(heading_rad);
-    for (std::size_t i = 0; i < model_.size(); ++i) q_earth_segment[i] = (turn * q_earth_segment[i]).normalized();
+    for (std::size_t i = 0; i < model_.size(); ++i)
+        q_earth_segment[i] = (turn * q_earth_segment[i]).normalized();
     root_m = origin_m + filter::rotate(turn, root_m);
 }
 

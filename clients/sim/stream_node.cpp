@@ -18,7 +18,8 @@ constexpr mw_accel_range kAccelRange = MW_ACCEL_16G;
 constexpr mw_gyro_range kGyroRange = MW_GYRO_2000DPS;
 
 void to_floats(const Vec3& v, float out[3]) {
-    for (int i = 0; i < 3; ++i) out[i] = static_cast<float>(v[i]);
+    for (int i = 0; i < 3; ++i)
+        out[i] = static_cast<float>(v[i]);
 }
 
 void encode_raw(mw_function kind, std::uint8_t node, const std::int16_t counts[3], std::uint32_t counter,
@@ -26,7 +27,8 @@ void encode_raw(mw_function kind, std::uint8_t node, const std::int16_t counts[3
     mw_raw raw{};
     raw.kind = kind;
     raw.node_id = node;
-    for (int i = 0; i < 3; ++i) raw.xyz[i] = counts[i];
+    for (int i = 0; i < 3; ++i)
+        raw.xyz[i] = counts[i];
     raw.counter_low = static_cast<std::uint16_t>(counter & 0xFFFFu);
     (void)mw_raw_encode(&raw, &out);  // node id and kind are valid by construction
 }

@@ -14,9 +14,13 @@
 
 namespace mocap::sim {
 
-PosixUplink::PosixUplink(const sockaddr_in& peer) : peer_(peer) { pending_.reserve(SINK_NODE_PACKET_CAPACITY); }
+PosixUplink::PosixUplink(const sockaddr_in& peer) : peer_(peer) {
+    pending_.reserve(SINK_NODE_PACKET_CAPACITY);
+}
 
-PosixUplink::~PosixUplink() { close(); }
+PosixUplink::~PosixUplink() {
+    close();
+}
 
 int PosixUplink::connect() {
     close();
@@ -52,8 +56,7 @@ sink_uplink_state PosixUplink::state() {
         char byte;
         const ssize_t n = ::recv(fd_, &byte, 1, MSG_PEEK | MSG_DONTWAIT);
         // The daemon never sends on this connection: 0 means it closed.
-        if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) ||
-            !flush_pending()) {
+        if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) || !flush_pending()) {
             close();
         }
     }

@@ -4,8 +4,7 @@
 
 #define INIT_TIMEOUT 0x100000u
 
-int bxcan_start(uint32_t btr, const bxcan_filter *filters, unsigned filter_count)
-{
+int bxcan_start(uint32_t btr, const bxcan_filter* filters, unsigned filter_count) {
     CAN1->MCR &= ~CAN_MCR_SLEEP;
     CAN1->MCR |= CAN_MCR_INRQ;
     for (uint32_t n = 0; !(CAN1->MSR & CAN_MSR_INAK); ++n) {
@@ -42,14 +41,13 @@ int bxcan_start(uint32_t btr, const bxcan_filter *filters, unsigned filter_count
     return 0;
 }
 
-int bxcan_transmit(const mw_can_frame *frame)
-{
+int bxcan_transmit(const mw_can_frame* frame) {
     const uint32_t tsr = CAN1->TSR;
     if (!(tsr & CAN_TSR_TME_ALL)) {
         return 1;
     }
-    bxcan_tx_mailbox *mb = &CAN1->TX[(tsr >> CAN_TSR_CODE_SHIFT) & 3u];
-    const uint8_t *d = frame->data;
+    bxcan_tx_mailbox* mb = &CAN1->TX[(tsr >> CAN_TSR_CODE_SHIFT) & 3u];
+    const uint8_t* d = frame->data;
     mb->TDTR = frame->dlc & 0xFu;
     mb->TDLR = (uint32_t)d[0] | ((uint32_t)d[1] << 8) | ((uint32_t)d[2] << 16) | ((uint32_t)d[3] << 24);
     mb->TDHR = (uint32_t)d[4] | ((uint32_t)d[5] << 8) | ((uint32_t)d[6] << 16) | ((uint32_t)d[7] << 24);
@@ -57,12 +55,11 @@ int bxcan_transmit(const mw_can_frame *frame)
     return 0;
 }
 
-int bxcan_receive_fifo0(mw_can_frame *frame)
-{
+int bxcan_receive_fifo0(mw_can_frame* frame) {
     if ((CAN1->RF0R & CAN_RFR_FMP_MASK) == 0u) {
         return 0;
     }
-    const bxcan_rx_fifo *rx = &CAN1->RX[0];
+    const bxcan_rx_fifo* rx = &CAN1->RX[0];
     const uint32_t rir = rx->RIR;
     const uint32_t dlc = rx->RDTR & 0xFu;
     const uint32_t lo = rx->RDLR;
@@ -80,7 +77,6 @@ int bxcan_receive_fifo0(mw_can_frame *frame)
     return 1;
 }
 
-int bxcan_bus_error(void)
-{
+int bxcan_bus_error(void) {
     return (CAN1->ESR & (CAN_ESR_EPVF | CAN_ESR_BOFF)) != 0u || (CAN1->MSR & CAN_MSR_INAK) != 0u;
 }

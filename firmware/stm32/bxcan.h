@@ -25,31 +25,31 @@ typedef struct {
 } bxcan_filter_bank;
 
 typedef struct {
-    volatile uint32_t MCR;   /* 0x000 */
-    volatile uint32_t MSR;   /* 0x004 */
-    volatile uint32_t TSR;   /* 0x008 */
-    volatile uint32_t RF0R;  /* 0x00C */
-    volatile uint32_t RF1R;  /* 0x010 */
-    volatile uint32_t IER;   /* 0x014 */
-    volatile uint32_t ESR;   /* 0x018 */
-    volatile uint32_t BTR;   /* 0x01C */
-    uint32_t reserved0[88];  /* 0x020 - 0x17F */
-    bxcan_tx_mailbox TX[3];  /* 0x180 */
-    bxcan_rx_fifo RX[2];     /* 0x1B0 */
-    uint32_t reserved1[12];  /* 0x1D0 - 0x1FF */
-    volatile uint32_t FMR;   /* 0x200 */
-    volatile uint32_t FM1R;  /* 0x204 */
+    volatile uint32_t MCR;  /* 0x000 */
+    volatile uint32_t MSR;  /* 0x004 */
+    volatile uint32_t TSR;  /* 0x008 */
+    volatile uint32_t RF0R; /* 0x00C */
+    volatile uint32_t RF1R; /* 0x010 */
+    volatile uint32_t IER;  /* 0x014 */
+    volatile uint32_t ESR;  /* 0x018 */
+    volatile uint32_t BTR;  /* 0x01C */
+    uint32_t reserved0[88]; /* 0x020 - 0x17F */
+    bxcan_tx_mailbox TX[3]; /* 0x180 */
+    bxcan_rx_fifo RX[2];    /* 0x1B0 */
+    uint32_t reserved1[12]; /* 0x1D0 - 0x1FF */
+    volatile uint32_t FMR;  /* 0x200 */
+    volatile uint32_t FM1R; /* 0x204 */
     uint32_t reserved2;
-    volatile uint32_t FS1R;  /* 0x20C */
+    volatile uint32_t FS1R; /* 0x20C */
     uint32_t reserved3;
     volatile uint32_t FFA1R; /* 0x214 */
     uint32_t reserved4;
-    volatile uint32_t FA1R;  /* 0x21C */
+    volatile uint32_t FA1R; /* 0x21C */
     uint32_t reserved5[8];
     bxcan_filter_bank FB[28]; /* 0x240; the F103 has 14 banks, the F407 28 (shared with CAN2) */
 } bxcan_regs;
 
-#define CAN1 ((bxcan_regs *)0x40006400u)
+#define CAN1 ((bxcan_regs*)0x40006400u)
 
 #define CAN_MCR_INRQ (1u << 0)
 #define CAN_MCR_SLEEP (1u << 1)

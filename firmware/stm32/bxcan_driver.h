@@ -14,13 +14,13 @@ typedef struct {
 
 /* Enters init mode, sets BTR and filter banks 0..filter_count-1 (to FIFO 0), and joins the
  * bus. 0 = on the bus, negative = the controller did not enter/leave init mode. */
-int bxcan_start(uint32_t btr, const bxcan_filter *filters, unsigned filter_count);
+int bxcan_start(uint32_t btr, const bxcan_filter* filters, unsigned filter_count);
 
 /* 0 = placed in a free mailbox, 1 = all three busy. */
-int bxcan_transmit(const mw_can_frame *frame);
+int bxcan_transmit(const mw_can_frame* frame);
 
 /* 1 = *frame filled, 0 = FIFO empty, -1 = an extended/remote frame was discarded. */
-int bxcan_receive_fifo0(mw_can_frame *frame);
+int bxcan_receive_fifo0(mw_can_frame* frame);
 
 /* Nonzero while the controller is error-passive, bus-off, or still waiting to join the bus. */
 int bxcan_bus_error(void);

@@ -6,8 +6,7 @@
 
 void system_clock_init(void);
 
-void system_clock_init(void)
-{
+void system_clock_init(void) {
     F1_FLASH->ACR = F1_FLASH_ACR_PRFTBE | F1_FLASH_ACR_LATENCY_2;
     F1_RCC->CR |= F1_RCC_CR_HSEON;
     for (uint32_t n = 0; !(F1_RCC->CR & F1_RCC_CR_HSERDY); ++n) {

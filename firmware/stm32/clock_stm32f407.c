@@ -7,8 +7,7 @@
 
 void system_clock_init(void);
 
-void system_clock_init(void)
-{
+void system_clock_init(void) {
     F4_RCC->APB1ENR |= F4_RCC_APB1ENR_PWR;
     F4_PWR->CR |= F4_PWR_CR_VOS;
     F4_RCC->CR |= F4_RCC_CR_HSEON;

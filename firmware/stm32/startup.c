@@ -16,18 +16,17 @@ extern void (*__init_array_end[])(void);
 void system_clock_init(void); /* per part: clocks and flash wait states */
 int main(void);
 
-void reset_handler(void)
-{
+void reset_handler(void) {
 #if defined(__ARM_FP)
     /* Full access to CP10/CP11 before any floating-point instruction runs. */
     SCB_CPACR |= (0xFu << 20);
     __asm__ volatile("dsb\n isb");
 #endif
-    const uint32_t *src = &_sidata;
-    for (uint32_t *dst = &_sdata; dst < &_edata;) {
+    const uint32_t* src = &_sidata;
+    for (uint32_t* dst = &_sdata; dst < &_edata;) {
         *dst++ = *src++;
     }
-    for (uint32_t *dst = &_sbss; dst < &_ebss;) {
+    for (uint32_t* dst = &_sbss; dst < &_ebss;) {
         *dst++ = 0u;
     }
     system_clock_init();
@@ -43,8 +42,7 @@ void reset_handler(void)
 
 /* An unexpected exception or interrupt: stop here so a debugger shows where; the
  * watchdog-less node then stays silent on the bus, which the sink reports as node loss. */
-void default_handler(void)
-{
+void default_handler(void) {
     irq_disable();
     for (;;) {
     }

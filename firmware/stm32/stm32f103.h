@@ -19,7 +19,7 @@ typedef struct {
     volatile uint32_t BDCR;
     volatile uint32_t CSR;
 } f1_rcc_regs;
-#define F1_RCC ((f1_rcc_regs *)0x40021000u)
+#define F1_RCC ((f1_rcc_regs*)0x40021000u)
 
 #define F1_RCC_CR_HSION (1u << 0)
 #define F1_RCC_CR_HSEON (1u << 16)
@@ -42,7 +42,7 @@ typedef struct {
 typedef struct {
     volatile uint32_t ACR;
 } f1_flash_regs;
-#define F1_FLASH ((f1_flash_regs *)0x40022000u)
+#define F1_FLASH ((f1_flash_regs*)0x40022000u)
 #define F1_FLASH_ACR_LATENCY_2 (2u << 0)
 #define F1_FLASH_ACR_PRFTBE (1u << 4)
 
@@ -55,20 +55,19 @@ typedef struct {
     volatile uint32_t BRR;
     volatile uint32_t LCKR;
 } f1_gpio_regs;
-#define F1_GPIOA ((f1_gpio_regs *)0x40010800u)
-#define F1_GPIOB ((f1_gpio_regs *)0x40010C00u)
-#define F1_GPIOC ((f1_gpio_regs *)0x40011000u)
+#define F1_GPIOA ((f1_gpio_regs*)0x40010800u)
+#define F1_GPIOB ((f1_gpio_regs*)0x40010C00u)
+#define F1_GPIOC ((f1_gpio_regs*)0x40011000u)
 
 /* 4-bit pin configurations (CNF[1:0] MODE[1:0]). */
 #define F1_GPIO_IN_FLOATING 0x4u
-#define F1_GPIO_IN_PULL 0x8u         /* pull-up/down chosen by ODR */
+#define F1_GPIO_IN_PULL 0x8u /* pull-up/down chosen by ODR */
 #define F1_GPIO_OUT_PP_50MHZ 0x3u
 #define F1_GPIO_OUT_PP_2MHZ 0x2u
 #define F1_GPIO_AF_PP_50MHZ 0xBu
 
-static inline void f1_gpio_config(f1_gpio_regs *port, unsigned pin, uint32_t cfg)
-{
-    volatile uint32_t *reg = pin < 8u ? &port->CRL : &port->CRH;
+static inline void f1_gpio_config(f1_gpio_regs* port, unsigned pin, uint32_t cfg) {
+    volatile uint32_t* reg = pin < 8u ? &port->CRL : &port->CRH;
     unsigned shift = (pin & 7u) * 4u;
     *reg = (*reg & ~(0xFu << shift)) | (cfg << shift);
 }
@@ -77,7 +76,7 @@ typedef struct {
     volatile uint32_t EVCR;
     volatile uint32_t MAPR;
 } f1_afio_regs;
-#define F1_AFIO ((f1_afio_regs *)0x40010000u)
+#define F1_AFIO ((f1_afio_regs*)0x40010000u)
 #define F1_AFIO_MAPR_CAN_PB8_PB9 (2u << 13)
 #define F1_AFIO_MAPR_CAN_MASK (3u << 13)
 #define F1_AFIO_MAPR_SWJ_NOJTAG (2u << 24) /* keep SWD, free PB3/PB4/PA15 */
@@ -88,7 +87,7 @@ typedef struct {
     volatile uint32_t SR;
     volatile uint32_t DR;
 } f1_spi_regs;
-#define F1_SPI1 ((f1_spi_regs *)0x40013000u)
+#define F1_SPI1 ((f1_spi_regs*)0x40013000u)
 #define SPI_CR1_CPHA (1u << 0)
 #define SPI_CR1_CPOL (1u << 1)
 #define SPI_CR1_MSTR (1u << 2)

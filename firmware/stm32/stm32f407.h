@@ -25,7 +25,7 @@ typedef struct {
     volatile uint32_t APB1ENR; /* 0x40 */
     volatile uint32_t APB2ENR; /* 0x44 */
 } f4_rcc_regs;
-#define F4_RCC ((f4_rcc_regs *)0x40023800u)
+#define F4_RCC ((f4_rcc_regs*)0x40023800u)
 
 #define F4_RCC_CR_HSEON (1u << 16)
 #define F4_RCC_CR_HSERDY (1u << 17)
@@ -50,13 +50,13 @@ typedef struct {
     volatile uint32_t CR;
     volatile uint32_t CSR;
 } f4_pwr_regs;
-#define F4_PWR ((f4_pwr_regs *)0x40007000u)
+#define F4_PWR ((f4_pwr_regs*)0x40007000u)
 #define F4_PWR_CR_VOS (1u << 14)
 
 typedef struct {
     volatile uint32_t ACR;
 } f4_flash_regs;
-#define F4_FLASH ((f4_flash_regs *)0x40023C00u)
+#define F4_FLASH ((f4_flash_regs*)0x40023C00u)
 #define F4_FLASH_ACR_LATENCY(ws) ((uint32_t)(ws))
 #define F4_FLASH_ACR_PRFTEN (1u << 8)
 #define F4_FLASH_ACR_ICEN (1u << 9)
@@ -73,24 +73,22 @@ typedef struct {
     volatile uint32_t LCKR;
     volatile uint32_t AFR[2];
 } f4_gpio_regs;
-#define F4_GPIOA ((f4_gpio_regs *)0x40020000u)
-#define F4_GPIOB ((f4_gpio_regs *)0x40020400u)
-#define F4_GPIOD ((f4_gpio_regs *)0x40020C00u)
+#define F4_GPIOA ((f4_gpio_regs*)0x40020000u)
+#define F4_GPIOB ((f4_gpio_regs*)0x40020400u)
+#define F4_GPIOD ((f4_gpio_regs*)0x40020C00u)
 
 #define F4_GPIO_MODE_OUTPUT 1u
 #define F4_GPIO_MODE_AF 2u
 
 /* Alternate function `af` on `pin`, very high speed, push-pull, pull-up when `pull_up`. */
-static inline void f4_gpio_af(f4_gpio_regs *port, unsigned pin, unsigned af, int pull_up)
-{
+static inline void f4_gpio_af(f4_gpio_regs* port, unsigned pin, unsigned af, int pull_up) {
     port->MODER = (port->MODER & ~(3u << (2u * pin))) | (F4_GPIO_MODE_AF << (2u * pin));
     port->OSPEEDR |= 3u << (2u * pin);
     port->PUPDR = (port->PUPDR & ~(3u << (2u * pin))) | ((pull_up ? 1u : 0u) << (2u * pin));
     port->AFR[pin >> 3] = (port->AFR[pin >> 3] & ~(0xFu << (4u * (pin & 7u)))) | ((uint32_t)af << (4u * (pin & 7u)));
 }
 
-static inline void f4_gpio_output(f4_gpio_regs *port, unsigned pin)
-{
+static inline void f4_gpio_output(f4_gpio_regs* port, unsigned pin) {
     port->MODER = (port->MODER & ~(3u << (2u * pin))) | (F4_GPIO_MODE_OUTPUT << (2u * pin));
 }
 
@@ -103,7 +101,7 @@ typedef struct {
     volatile uint32_t CR3;
     volatile uint32_t GTPR;
 } f4_usart_regs;
-#define F4_USART1 ((f4_usart_regs *)0x40011000u)
+#define F4_USART1 ((f4_usart_regs*)0x40011000u)
 #define USART_SR_ORE (1u << 3)
 #define USART_SR_RXNE (1u << 5)
 #define USART_SR_TC (1u << 6)
@@ -128,7 +126,7 @@ typedef struct {
     volatile uint32_t PSC; /* 0x28 */
     volatile uint32_t ARR; /* 0x2C */
 } f4_tim_regs;
-#define F4_TIM2 ((f4_tim_regs *)0x40000000u) /* 32-bit general-purpose timer */
+#define F4_TIM2 ((f4_tim_regs*)0x40000000u) /* 32-bit general-purpose timer */
 #define TIM_CR1_CEN (1u << 0)
 #define TIM_EGR_UG (1u << 0)
 

@@ -21,9 +21,9 @@ extern uint32_t _estack; /* top of RAM, from the linker script */
 
 /* The 16 Cortex-M entries: initial stack pointer, reset, faults (MemManage, BusFault and
  * UsageFault are not enabled, so they escalate to hard fault), SVC, PendSV, SysTick. */
-#define MOCAP_CORE_VECTORS                                                              \
-    (vector_fn)(uintptr_t)&_estack, reset_handler, nmi_handler, hard_fault_handler,     \
-        hard_fault_handler, hard_fault_handler, hard_fault_handler, 0, 0, 0, 0,         \
-        svc_handler, default_handler, 0, pendsv_handler, systick_handler
+#define MOCAP_CORE_VECTORS                                                                                   \
+    (vector_fn)(uintptr_t) & _estack, reset_handler, nmi_handler, hard_fault_handler, hard_fault_handler,    \
+        hard_fault_handler, hard_fault_handler, 0, 0, 0, 0, svc_handler, default_handler, 0, pendsv_handler, \
+        systick_handler
 
 #endif

@@ -11,7 +11,7 @@
 namespace mocap {
 
 class Clock {
-  public:
+public:
     virtual ~Clock() = default;
     /// Microseconds on the clock's own epoch; monotonic enough for stage differences.
     [[nodiscard]] virtual std::int64_t now_us() const noexcept = 0;

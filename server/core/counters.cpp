@@ -7,8 +7,7 @@
 namespace mocap {
 
 void CounterGroup::add(std::string_view name, const CounterBase& counter) {
-    auto it = std::find_if(entries_.begin(), entries_.end(),
-                           [&](const Entry& e) { return e.name == name; });
+    auto it = std::find_if(entries_.begin(), entries_.end(), [&](const Entry& e) { return e.name == name; });
     if (it == entries_.end()) {
         entries_.push_back(Entry{std::string(name), {&counter}});
     } else {

@@ -43,15 +43,13 @@ inline void single_writer_add(std::atomic<std::uint64_t>& cell, std::uint64_t n)
 
 /// What a stats reader needs of either counter type (CounterGroup holds these).
 class CounterBase {
-  public:
+public:
     CounterBase(const CounterBase&) = delete;
     CounterBase& operator=(const CounterBase&) = delete;
 
-    [[nodiscard]] std::uint64_t value() const noexcept {
-        return value_.load(std::memory_order_relaxed);
-    }
+    [[nodiscard]] std::uint64_t value() const noexcept { return value_.load(std::memory_order_relaxed); }
 
-  protected:
+protected:
     CounterBase() = default;
     ~CounterBase() = default;
     std::atomic<std::uint64_t> value_{0};
@@ -59,13 +57,13 @@ class CounterBase {
 
 /// Any number of writer threads.
 class Counter : public CounterBase {
-  public:
+public:
     void add(std::uint64_t n = 1) noexcept { value_.fetch_add(n, std::memory_order_relaxed); }
 };
 
 /// One writer thread (see the single-writer rule above); readers on any thread.
 class SingleWriterCounter : public CounterBase {
-  public:
+public:
     void add(std::uint64_t n = 1) noexcept { single_writer_add(value_, n); }
 };
 
@@ -75,7 +73,7 @@ struct CounterValue {
 };
 
 class CounterGroup {
-  public:
+public:
     explicit CounterGroup(std::string component) : component_(std::move(component)) {}
 
     CounterGroup(const CounterGroup&) = delete;
@@ -93,7 +91,7 @@ class CounterGroup {
     /// Any thread (after set-up). The summed value of one entry, or nullopt if unknown.
     [[nodiscard]] std::optional<std::uint64_t> value(std::string_view name) const;
 
-  private:
+private:
     struct Entry {
         std::string name;
         std::vector<const CounterBase*> parts;

@@ -21,8 +21,7 @@ std::uint32_t* futex_word(std::atomic<std::uint32_t>& a) noexcept {
 }
 
 // Returns when woken, on timeout, on a signal, or at once if *word != expected.
-void futex_wait(std::atomic<std::uint32_t>& word, std::uint32_t expected,
-                const timespec* timeout) noexcept {
+void futex_wait(std::atomic<std::uint32_t>& word, std::uint32_t expected, const timespec* timeout) noexcept {
     syscall(SYS_futex, futex_word(word), FUTEX_WAIT_PRIVATE, expected, timeout, nullptr, 0);
 }
 

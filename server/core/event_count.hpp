@@ -25,7 +25,7 @@
 namespace mocap {
 
 class EventCount {
-  public:
+public:
     using Key = std::uint32_t;
 
     EventCount() = default;
@@ -55,7 +55,7 @@ class EventCount {
         if (waiters_.fetch_add(0, std::memory_order_acq_rel) != 0) wake_all();
     }
 
-  private:
+private:
     void wake_all() noexcept;
 
     std::atomic<std::uint32_t> epoch_{0};    // futex word: bumped by every effective notify

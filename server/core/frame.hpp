@@ -31,11 +31,11 @@ struct StageTimes {
 /// A sample on its way from ingest to the segment's filter worker.
 struct SegmentSample {
     std::uint32_t subject_id = 0;
-    std::uint16_t segment_index = 0;  ///< index into the subject's skeleton
-    std::uint8_t node_id = 0;         ///< CAN node id it came from
-    bool has_node_quat = false;       ///< node ran its own filter: node_q is the estimate
-    std::uint64_t sync = 0;           ///< SYNC counter, extended past wrap (monotonic)
-    ImuSample imu{};                  ///< raw sample (t_us = sample instant)
+    std::uint16_t segment_index = 0;                        ///< index into the subject's skeleton
+    std::uint8_t node_id = 0;                               ///< CAN node id it came from
+    bool has_node_quat = false;                             ///< node ran its own filter: node_q is the estimate
+    std::uint64_t sync = 0;                                 ///< SYNC counter, extended past wrap (monotonic)
+    ImuSample imu{};                                        ///< raw sample (t_us = sample instant)
     std::array<double, 4> node_q_wxyz{1.0, 0.0, 0.0, 0.0};  ///< q_earth_sensor from the node
     StageTimes times{};
 };

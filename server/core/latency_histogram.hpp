@@ -85,7 +85,7 @@ struct LatencySnapshot {
 /// SingleWriterLatencyHistogram (one writer thread, see the contract above).
 template <bool SingleWriter>
 class BasicLatencyHistogram {
-  public:
+public:
     BasicLatencyHistogram() = default;
     BasicLatencyHistogram(const BasicLatencyHistogram&) = delete;
     BasicLatencyHistogram& operator=(const BasicLatencyHistogram&) = delete;
@@ -112,7 +112,7 @@ class BasicLatencyHistogram {
     /// Any thread.
     [[nodiscard]] LatencySnapshot snapshot() const noexcept;
 
-  private:
+private:
     static void add(std::atomic<std::uint64_t>& cell, std::uint64_t n) noexcept {
         if constexpr (SingleWriter) {
             single_writer_add(cell, n);

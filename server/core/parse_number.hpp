@@ -16,8 +16,8 @@
 namespace mocap::core {
 
 template <typename T>
-    requires std::is_arithmetic_v<T> && (!std::is_same_v<T, bool>)
-[[nodiscard]] bool parse_number(std::string_view text, T& out) {
+requires std::is_arithmetic_v<T> &&(!std::is_same_v<T, bool>)
+    [[nodiscard]] bool parse_number(std::string_view text, T& out) {
     if (!text.empty() && text.front() == '+') {
         text.remove_prefix(1);
         if (!text.empty() && text.front() == '-') return false;  // "+-1"

@@ -14,7 +14,7 @@
 namespace mocap {
 
 class SegmentProcessor {
-  public:
+public:
     virtual ~SegmentProcessor() = default;
 
     /// Consumes one sample. On entry `out` holds identity, sample_us = in.imu.t_us and

@@ -34,12 +34,10 @@ class SpscRing {
     static_assert(std::is_default_constructible_v<T>, "ring slots are default-constructed");
     static_assert(std::is_nothrow_copy_assignable_v<T>, "push/pop must not throw");
 
-  public:
+public:
     /// @throws std::invalid_argument unless capacity is a power of two >= 2.
     explicit SpscRing(std::size_t capacity)
-        : capacity_(checked_capacity(capacity)),
-          mask_(capacity - 1),
-          slots_(std::make_unique<T[]>(capacity)) {}
+        : capacity_(checked_capacity(capacity)), mask_(capacity - 1), slots_(std::make_unique<T[]>(capacity)) {}
 
     SpscRing(const SpscRing&) = delete;
     SpscRing& operator=(const SpscRing&) = delete;
@@ -77,9 +75,7 @@ class SpscRing {
     }
 
     /// Consumer only, after front() returned non-null: releases the oldest slot.
-    void pop() noexcept {
-        head_.store(head_.load(std::memory_order_relaxed) + 1, std::memory_order_release);
-    }
+    void pop() noexcept { head_.store(head_.load(std::memory_order_relaxed) + 1, std::memory_order_release); }
 
     /// Consumer only: true when nothing is ready (re-reads the producer's index).
     [[nodiscard]] bool empty() const noexcept {
@@ -95,7 +91,7 @@ class SpscRing {
 
     [[nodiscard]] std::size_t capacity() const noexcept { return capacity_; }
 
-  private:
+private:
     static std::size_t checked_capacity(std::size_t capacity) {
         if (capacity < 2 || (capacity & (capacity - 1)) != 0) {
             throw std::invalid_argument("SpscRing capacity must be a power of two >= 2");

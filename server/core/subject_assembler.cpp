@@ -30,9 +30,8 @@ void AssemblerCounters::add_to(CounterGroup& group) const {
     group.add("segments_invalid", segments_invalid);
 }
 
-SubjectAssembler::SubjectAssembler(std::uint32_t subject_id, std::uint16_t segment_count,
-                                   const AssemblerConfig& config, FrameSink& sink,
-                                   LatencyHistogram* assembly)
+SubjectAssembler::SubjectAssembler(std::uint32_t subject_id, std::uint16_t segment_count, const AssemblerConfig& config,
+                                   FrameSink& sink, LatencyHistogram* assembly)
     : subject_id_(subject_id),
       segment_count_(segment_count),
       all_mask_(segment_count >= 32 ? ~std::uint32_t{0} : bit(segment_count) - 1),
@@ -53,8 +52,7 @@ std::size_t SubjectAssembler::oldest_index() const noexcept {
     if (oldest_index_ == kNoSlot) {
         for (std::size_t i = 0; i < instants_.size(); ++i) {
             const Instant& in = instants_[i];
-            if (in.open &&
-                (oldest_index_ == kNoSlot || in.frame.sync < instants_[oldest_index_].frame.sync)) {
+            if (in.open && (oldest_index_ == kNoSlot || in.frame.sync < instants_[oldest_index_].frame.sync)) {
                 oldest_index_ = i;
             }
         }
@@ -95,8 +93,8 @@ void SubjectAssembler::emit(Instant& in, std::int64_t now_us) {
         ++stale;
         if ((seen_mask_ & bit(k)) != 0) {
             out_.segments[k] = last_good_[k];
-            out_.segments[k].flags = static_cast<std::uint8_t>(
-                (out_.segments[k].flags & ~kSegmentNeverSeen) | kSegmentStale);
+            out_.segments[k].flags =
+                static_cast<std::uint8_t>((out_.segments[k].flags & ~kSegmentNeverSeen) | kSegmentStale);
             // Missing without having moved on: stop waiting for it until it speaks again.
             if (newest_sync_[k] < in.frame.sync) dead_mask_ |= bit(k);
         } else {
@@ -170,8 +168,7 @@ void SubjectAssembler::on_pose(const PoseUpdate& u, std::int64_t now_us) {
         in.frame.sample_us = u.pose.sample_us;
         in.frame.times = u.times;
         const std::size_t slot = u.sync % window;
-        if (open_count_ == 0 ||
-            (oldest_index_ != kNoSlot && u.sync < instants_[oldest_index_].frame.sync)) {
+        if (open_count_ == 0 || (oldest_index_ != kNoSlot && u.sync < instants_[oldest_index_].frame.sync)) {
             oldest_index_ = slot;
         }
         ++open_count_;
@@ -203,30 +200,26 @@ std::int64_t SubjectAssembler::next_deadline_us() const noexcept {
     return i == kNoSlot ? kNoDeadline : instants_[i].first_us + config_.deadline_us;
 }
 
-AssemblerSet::AssemblerSet(const AssemblerConfig& config, FrameSink& sink)
-    : config_(config), sink_(sink) {
+AssemblerSet::AssemblerSet(const AssemblerConfig& config, FrameSink& sink) : config_(config), sink_(sink) {
     counters_.add("poses_unknown_subject", unknown_subject_);
 }
 
 SubjectAssembler& AssemblerSet::add_subject(std::uint32_t subject_id, std::uint16_t segment_count) {
-    auto pos = std::lower_bound(subjects_.begin(), subjects_.end(), subject_id,
-                                [](const std::unique_ptr<SubjectAssembler>& s, std::uint32_t id) {
-                                    return s->subject_id() < id;
-                                });
+    auto pos = std::lower_bound(
+        subjects_.begin(), subjects_.end(), subject_id,
+        [](const std::unique_ptr<SubjectAssembler>& s, std::uint32_t id) { return s->subject_id() < id; });
     if (pos != subjects_.end() && (*pos)->subject_id() == subject_id) {
         throw std::logic_error("AssemblerSet::add_subject: subject added twice");
     }
-    auto subject =
-        std::make_unique<SubjectAssembler>(subject_id, segment_count, config_, sink_, &assembly_);
+    auto subject = std::make_unique<SubjectAssembler>(subject_id, segment_count, config_, sink_, &assembly_);
     subject->stats().add_to(counters_);
     return **subjects_.insert(pos, std::move(subject));
 }
 
 SubjectAssembler* AssemblerSet::lookup(std::uint32_t subject_id) const noexcept {
-    auto pos = std::lower_bound(subjects_.begin(), subjects_.end(), subject_id,
-                                [](const std::unique_ptr<SubjectAssembler>& s, std::uint32_t id) {
-                                    return s->subject_id() < id;
-                                });
+    auto pos = std::lower_bound(
+        subjects_.begin(), subjects_.end(), subject_id,
+        [](const std::unique_ptr<SubjectAssembler>& s, std::uint32_t id) { return s->subject_id() < id; });
     return (pos != subjects_.end() && (*pos)->subject_id() == subject_id) ? pos->get() : nullptr;
 }
 

@@ -65,7 +65,7 @@ struct AssemblerConfig {
 /// Receives emitted frames, on the assembler thread. The frame is valid only during the call
 /// (copy or encode it there). Must not block.
 class FrameSink {
-  public:
+public:
     virtual ~FrameSink() = default;
     virtual void on_frame(const SubjectFrame& frame) = 0;
 };
@@ -84,13 +84,12 @@ struct AssemblerCounters {
 };
 
 class SubjectAssembler {
-  public:
+public:
     /// @param sink not owned, must outlive this. @param assembly optional histogram of
     ///        filtered_us -> assembled_us per frame (not owned).
     /// @throws std::invalid_argument if segment_count is 0 or > kMaxSegments, or window is 0.
-    SubjectAssembler(std::uint32_t subject_id, std::uint16_t segment_count,
-                     const AssemblerConfig& config, FrameSink& sink,
-                     LatencyHistogram* assembly = nullptr);
+    SubjectAssembler(std::uint32_t subject_id, std::uint16_t segment_count, const AssemblerConfig& config,
+                     FrameSink& sink, LatencyHistogram* assembly = nullptr);
 
     SubjectAssembler(const SubjectAssembler&) = delete;
     SubjectAssembler& operator=(const SubjectAssembler&) = delete;
@@ -112,7 +111,7 @@ class SubjectAssembler {
     /// Any thread.
     [[nodiscard]] const AssemblerCounters& stats() const noexcept { return stats_; }
 
-  private:
+private:
     struct Instant {
         bool open = false;
         std::int64_t first_us = 0;  // now_us when its first segment arrived
@@ -152,7 +151,7 @@ class SubjectAssembler {
 /// Routes poses to the SubjectAssembler of their subject. Same threading as SubjectAssembler;
 /// add_subject() is set-up only (before the assembler thread and any stats reader start).
 class AssemblerSet {
-  public:
+public:
     /// @param sink not owned, must outlive this; receives the frames of every subject.
     AssemblerSet(const AssemblerConfig& config, FrameSink& sink);
 
@@ -176,11 +175,9 @@ class AssemblerSet {
     /// over subjects, plus poses_unknown_subject.
     [[nodiscard]] const CounterGroup& counters() const noexcept { return counters_; }
     /// Any thread. filtered_us -> assembled_us of every emitted frame.
-    [[nodiscard]] LatencySnapshot assembly_snapshot() const noexcept {
-        return assembly_.snapshot();
-    }
+    [[nodiscard]] LatencySnapshot assembly_snapshot() const noexcept { return assembly_.snapshot(); }
 
-  private:
+private:
     [[nodiscard]] SubjectAssembler* lookup(std::uint32_t subject_id) const noexcept;
 
     AssemblerConfig config_;

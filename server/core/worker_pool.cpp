@@ -27,15 +27,13 @@ std::size_t resolve_workers(std::size_t requested) {
 
 }  // namespace
 
-WorkerPool::WorkerPool(const WorkerPoolConfig& config, const Clock* clock)
-    : config_(config), clock_(clock) {
+WorkerPool::WorkerPool(const WorkerPoolConfig& config, const Clock* clock) : config_(config), clock_(clock) {
     if (config_.batch == 0) throw std::invalid_argument("WorkerPool batch must be >= 1");
     const std::size_t n = resolve_workers(config_.workers);
     config_.workers = n;
     workers_.reserve(n);
     for (std::size_t i = 0; i < n; ++i) {
-        workers_.push_back(
-            std::make_unique<Worker>(config_.input_capacity, config_.output_capacity));
+        workers_.push_back(std::make_unique<Worker>(config_.input_capacity, config_.output_capacity));
     }
     for (const auto& w : workers_) {
         counters_.add("samples_submitted", w->submitted);
@@ -56,8 +54,8 @@ WorkerPool::~WorkerPool() {
     stop();
 }
 
-std::size_t WorkerPool::add_segment(std::uint32_t subject_id, std::uint16_t segment_index,
-                                    SegmentProcessor& processor, std::uint32_t cost_weight) {
+std::size_t WorkerPool::add_segment(std::uint32_t subject_id, std::uint16_t segment_index, SegmentProcessor& processor,
+                                    std::uint32_t cost_weight) {
     if (started_) throw std::logic_error("WorkerPool::add_segment after start()");
     const std::uint64_t key = route_key(subject_id, segment_index);
     auto pos = std::lower_bound(routes_.begin(), routes_.end(), key,
@@ -66,15 +64,13 @@ std::size_t WorkerPool::add_segment(std::uint32_t subject_id, std::uint16_t segm
         throw std::logic_error("WorkerPool::add_segment: segment added twice");
     }
     // Least total weight wins; min_element keeps the lowest index on ties (round-robin).
-    auto lightest =
-        std::min_element(workers_.begin(), workers_.end(),
-                         [](const auto& a, const auto& b) { return a->weight < b->weight; });
+    auto lightest = std::min_element(workers_.begin(), workers_.end(),
+                                     [](const auto& a, const auto& b) { return a->weight < b->weight; });
     Worker& w = **lightest;
     const auto worker_index = static_cast<std::uint32_t>(lightest - workers_.begin());
     w.weight += cost_weight;
     w.processors.push_back(&processor);
-    routes_.insert(pos,
-                   Route{key, worker_index, static_cast<std::uint32_t>(w.processors.size() - 1)});
+    routes_.insert(pos, Route{key, worker_index, static_cast<std::uint32_t>(w.processors.size() - 1)});
     return worker_index;
 }
 
@@ -155,8 +151,7 @@ void WorkerPool::process_one(Worker& w, const WorkItem& item) {
     }
     if (clock_ != nullptr) {
         u.times.filtered_us = clock_->now_us();
-        if (s.times.received_us != 0)
-            w.queue_wait.record(u.times.dequeued_us - s.times.received_us);
+        if (s.times.received_us != 0) w.queue_wait.record(u.times.dequeued_us - s.times.received_us);
         w.filter.record(u.times.filtered_us - u.times.dequeued_us);
     }
     if (!w.output.try_push(u)) w.output_dropped.add();
@@ -229,8 +224,7 @@ void WorkerPool::stop() {
     output_event_.notify_all();
 }
 
-std::size_t WorkerPool::worker_of(std::uint32_t subject_id,
-                                  std::uint16_t segment_index) const noexcept {
+std::size_t WorkerPool::worker_of(std::uint32_t subject_id, std::uint16_t segment_index) const noexcept {
     const Route* route = find_route(route_key(subject_id, segment_index));
     return route == nullptr ? kNoWorker : route->worker;
 }

@@ -58,10 +58,10 @@
 namespace mocap {
 
 struct WorkerPoolConfig {
-    std::size_t workers = 0;             ///< worker threads; 0 = hardware cores (at least 1)
-    std::size_t input_capacity = 1024;   ///< samples per worker input ring (power of two)
-    std::size_t output_capacity = 1024;  ///< poses per worker output ring (power of two)
-    std::size_t batch = 64;              ///< samples a worker processes before waking the assembler
+    std::size_t workers = 0;              ///< worker threads; 0 = hardware cores (at least 1)
+    std::size_t input_capacity = 1024;    ///< samples per worker input ring (power of two)
+    std::size_t output_capacity = 1024;   ///< poses per worker output ring (power of two)
+    std::size_t batch = 64;               ///< samples a worker processes before waking the assembler
     std::uint32_t spin_iterations = 200;  ///< idle polls (each with a CPU pause) before sleeping
     bool pin_cpus = false;                ///< pin worker i to CPU i mod cores (failures counted)
 };
@@ -83,7 +83,7 @@ enum class SubmitResult : std::uint8_t {
 };
 
 class WorkerPool {
-  public:
+public:
     static constexpr std::size_t kNoWorker = static_cast<std::size_t>(-1);
 
     /// @param clock optional (may be null, then no dequeued/filtered stamps and no histograms);
@@ -99,8 +99,8 @@ class WorkerPool {
     /// Set-up only. Registers a segment and its processor (not owned; must outlive the pool's
     /// stop()). cost_weight balances mixed filters (e.g. a particle filter weighs more).
     /// Returns the worker index. @throws std::logic_error after start() or for a duplicate.
-    std::size_t add_segment(std::uint32_t subject_id, std::uint16_t segment_index,
-                            SegmentProcessor& processor, std::uint32_t cost_weight = 1);
+    std::size_t add_segment(std::uint32_t subject_id, std::uint16_t segment_index, SegmentProcessor& processor,
+                            std::uint32_t cost_weight = 1);
 
     /// Set-up only: starts the worker threads. @throws std::logic_error if called twice.
     void start();
@@ -145,8 +145,7 @@ class WorkerPool {
 
     [[nodiscard]] std::size_t worker_count() const noexcept { return workers_.size(); }
     /// Worker of a registered segment, or kNoWorker.
-    [[nodiscard]] std::size_t worker_of(std::uint32_t subject_id,
-                                        std::uint16_t segment_index) const noexcept;
+    [[nodiscard]] std::size_t worker_of(std::uint32_t subject_id, std::uint16_t segment_index) const noexcept;
     /// Samples waiting on a worker's input ring (approximate while running).
     [[nodiscard]] std::size_t input_depth(std::size_t worker) const noexcept;
 
@@ -159,7 +158,7 @@ class WorkerPool {
     /// Filter: dequeued_us -> filtered_us, all workers.
     [[nodiscard]] LatencySnapshot filter_snapshot() const noexcept;
 
-  private:
+private:
     using WorkItem = detail::WorkItem;
 
     struct Route {

@@ -1,11 +1,11 @@
 #include "daemon/config.hpp"
 
+#include <toml++/toml.h>
 #include <charconv>
 #include <cmath>
 #include <fstream>
 #include <set>
 #include <sstream>
-#include <toml++/toml.h>
 
 namespace mocap::daemon {
 namespace {
@@ -18,7 +18,9 @@ struct ConfigError {
     std::string message;
 };
 
-std::size_t line_of(const toml::node& n) { return n.source().begin.line; }
+std::size_t line_of(const toml::node& n) {
+    return n.source().begin.line;
+}
 
 // A TOML number (integer or float) as a double. toml++'s value<double>() refuses an
 // integer that a double cannot hold exactly (above 2^53), so convert by hand: the range
@@ -290,17 +292,23 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
     r.read("bvh_subject", c.bvh_subject, 0, 65535);
     if (const auto* n = r.take("bvh_unit")) {
         const auto unit = n->value<std::string>();
-        if (unit == "cm") c.bvh_units_per_m = 100.0;
-        else if (unit == "m") c.bvh_units_per_m = 1.0;
-        else if (unit == "mm") c.bvh_units_per_m = 1000.0;
-        else r.fail("bvh_unit", n, "must be \"cm\", \"m\" or \"mm\"");
+        if (unit == "cm")
+            c.bvh_units_per_m = 100.0;
+        else if (unit == "m")
+            c.bvh_units_per_m = 1.0;
+        else if (unit == "mm")
+            c.bvh_units_per_m = 1000.0;
+        else
+            r.fail("bvh_unit", n, "must be \"cm\", \"m\" or \"mm\"");
     }
     r.read("bvh_rotation_order", c.bvh_rotation_order);
     {
         const std::string& o = c.bvh_rotation_order;
         const bool ok = o.size() == 3 && o.find_first_not_of("XYZ") == std::string::npos && o[0] != o[1] &&
                         o[1] != o[2] && o[0] != o[2];
-        if (!ok) r.fail("bvh_rotation_order", r.take("bvh_rotation_order"), "must be three distinct letters of XYZ, e.g. \"ZXY\"");
+        if (!ok)
+            r.fail("bvh_rotation_order", r.take("bvh_rotation_order"),
+                   "must be three distinct letters of XYZ, e.g. \"ZXY\"");
     }
     r.read("bvh_frame_time_s", c.bvh_frame_time_s, 0.0001, 10.0);
     r.read("record_dir", c.record_dir);
@@ -363,18 +371,16 @@ std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error
     return ep;
 }
 
-std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name,
-                                         std::string* error) {
+std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name, std::string* error) {
     DaemonConfig c;
     try {
         const toml::table root = toml::parse(toml_text, source_name);
         TableReader top(root, "");
         using Section = void (*)(TableReader&, DaemonConfig&);
         const std::pair<const char*, Section> sections[] = {
-            {"log", read_log},           {"ingest", read_ingest}, {"pipeline", read_pipeline},
-            {"filter", read_filter},     {"skeleton", read_skeleton}, {"serve", read_serve},
-            {"control", read_control},   {"outputs", read_outputs},
-            {"http", read_http},
+            {"log", read_log},         {"ingest", read_ingest},     {"pipeline", read_pipeline},
+            {"filter", read_filter},   {"skeleton", read_skeleton}, {"serve", read_serve},
+            {"control", read_control}, {"outputs", read_outputs},   {"http", read_http},
         };
         for (const auto& [name, fn] : sections) {
             if (const auto* t = top.sub_table(name)) {
@@ -389,8 +395,7 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
                  ": syntax: " + std::string(e.description());
         return std::nullopt;
     } catch (const ConfigError& e) {
-        *error = std::string(source_name) + ":" + std::to_string(e.line) + ": " + e.key + ": " +
-                 e.message;
+        *error = std::string(source_name) + ":" + std::to_string(e.line) + ": " + e.key + ": " + e.message;
         return std::nullopt;
     }
     return c;

@@ -25,18 +25,18 @@ struct Endpoint {
 };
 
 struct SocketCanConfig {
-    std::string interface;       ///< e.g. "can0", "vcan0"
-    std::uint32_t subject = 1;   ///< subject id the bus belongs to
+    std::string interface;      ///< e.g. "can0", "vcan0"
+    std::uint32_t subject = 1;  ///< subject id the bus belongs to
     bool operator==(const SocketCanConfig&) const = default;
 };
 
 struct SegmentConfig {
     std::string name;
-    std::string parent;                      ///< "" = root
-    std::array<double, 3> offset_m{};        ///< joint position in the parent's frame, metres
-    std::array<double, 3> end_m{};           ///< distal tip in this segment's frame, metres
-    std::uint8_t node = 0;                   ///< CAN node id (1..63)
-    std::string filter;                      ///< "" = [filter].name
+    std::string parent;                ///< "" = root
+    std::array<double, 3> offset_m{};  ///< joint position in the parent's frame, metres
+    std::array<double, 3> end_m{};     ///< distal tip in this segment's frame, metres
+    std::uint8_t node = 0;             ///< CAN node id (1..63)
+    std::string filter;                ///< "" = [filter].name
     bool operator==(const SegmentConfig&) const = default;
 };
 
@@ -60,13 +60,13 @@ struct DaemonConfig {
     // [skeleton]
     std::string calibration_dir = ".";
     double calibration_s = 1.0;
-    std::string auto_calibrate = "t-pose";   ///< "t-pose" | "n-pose" | "off"
-    bool heading_align = true;               ///< heading = "align" (else "earth")
-    bool facing_from_sensor = true;          ///< facing = "sensor" (else "given")
+    std::string auto_calibrate = "t-pose";  ///< "t-pose" | "n-pose" | "off"
+    bool heading_align = true;              ///< heading = "align" (else "earth")
+    bool facing_from_sensor = true;         ///< facing = "sensor" (else "given")
     double facing_heading_deg = 0.0;
     std::array<double, 3> facing_sensor_axis{1.0, 0.0, 0.0};
     double smoothing_alpha = 1.0;
-    double root_height_m = 1.0;              ///< only with custom segments
+    double root_height_m = 1.0;           ///< only with custom segments
     std::vector<SegmentConfig> segments;  ///< empty = built-in 15-segment body
     // [serve]
     Endpoint pose_listen{"0.0.0.0", 7001};
@@ -82,17 +82,17 @@ struct DaemonConfig {
     bool control_loopback_only = true;
     // [outputs] (docs/outputs.md)
     Endpoint bvh_listen{"0.0.0.0", 7002};
-    bool bvh_live = true;                    ///< serve live BVH on bvh_listen
+    bool bvh_live = true;  ///< serve live BVH on bvh_listen
     std::uint32_t bvh_max_clients = 64;
-    std::uint32_t bvh_subject = 0;           ///< 0 = first subject with a frame
-    double bvh_units_per_m = 100.0;          ///< "cm" = 100, "m" = 1, "mm" = 1000
+    std::uint32_t bvh_subject = 0;   ///< 0 = first subject with a frame
+    double bvh_units_per_m = 100.0;  ///< "cm" = 100, "m" = 1, "mm" = 1000
     std::string bvh_rotation_order = "ZXY";
     double bvh_frame_time_s = 0.01;
     std::string record_dir = ".";
     double record_flush_interval_s = 1.0;
-    bool raw_record = false;                 ///< record every raw sample from start
-    double raw_rotate_mb = 256.0;            ///< 0 = never by size
-    double raw_rotate_s = 3600.0;            ///< 0 = never by time
+    bool raw_record = false;       ///< record every raw sample from start
+    double raw_rotate_mb = 256.0;  ///< 0 = never by size
+    double raw_rotate_s = 3600.0;  ///< 0 = never by time
     std::uint32_t raw_ring_capacity = 16384;
     // [http] (docs/viewer.md): viewer page, pose WebSocket, /metrics, /healthz
     bool http_enabled = true;
@@ -108,8 +108,7 @@ std::string_view embedded_default_config();
 
 /// Parses and validates TOML text. On error returns std::nullopt and sets *error to
 /// "<source_name>:<line>: <key>: <message>". Never throws.
-std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name,
-                                         std::string* error);
+std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name, std::string* error);
 
 /// Reads a file and parses it (errors as above; an unreadable file names the path).
 std::optional<DaemonConfig> load_config_file(const std::string& path, std::string* error);

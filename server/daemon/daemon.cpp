@@ -25,7 +25,8 @@ serve::StageLatencySummary summarize(std::string stage, const LatencySnapshot& s
 }
 
 void append(std::vector<serve::NamedCounter>& out, const CounterGroup& g) {
-    for (const auto& c : g.snapshot()) out.push_back({g.component() + "." + c.name, c.value});
+    for (const auto& c : g.snapshot())
+        out.push_back({g.component() + "." + c.name, c.value});
 }
 
 }  // namespace
@@ -62,7 +63,9 @@ Daemon::Daemon(DaemonConfig config, std::string config_path)
     route_counters_.add("samples_rejected", samples_rejected_);
 }
 
-Daemon::~Daemon() { shutdown(); }
+Daemon::~Daemon() {
+    shutdown();
+}
 
 bool Daemon::start(std::string* error) {
     auto model = body_model_from_config(config_, error);
@@ -83,7 +86,8 @@ bool Daemon::start(std::string* error) {
     pc.output_capacity = config_.ring_capacity;
     pool_ = std::make_unique<WorkerPool>(pc, &clock_);
     std::vector<std::uint32_t> subject_ids;
-    for (std::uint32_t id = 1; id <= config_.max_subjects; ++id) subject_ids.push_back(id);
+    for (std::uint32_t id = 1; id <= config_.max_subjects; ++id)
+        subject_ids.push_back(id);
     for (const auto& can : config_.socketcan) {
         if (can.subject > config_.max_subjects) subject_ids.push_back(can.subject);
     }
@@ -121,8 +125,8 @@ bool Daemon::start(std::string* error) {
 
     serve::ControlHandlers handlers;
     handlers.calibrate = [this](std::uint32_t subject, serve::CalibrationPose pose) {
-        const auto p = pose == serve::CalibrationPose::kN ? skeleton::CalibrationPose::kNPose
-                                                          : skeleton::CalibrationPose::kTPose;
+        const auto p =
+            pose == serve::CalibrationPose::kN ? skeleton::CalibrationPose::kNPose : skeleton::CalibrationPose::kTPose;
         const std::string err = solver_->request_calibration(subject, p);
         return err.empty() ? serve::ControlResult::success() : serve::ControlResult::failure(err);
     };
@@ -179,7 +183,8 @@ bool Daemon::start(std::string* error) {
         hc.control_loopback_only = config_.control_loopback_only;
         hc.wall_clock_us = [this] { return clock_.now_us(); };
         serve::HttpDescription hd;
-        for (const auto& seg : model_.segments) hd.segments.push_back({seg.name, seg.parent, {seg.end_m.x(), seg.end_m.y(), seg.end_m.z()}});
+        for (const auto& seg : model_.segments)
+            hd.segments.push_back({seg.name, seg.parent, {seg.end_m.x(), seg.end_m.y(), seg.end_m.z()}});
         hd.subjects = subject_ids;
         serve::HttpHandlers hh;
         hh.control = handlers;
@@ -197,22 +202,28 @@ bool Daemon::start(std::string* error) {
         bvh_recorder_->publish(f, p);
         if (http_server_) http_server_->publish(f, p);
     });
-    for (const auto& line : solver_->load_calibrations()) spdlog::info("{}", line);
+    for (const auto& line : solver_->load_calibrations())
+        spdlog::info("{}", line);
 
     AssemblerConfig ac;
     ac.deadline_us = static_cast<std::int64_t>(config_.assembly_deadline_ms * 1000.0);
     assemblers_ = std::make_unique<AssemblerSet>(ac, *solver_);
-    for (std::uint32_t id : subject_ids) assemblers_->add_subject(id, static_cast<std::uint16_t>(model_.size()));
+    for (std::uint32_t id : subject_ids)
+        assemblers_->add_subject(id, static_cast<std::uint16_t>(model_.size()));
 
     serve::ServeDescription desc;
     for (const auto& s : model_.segments) {
-        desc.segments.push_back({s.name, s.parent, {s.offset_m.x(), s.offset_m.y(), s.offset_m.z()},
+        desc.segments.push_back({s.name,
+                                 s.parent,
+                                 {s.offset_m.x(), s.offset_m.y(), s.offset_m.z()},
                                  static_cast<std::uint32_t>(std::max(0, s.node_id))});
     }
     for (const auto& j : solver_->joints()) {
-        for (const char* axis : {"flexion", "abduction", "rotation"}) desc.joint_angle_names.push_back(j.name + "." + axis);
+        for (const char* axis : {"flexion", "abduction", "rotation"})
+            desc.joint_angle_names.push_back(j.name + "." + axis);
     }
-    for (std::uint32_t id : subject_ids) desc.subjects.push_back({id, "subject-" + std::to_string(id)});
+    for (std::uint32_t id : subject_ids)
+        desc.subjects.push_back({id, "subject-" + std::to_string(id)});
     server_->set_description(desc);
 
     // Ingest.
@@ -323,13 +334,15 @@ void Daemon::assembler_loop() {
 serve::StatsSnapshot Daemon::stats() const {
     serve::StatsSnapshot s;
     if (sink_listener_) append(s.counters, sink_listener_->counters());
-    for (const auto& r : can_readers_) append(s.counters, r->counters());
+    for (const auto& r : can_readers_)
+        append(s.counters, r->counters());
     append(s.counters, route_counters_);
     if (pool_) append(s.counters, pool_->counters());
     if (assemblers_) append(s.counters, assemblers_->counters());
     if (solver_) append(s.counters, solver_->counters());
     if (bvh_server_) {
-        for (const auto& c : bvh_server_->counters().snapshot()) s.counters.push_back(c);
+        for (const auto& c : bvh_server_->counters().snapshot())
+            s.counters.push_back(c);
     }
     if (bvh_recorder_) append(s.counters, bvh_recorder_->counters());
     if (raw_recorder_) append(s.counters, raw_recorder_->counters());
@@ -349,19 +362,23 @@ serve::StatsSnapshot Daemon::stats() const {
 serve::MetricsSnapshot Daemon::metrics() const {
     serve::MetricsSnapshot m;
     m.counters = stats().counters;
-    for (auto& c : server_->counter_snapshot()) m.counters.push_back(std::move(c));
+    for (auto& c : server_->counter_snapshot())
+        m.counters.push_back(std::move(c));
     auto gauge = [&m](std::string name, std::string help, double value) {
         m.gauges.push_back({std::move(name), std::move(help), value});
     };
     gauge("pose_clients", "Protobuf pose clients connected now", static_cast<double>(server_->client_count()));
-    if (bvh_server_) gauge("bvh_live_clients", "Live BVH clients connected now", static_cast<double>(bvh_server_->client_count()));
+    if (bvh_server_)
+        gauge("bvh_live_clients", "Live BVH clients connected now", static_cast<double>(bvh_server_->client_count()));
     if (sink_listener_) {
         const auto& g = sink_listener_->counters();
         const auto opened = g.value("connections_accepted").value_or(0);
         const auto closed = g.value("connections_closed").value_or(0);
-        gauge("sinks_connected", "Sink TCP connections open now", static_cast<double>(opened - std::min(opened, closed)));
+        gauge("sinks_connected", "Sink TCP connections open now",
+              static_cast<double>(opened - std::min(opened, closed)));
     }
-    gauge("subjects_configured", "Subjects the pipeline was built for", static_cast<double>(assemblers_ ? assemblers_->subject_count() : 0));
+    gauge("subjects_configured", "Subjects the pipeline was built for",
+          static_cast<double>(assemblers_ ? assemblers_->subject_count() : 0));
     gauge("start_time_seconds", "Start of mocapd, Unix time in seconds", static_cast<double>(start_us_) * 1e-6);
     m.latencies.push_back({"ingest", ingest_latency_.snapshot()});
     if (pool_) {
@@ -378,12 +395,15 @@ serve::HealthStatus Daemon::health() const {
     constexpr std::int64_t kWindowUs = 2'000'000;
     const std::int64_t now = clock_.now_us();
     if (stopping_.load()) return {false, "stopping"};
-    if (now - assembler_alive_us_.load(std::memory_order_relaxed) > kWindowUs) return {false, "assembler thread stalled"};
+    if (now - assembler_alive_us_.load(std::memory_order_relaxed) > kWindowUs)
+        return {false, "assembler thread stalled"};
     if (ingest_io_.stopped()) return {false, "ingest thread stopped"};
     const std::int64_t last_sample = last_sample_us_.load(std::memory_order_relaxed);
     if (last_sample == 0) return {true, "no sink data yet"};
-    const std::int64_t last_frame = std::max(http_server_ ? http_server_->last_frame_us() : 0, first_sample_us_.load(std::memory_order_relaxed));
-    if (now - last_sample <= kWindowUs && now - last_frame > kWindowUs) return {false, "samples arrive but no frame was assembled for 2 s"};
+    const std::int64_t last_frame =
+        std::max(http_server_ ? http_server_->last_frame_us() : 0, first_sample_us_.load(std::memory_order_relaxed));
+    if (now - last_sample <= kWindowUs && now - last_frame > kWindowUs)
+        return {false, "samples arrive but no frame was assembled for 2 s"};
     return {true, "ok"};
 }
 // --- end web endpoint ---
@@ -477,7 +497,8 @@ void Daemon::shutdown() {
     if (ingest_thread_.joinable()) {
         asio::post(ingest_io_, [this] {
             sink_listener_->stop();
-            for (auto& r : can_readers_) r->stop();
+            for (auto& r : can_readers_)
+                r->stop();
             ingest_io_.stop();
         });
         ingest_thread_.join();

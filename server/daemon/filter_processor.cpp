@@ -5,7 +5,9 @@
 namespace mocap::daemon {
 namespace {
 
-bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+bool finite(const Vec3d& v) {
+    return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
 
 }  // namespace
 
@@ -15,7 +17,8 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
         const auto& q = in.node_q_wxyz;
         const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
         if (!std::isfinite(n) || n < 0.5) return false;
-        for (std::size_t i = 0; i < 4; ++i) out.q_earth_sensor_wxyz[i] = q[i] / n;
+        for (std::size_t i = 0; i < 4; ++i)
+            out.q_earth_sensor_wxyz[i] = q[i] / n;
         out.flags |= kSegmentFromNode;
         return true;
     }

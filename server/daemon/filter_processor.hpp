@@ -20,8 +20,7 @@ namespace mocap::daemon {
 
 class FilterProcessor final : public SegmentProcessor {
 public:
-    explicit FilterProcessor(std::unique_ptr<filter::OrientationFilter> filter)
-        : filter_(std::move(filter)) {}
+    explicit FilterProcessor(std::unique_ptr<filter::OrientationFilter> filter) : filter_(std::move(filter)) {}
 
     bool process(const SegmentSample& in, SegmentPose& out) override;
 

@@ -1,7 +1,7 @@
 // mocapd — entry point: command line, config, logging, then the Daemon.
-#include <CLI/CLI.hpp>
 #include <google/protobuf/stubs/logging.h>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
 
 #include <cstdio>
 #include <iostream>
@@ -39,11 +39,13 @@ static int run(int argc, char** argv) {
     // Replay of raw recordings (docs/outputs.md): no sockets, files out, then exit.
     ReplayOptions replay;
     std::vector<std::string> calibrate_at;
-    auto* replay_opt = app.add_option("--replay", replay.files, "re-run raw recording(s) through the pipeline and exit");
+    auto* replay_opt =
+        app.add_option("--replay", replay.files, "re-run raw recording(s) through the pipeline and exit");
     app.add_flag("--realtime", replay.realtime, "replay at the recorded pace (default: as fast as possible)")
         ->needs(replay_opt);
     app.add_option("--bvh-out", replay.bvh_out, "replay: write a BVH file (must not exist)")->needs(replay_opt);
-    app.add_option("--bvh-subject", replay.bvh_subject, "replay: subject written to the BVH (0 = [outputs].bvh_subject)")
+    app.add_option("--bvh-subject", replay.bvh_subject,
+                   "replay: subject written to the BVH (0 = [outputs].bvh_subject)")
         ->needs(replay_opt);
     app.add_option("--angles-out", replay.angles_out, "replay: write the joint-angle CSV (must not exist)")
         ->needs(replay_opt);

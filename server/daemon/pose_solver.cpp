@@ -19,7 +19,8 @@ PoseSolver::PoseSolver(skeleton::BodyModel model, PoseSolverOptions options, Pub
       publish_(std::move(publish)),
       joints_(skeleton::default_joint_specs(model_)),
       subjects_(options_.max_subjects + 1) {
-    for (auto& s : subjects_) s.smoother = skeleton::PoseSmoother(options_.smoothing);
+    for (auto& s : subjects_)
+        s.smoother = skeleton::PoseSmoother(options_.smoothing);
     group_.add("frames_solved", frames_solved_);
     group_.add("calibrations_ok", calibrations_ok_);
     group_.add("calibrations_failed", calibrations_failed_);
@@ -27,8 +28,7 @@ PoseSolver::PoseSolver(skeleton::BodyModel model, PoseSolverOptions options, Pub
 }
 
 std::string PoseSolver::calibration_path(std::uint32_t subject_id) const {
-    return (fs::path(options_.calibration_dir) /
-            ("calibration-subject-" + std::to_string(subject_id) + ".toml"))
+    return (fs::path(options_.calibration_dir) / ("calibration-subject-" + std::to_string(subject_id) + ".toml"))
         .string();
 }
 
@@ -74,8 +74,8 @@ void PoseSolver::take_requests() {
         s.auto_pending = false;
         s.collect_start_us = -1;
         s.pose = pose;
-        spdlog::info("subject {}: calibration ({}) started: stand still for {} s", id,
-                     skeleton::to_string(pose), options_.calibration_s);
+        spdlog::info("subject {}: calibration ({}) started: stand still for {} s", id, skeleton::to_string(pose),
+                     options_.calibration_s);
     }
     requests_.clear();
     has_requests_.store(false, std::memory_order_relaxed);
@@ -105,9 +105,10 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
     }
     if (s.auto_run) {
         s.auto_pending = false;
-        spdlog::info("subject {}: calibrated automatically from its first still period ({} assumed); "
-                     "send a calibrate request to redo it",
-                     subject_id, skeleton::to_string(s.pose));
+        spdlog::info(
+            "subject {}: calibrated automatically from its first still period ({} assumed); "
+            "send a calibrate request to redo it",
+            subject_id, skeleton::to_string(s.pose));
     }
     s.calibration = *result.calibration;
     s.smoother.reset();

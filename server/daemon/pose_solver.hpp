@@ -43,11 +43,11 @@
 namespace mocap::daemon {
 
 struct PoseSolverOptions {
-    std::uint32_t max_subjects = 64;   ///< subject ids 1..max_subjects
-    double calibration_s = 1.0;        ///< still period collected per calibration
+    std::uint32_t max_subjects = 64;             ///< subject ids 1..max_subjects
+    double calibration_s = 1.0;                  ///< still period collected per calibration
     skeleton::CalibrationOptions calibration{};  ///< pose is set per request
     skeleton::PoseSmootherParams smoothing{};
-    std::string calibration_dir;       ///< "" = do not save or load
+    std::string calibration_dir;  ///< "" = do not save or load
     /// Calibrate a subject without a calibration from its first still period, assuming
     /// this pose (nullopt = only on command).
     std::optional<skeleton::CalibrationPose> auto_calibrate;
@@ -83,8 +83,8 @@ private:
         std::int64_t collect_start_us = -1;
         skeleton::CalibrationPose pose = skeleton::CalibrationPose::kTPose;
         std::optional<skeleton::FootContactRootTracker> root;  // travel once calibrated
-        bool auto_pending = true;   // no calibration yet: calibrate from the first still period
-        bool auto_run = false;      // the collection in progress is the automatic one
+        bool auto_pending = true;    // no calibration yet: calibrate from the first still period
+        bool auto_run = false;       // the collection in progress is the automatic one
         std::int64_t first_us = -1;  // sample time of the subject's first frame
     };
 

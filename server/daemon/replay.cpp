@@ -36,10 +36,10 @@ PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config) {
     PoseSolverOptions so;
     so.calibration_s = config.calibration_s;
     so.calibration_dir = config.calibration_dir;
-    so.calibration.heading_mode = config.heading_align ? skeleton::HeadingMode::kAlignToForward
-                                                       : skeleton::HeadingMode::kKeepEarth;
-    so.calibration.facing_source = config.facing_from_sensor ? skeleton::FacingSource::kFromSensorAxis
-                                                             : skeleton::FacingSource::kGiven;
+    so.calibration.heading_mode =
+        config.heading_align ? skeleton::HeadingMode::kAlignToForward : skeleton::HeadingMode::kKeepEarth;
+    so.calibration.facing_source =
+        config.facing_from_sensor ? skeleton::FacingSource::kFromSensorAxis : skeleton::FacingSource::kGiven;
     so.calibration.facing_heading_rad = config.facing_heading_deg * kPi / 180.0;
     so.calibration.facing_sensor_axis = {config.facing_sensor_axis[0], config.facing_sensor_axis[1],
                                          config.facing_sensor_axis[2]};
@@ -55,8 +55,10 @@ bool parse_replay_calibration(std::string_view spec, ReplayCalibration* out, std
     bool ok = f.size() <= 3 && core::parse_number(f[0], c.at_s) && c.at_s >= 0.0;
     if (ok && f.size() >= 2) ok = core::parse_number(f[1], c.subject) && c.subject >= 1;
     if (ok && f.size() == 3) {
-        if (f[2] == "N" || f[2] == "n") c.pose = skeleton::CalibrationPose::kNPose;
-        else ok = f[2] == "T" || f[2] == "t";
+        if (f[2] == "N" || f[2] == "n")
+            c.pose = skeleton::CalibrationPose::kNPose;
+        else
+            ok = f[2] == "T" || f[2] == "t";
     }
     if (!ok) {
         *error = "--calibrate-at " + std::string(spec) +
@@ -92,7 +94,8 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
 
     PoseSolverOptions so = pose_solver_options_from_config(config);
     so.max_subjects = config.max_subjects;
-    for (const auto& can : config.socketcan) so.max_subjects = std::max(so.max_subjects, can.subject);
+    for (const auto& can : config.socketcan)
+        so.max_subjects = std::max(so.max_subjects, can.subject);
     so.calibration_dir = options.calibration_dir;
     std::vector<std::string> angle_names;
     PoseSolver solver(*model, so, [&](const SubjectFrame& f, const serve::SkeletonPose& p) {
@@ -106,9 +109,11 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
             (void)std::fwrite(row.data(), 1, row.size(), csv.get());
         }
     });
-    for (const auto& line : solver.load_calibrations()) spdlog::info("{}", line);
+    for (const auto& line : solver.load_calibrations())
+        spdlog::info("{}", line);
     for (const auto& j : solver.joints()) {
-        for (const char* axis : {"flexion", "abduction", "rotation"}) angle_names.push_back(j.name + "." + axis);
+        for (const char* axis : {"flexion", "abduction", "rotation"})
+            angle_names.push_back(j.name + "." + axis);
     }
     if (!options.angles_out.empty()) {
         csv.reset(std::fopen(options.angles_out.c_str(), "wx"));

@@ -48,20 +48,20 @@ bool parse_replay_calibration(std::string_view spec, ReplayCalibration* out, std
 struct ReplayOptions {
     std::vector<std::string> files;  ///< raw recordings, replayed in this order
     bool realtime = false;
-    std::string bvh_out;             ///< "" = no BVH file; must not exist
-    std::uint32_t bvh_subject = 0;   ///< 0 = [outputs].bvh_subject rule
-    std::string angles_out;          ///< "" = no CSV
-    std::string calibration_dir;     ///< "" = neither load nor save calibrations
+    std::string bvh_out;            ///< "" = no BVH file; must not exist
+    std::uint32_t bvh_subject = 0;  ///< 0 = [outputs].bvh_subject rule
+    std::string angles_out;         ///< "" = no CSV
+    std::string calibration_dir;    ///< "" = neither load nor save calibrations
     std::vector<ReplayCalibration> calibrate;
 };
 
 struct ReplayResult {
     std::uint64_t samples = 0;
     std::uint64_t samples_unknown_node = 0;  ///< node not in the model, or subject out of range
-    std::uint64_t samples_rejected = 0;  ///< the filter refused them (non-finite input)
-    std::uint64_t frames = 0;            ///< subject frames solved
+    std::uint64_t samples_rejected = 0;      ///< the filter refused them (non-finite input)
+    std::uint64_t frames = 0;                ///< subject frames solved
     std::uint64_t bvh_frames = 0;
-    bool truncated = false;              ///< a file ended in a partial record
+    bool truncated = false;  ///< a file ended in a partial record
 };
 
 /// Runs the replay. False + error on a bad file, an unwritable output or an invalid config.

@@ -6,7 +6,9 @@
 
 namespace mocap::filter {
 
-Vec3 field_direction_enu(double dip_rad) { return {0.0, std::cos(dip_rad), -std::sin(dip_rad)}; }
+Vec3 field_direction_enu(double dip_rad) {
+    return {0.0, std::cos(dip_rad), -std::sin(dip_rad)};
+}
 
 double measured_dip_rad(const Vec3& accel, const Vec3& mag) {
     const double na = accel.norm(), nm = mag.norm();
@@ -26,11 +28,16 @@ bool own_dip_field_direction(const Vec3& accel, const Vec3& mag, Vec3& h_ref_enu
 
 std::string_view to_string(AttitudeStatus s) {
     switch (s) {
-        case AttitudeStatus::ok: return "ok";
-        case AttitudeStatus::zero_accel: return "zero_accel";
-        case AttitudeStatus::zero_mag: return "zero_mag";
-        case AttitudeStatus::parallel_vectors: return "parallel_vectors";
-        case AttitudeStatus::not_finite: return "not_finite";
+        case AttitudeStatus::ok:
+            return "ok";
+        case AttitudeStatus::zero_accel:
+            return "zero_accel";
+        case AttitudeStatus::zero_mag:
+            return "zero_mag";
+        case AttitudeStatus::parallel_vectors:
+            return "parallel_vectors";
+        case AttitudeStatus::not_finite:
+            return "not_finite";
     }
     return "unknown";
 }
@@ -38,10 +45,9 @@ std::string_view to_string(AttitudeStatus s) {
 namespace {
 
 // Validates and normalises the pair; a non-ok status leaves the outputs unspecified.
-AttitudeStatus unit_pair(const Vec3& accel, const Vec3& mag, const Vec3& h_ref,
-                         const LmaParams& p, Vec3& f_s, Vec3& h_s) {
-    if (!accel.allFinite() || !mag.allFinite() || !h_ref.allFinite())
-        return AttitudeStatus::not_finite;
+AttitudeStatus unit_pair(const Vec3& accel, const Vec3& mag, const Vec3& h_ref, const LmaParams& p, Vec3& f_s,
+                         Vec3& h_s) {
+    if (!accel.allFinite() || !mag.allFinite() || !h_ref.allFinite()) return AttitudeStatus::not_finite;
     const double na = accel.norm(), nm = mag.norm();
     if (na < p.min_norm) return AttitudeStatus::zero_accel;
     if (nm < p.min_norm) return AttitudeStatus::zero_mag;
@@ -49,8 +55,7 @@ AttitudeStatus unit_pair(const Vec3& accel, const Vec3& mag, const Vec3& h_ref,
     h_s = mag / nm;
     const double s_min = std::sin(p.min_angle_rad);
     if (f_s.cross(h_s).norm() < s_min) return AttitudeStatus::parallel_vectors;
-    if (Vec3::UnitZ().cross(h_ref).norm() < s_min * h_ref.norm())
-        return AttitudeStatus::parallel_vectors;
+    if (Vec3::UnitZ().cross(h_ref).norm() < s_min * h_ref.norm()) return AttitudeStatus::parallel_vectors;
     return AttitudeStatus::ok;
 }
 
@@ -65,15 +70,14 @@ Vec3 solve_spd3(const Mat3& a, const Vec3& b) {
     const double c12 = a(0, 1) * a(0, 2) - a(0, 0) * a(1, 2);
     const double c22 = a(0, 0) * a(1, 1) - a(0, 1) * a(0, 1);
     const double inv_det = 1.0 / (a(0, 0) * c00 + a(0, 1) * c01 + a(0, 2) * c02);
-    return inv_det * Vec3(c00 * b.x() + c01 * b.y() + c02 * b.z(),
-                          c01 * b.x() + c11 * b.y() + c12 * b.z(),
+    return inv_det * Vec3(c00 * b.x() + c01 * b.y() + c02 * b.z(), c01 * b.x() + c11 * b.y() + c12 * b.z(),
                           c02 * b.x() + c12 * b.y() + c22 * b.z());
 }
 
 }  // namespace
 
-AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu,
-                           const Quat& q_start, const LmaParams& p) {
+AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu, const Quat& q_start,
+                           const LmaParams& p) {
     AttitudeSolution r;
     Vec3 f_s, h_s;
     r.status = unit_pair(accel, mag, h_ref_enu, p, f_s, h_s);
@@ -88,8 +92,8 @@ AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref
         const Vec3 h_hat = rotate(q, h_s);
         // Steps 4-6 with J = −2 [[ĥ]ₓ ; [f̂]ₓ] and ε = [h_n − ĥ ; f_n − f̂], written out:
         //   JᵀJ = 4 (2 I − ĥĥᵀ − f̂f̂ᵀ),   Jᵀε = 2 (ĥ × h_n + f̂ × f_n).
-        const Mat3 a = (8.0 + p.lambda) * Mat3::Identity() -
-                       4.0 * (h_hat * h_hat.transpose() + f_hat * f_hat.transpose());
+        const Mat3 a =
+            (8.0 + p.lambda) * Mat3::Identity() - 4.0 * (h_hat * h_hat.transpose() + f_hat * f_hat.transpose());
         const Vec3 jte = 2.0 * (h_hat.cross(h_n) + f_hat.cross(f_n));
         const Vec3 delta = p.alpha * solve_spd3(a, jte);
         // Step 7 (erratum): earth-side correction.
@@ -103,8 +107,7 @@ AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref
     return r;
 }
 
-AttitudeSolution solve_triad(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu,
-                             const LmaParams& p) {
+AttitudeSolution solve_triad(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu, const LmaParams& p) {
     AttitudeSolution r;
     Vec3 f_s, h_s;
     r.status = unit_pair(accel, mag, h_ref_enu, p, f_s, h_s);

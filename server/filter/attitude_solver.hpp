@@ -63,11 +63,10 @@ struct LmaParams {
 
 /// Levenberg–Marquardt from `q_start` (identity, the previous estimate, or solve_triad's
 /// result). h_ref_enu must be a unit vector not parallel to up.
-AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu,
-                           const Quat& q_start, const LmaParams& p = {});
+AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu, const Quat& q_start,
+                           const LmaParams& p = {});
 
 /// TRIAD closed form. Only the horizontal direction of h_ref_enu matters.
-AttitudeSolution solve_triad(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu,
-                             const LmaParams& p = {});
+AttitudeSolution solve_triad(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu, const LmaParams& p = {});
 
 }  // namespace mocap::filter

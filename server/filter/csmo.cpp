@@ -62,9 +62,8 @@ void Csmo::update(const ImuSample& sample) {
         state_.initialised = true;
         if (params_.init_from_measurement && sample.has_mag()) {
             // TRIAD only uses the reference field's horizontal direction: any dip will do.
-            const AttitudeSolution s = solve_triad(to_vec3(sample.accel_m_s2),
-                                                   to_vec3(sample.mag_ut),
-                                                   field_direction_enu(0.0), lma_);
+            const AttitudeSolution s =
+                solve_triad(to_vec3(sample.accel_m_s2), to_vec3(sample.mag_ut), field_direction_enu(0.0), lma_);
             if (s.ok()) state_.q_earth_sensor = state_.q_measured = s.q_earth_sensor;
         }
         return;

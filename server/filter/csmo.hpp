@@ -44,21 +44,22 @@ struct CsmoParams {
     double k2 = 1e-3;  ///< key "k2": switching gain, y
     double k3 = 1e-3;  ///< key "k3": switching gain, z
     // Linear gains on the x, y, z parts of q_e (per sample at gain_rate_hz).
-    double k4 = 9e-4;  ///< key "k4": linear gain, x
-    double k5 = 9e-4;  ///< key "k5": linear gain, y
-    double k6 = 9e-4;  ///< key "k6": linear gain, z
-    double rho = 3e-4;             ///< key "rho": boundary layer of the saturation (q_e units)
-    double gain_rate_hz = 100.0;   ///< key "gain_rate_hz": rate the per-sample gains are tuned for
+    double k4 = 9e-4;             ///< key "k4": linear gain, x
+    double k5 = 9e-4;             ///< key "k5": linear gain, y
+    double k6 = 9e-4;             ///< key "k6": linear gain, z
+    double rho = 3e-4;            ///< key "rho": boundary layer of the saturation (q_e units)
+    double gain_rate_hz = 100.0;  ///< key "gain_rate_hz": rate the per-sample gains are tuned for
     // Initial estimate (normalised; default identity). The paper uses
     // (0.2, 0.5, 0.7, 0.3) normalised: set q0w..q0z to those four numbers.
-    double q0w = 1.0;  ///< key "q0w": initial estimate, w
-    double q0x = 0.0;  ///< key "q0x": initial estimate, x
-    double q0y = 0.0;  ///< key "q0y": initial estimate, y
-    double q0z = 0.0;  ///< key "q0z": initial estimate, z
-    bool init_from_measurement = false;  ///< key "init_meas": start from the first sample's q_m
-                                         ///< (TRIAD) instead of q0
+    double q0w = 1.0;                                           ///< key "q0w": initial estimate, w
+    double q0x = 0.0;                                           ///< key "q0x": initial estimate, x
+    double q0y = 0.0;                                           ///< key "q0y": initial estimate, y
+    double q0z = 0.0;                                           ///< key "q0z": initial estimate, z
+    bool init_from_measurement = false;                         ///< key "init_meas": start from the first sample's q_m
+                                                                ///< (TRIAD) instead of q0
     double dip_deg = std::numeric_limits<double>::quiet_NaN();  ///< key "dip_deg": field
-        ///< inclination below the horizon, deg (paper: 60); NaN = each sample's own dip
+                                                                ///< inclination below the horizon, deg (paper: 60); NaN
+                                                                ///< = each sample's own dip
     double lm_lambda = 0.01;  ///< key "lm_lambda": LMA damping (design.md erratum: 0.01)
     double lm_alpha = 1.0;    ///< key "lm_alpha": LMA step scale (design.md erratum: 1)
     int lm_iterations = 2;    ///< key "lm_iterations": LMA iterations per sample (warm-started)
@@ -67,10 +68,10 @@ struct CsmoParams {
 
 /// Observable state; reset() returns it to the Params' initial estimate.
 struct CsmoState {
-    Quat q_earth_sensor = Quat::Identity();  ///< current estimate
-    Quat q_measured = Quat::Identity();      ///< last accepted q_m (LMA)
-    Vec3 q_error_vec = Vec3::Zero();         ///< vector part of the last q_e
-    bool initialised = false;                ///< the first sample has been seen
+    Quat q_earth_sensor = Quat::Identity();   ///< current estimate
+    Quat q_measured = Quat::Identity();       ///< last accepted q_m (LMA)
+    Vec3 q_error_vec = Vec3::Zero();          ///< vector part of the last q_e
+    bool initialised = false;                 ///< the first sample has been seen
     std::uint64_t rejected_measurements = 0;  ///< samples whose accel/mag gave no q_m
 };
 

@@ -56,16 +56,16 @@ std::string format_value(double v) {
     os << v;
     return os.str();
 }
-std::string format_value(bool v) { return v ? "true" : "false"; }
+std::string format_value(bool v) {
+    return v ? "true" : "false";
+}
 template <class Int>
 std::string format_value(Int v) {
     return std::to_string(v);
 }
 
-std::string cannot_parse_message(std::string_view filter, const std::string& key,
-                                 const std::string& value) {
-    return "parameter \"" + key + "\" of filter \"" + std::string(filter) + "\": cannot parse \"" +
-           value + "\"";
+std::string cannot_parse_message(std::string_view filter, const std::string& key, const std::string& value) {
+    return "parameter \"" + key + "\" of filter \"" + std::string(filter) + "\": cannot parse \"" + value + "\"";
 }
 
 // Everything the factory needs to know about one filter type.
@@ -90,8 +90,7 @@ struct Entry {
                 if (error) *error = "filter \"" + std::string(name) + "\" has no parameter \"" + key + "\"";
                 return nullptr;
             }
-            const bool ok = std::visit([&](auto member) { return parse_value(value, p.*member); },
-                                       field->member);
+            const bool ok = std::visit([&](auto member) { return parse_value(value, p.*member); }, field->member);
             if (!ok) {
                 if (error) *error = cannot_parse_message(name, key, value);
                 return nullptr;
@@ -108,8 +107,7 @@ struct Entry {
         const P p{};
         std::vector<FilterKey> out;
         for (const Field<P>& f : fields) {
-            out.push_back({f.key, std::visit([&](auto member) { return format_value(p.*member); },
-                                             f.member)});
+            out.push_back({f.key, std::visit([&](auto member) { return format_value(p.*member); }, f.member)});
         }
         return out;
     }
@@ -117,47 +115,45 @@ struct Entry {
 
 const Entry<MocapFilterParams, MocapFilter>& mocap_entry() {
     using P = MocapFilterParams;
-    static const Entry<P, MocapFilter> e{
-        {{"tau_acc_s", &P::tau_acc_s},
-         {"tau_mag_s", &P::tau_mag_s},
-         {"rest_bias", &P::rest_bias},
-         {"motion_bias", &P::motion_bias},
-         {"bias_sigma_init_deg_s", &P::bias_sigma_init_deg_s},
-         {"bias_forgetting_time_s", &P::bias_forgetting_time_s},
-         {"bias_clip_deg_s", &P::bias_clip_deg_s},
-         {"bias_sigma_motion_deg_s", &P::bias_sigma_motion_deg_s},
-         {"bias_vertical_forgetting", &P::bias_vertical_forgetting},
-         {"bias_sigma_rest_deg_s", &P::bias_sigma_rest_deg_s},
-         {"rest_min_time_s", &P::rest_min_time_s},
-         {"rest_filter_tau_s", &P::rest_filter_tau_s},
-         {"rest_th_gyro_deg_s", &P::rest_th_gyro_deg_s},
-         {"rest_th_acc_m_s2", &P::rest_th_acc_m_s2},
-         {"gyro_noise_ref_deg_s", &P::gyro_noise_ref_deg_s},
-         {"mag_guard", &P::mag_guard},
-         {"mag_current_tau_s", &P::mag_current_tau_s},
-         {"mag_ref_tau_s", &P::mag_ref_tau_s},
-         {"mag_norm_th", &P::mag_norm_th},
-         {"mag_dip_th_deg", &P::mag_dip_th_deg},
-         {"mag_noise_margin", &P::mag_noise_margin},
-         {"mag_heading_th_deg", &P::mag_heading_th_deg},
-         {"mag_heading_tau_s", &P::mag_heading_tau_s},
-         {"mag_new_time_s", &P::mag_new_time_s},
-         {"mag_new_first_time_s", &P::mag_new_first_time_s},
-         {"mag_new_min_gyro_deg_s", &P::mag_new_min_gyro_deg_s},
-         {"mag_min_undisturbed_time_s", &P::mag_min_undisturbed_time_s},
-         {"mag_max_rejection_time_s", &P::mag_max_rejection_time_s},
-         {"mag_rejection_factor", &P::mag_rejection_factor},
-         {"max_step_s", &P::max_step_s}},
-        [](const P& p) { return p.check(); }};
+    static const Entry<P, MocapFilter> e{{{"tau_acc_s", &P::tau_acc_s},
+                                          {"tau_mag_s", &P::tau_mag_s},
+                                          {"rest_bias", &P::rest_bias},
+                                          {"motion_bias", &P::motion_bias},
+                                          {"bias_sigma_init_deg_s", &P::bias_sigma_init_deg_s},
+                                          {"bias_forgetting_time_s", &P::bias_forgetting_time_s},
+                                          {"bias_clip_deg_s", &P::bias_clip_deg_s},
+                                          {"bias_sigma_motion_deg_s", &P::bias_sigma_motion_deg_s},
+                                          {"bias_vertical_forgetting", &P::bias_vertical_forgetting},
+                                          {"bias_sigma_rest_deg_s", &P::bias_sigma_rest_deg_s},
+                                          {"rest_min_time_s", &P::rest_min_time_s},
+                                          {"rest_filter_tau_s", &P::rest_filter_tau_s},
+                                          {"rest_th_gyro_deg_s", &P::rest_th_gyro_deg_s},
+                                          {"rest_th_acc_m_s2", &P::rest_th_acc_m_s2},
+                                          {"gyro_noise_ref_deg_s", &P::gyro_noise_ref_deg_s},
+                                          {"mag_guard", &P::mag_guard},
+                                          {"mag_current_tau_s", &P::mag_current_tau_s},
+                                          {"mag_ref_tau_s", &P::mag_ref_tau_s},
+                                          {"mag_norm_th", &P::mag_norm_th},
+                                          {"mag_dip_th_deg", &P::mag_dip_th_deg},
+                                          {"mag_noise_margin", &P::mag_noise_margin},
+                                          {"mag_heading_th_deg", &P::mag_heading_th_deg},
+                                          {"mag_heading_tau_s", &P::mag_heading_tau_s},
+                                          {"mag_new_time_s", &P::mag_new_time_s},
+                                          {"mag_new_first_time_s", &P::mag_new_first_time_s},
+                                          {"mag_new_min_gyro_deg_s", &P::mag_new_min_gyro_deg_s},
+                                          {"mag_min_undisturbed_time_s", &P::mag_min_undisturbed_time_s},
+                                          {"mag_max_rejection_time_s", &P::mag_max_rejection_time_s},
+                                          {"mag_rejection_factor", &P::mag_rejection_factor},
+                                          {"max_step_s", &P::max_step_s}},
+                                         [](const P& p) { return p.check(); }};
     return e;
 }
 
 const Entry<MadgwickParams, MadgwickFilter>& madgwick_entry() {
     using P = MadgwickParams;
-    static const Entry<P, MadgwickFilter> e{{{"beta", &P::beta},
-                                             {"init_from_first_sample", &P::init_from_first_sample},
-                                             {"max_step_s", &P::max_step_s}},
-                                            [](const P& p) { return p.check(); }};
+    static const Entry<P, MadgwickFilter> e{
+        {{"beta", &P::beta}, {"init_from_first_sample", &P::init_from_first_sample}, {"max_step_s", &P::max_step_s}},
+        [](const P& p) { return p.check(); }};
     return e;
 }
 
@@ -174,42 +170,41 @@ const Entry<MahonyParams, MahonyFilter>& mahony_entry() {
 
 const Entry<CsmoParams, Csmo>& csmo_entry() {
     using P = CsmoParams;
-    static const Entry<P, Csmo> e{
-        {{"k1", &P::k1},
-         {"k2", &P::k2},
-         {"k3", &P::k3},
-         {"k4", &P::k4},
-         {"k5", &P::k5},
-         {"k6", &P::k6},
-         {"rho", &P::rho},
-         {"gain_rate_hz", &P::gain_rate_hz},
-         {"q0w", &P::q0w},
-         {"q0x", &P::q0x},
-         {"q0y", &P::q0y},
-         {"q0z", &P::q0z},
-         {"init_meas", &P::init_from_measurement},
-         {"dip_deg", &P::dip_deg},
-         {"lm_lambda", &P::lm_lambda},
-         {"lm_alpha", &P::lm_alpha},
-         {"lm_iterations", &P::lm_iterations},
-         {"max_step_s", &P::max_step_s}},
-        // CsmoParams has no check of its own: the ranges its code relies on.
-        [](const P& p) -> std::string {
-            for (const double k : {p.k1, p.k2, p.k3, p.k4, p.k5, p.k6}) {
-                if (!(k >= 0.0)) return "gains k1..k6 must be >= 0";
-            }
-            if (!(p.rho > 0.0)) return "rho must be > 0";
-            if (!(p.gain_rate_hz > 0.0)) return "gain_rate_hz must be > 0";
-            if (!(std::hypot(p.q0w, p.q0x, p.q0y) + std::abs(p.q0z) > 0.0))
-                return "q0w..q0z must not all be zero";
-            if (!std::isnan(p.dip_deg) && !(std::abs(p.dip_deg) < 90.0))
-                return "dip_deg must be NaN or in (-90, 90)";
-            if (!(p.lm_lambda >= 0.0)) return "lm_lambda must be >= 0";
-            if (!(p.lm_alpha > 0.0)) return "lm_alpha must be > 0";
-            if (p.lm_iterations < 1) return "lm_iterations must be >= 1";
-            if (!(p.max_step_s > 0.0)) return "max_step_s must be > 0";
-            return {};
-        }};
+    static const Entry<P, Csmo> e{{{"k1", &P::k1},
+                                   {"k2", &P::k2},
+                                   {"k3", &P::k3},
+                                   {"k4", &P::k4},
+                                   {"k5", &P::k5},
+                                   {"k6", &P::k6},
+                                   {"rho", &P::rho},
+                                   {"gain_rate_hz", &P::gain_rate_hz},
+                                   {"q0w", &P::q0w},
+                                   {"q0x", &P::q0x},
+                                   {"q0y", &P::q0y},
+                                   {"q0z", &P::q0z},
+                                   {"init_meas", &P::init_from_measurement},
+                                   {"dip_deg", &P::dip_deg},
+                                   {"lm_lambda", &P::lm_lambda},
+                                   {"lm_alpha", &P::lm_alpha},
+                                   {"lm_iterations", &P::lm_iterations},
+                                   {"max_step_s", &P::max_step_s}},
+                                  // CsmoParams has no check of its own: the ranges its code relies on.
+                                  [](const P& p) -> std::string {
+                                      for (const double k : {p.k1, p.k2, p.k3, p.k4, p.k5, p.k6}) {
+                                          if (!(k >= 0.0)) return "gains k1..k6 must be >= 0";
+                                      }
+                                      if (!(p.rho > 0.0)) return "rho must be > 0";
+                                      if (!(p.gain_rate_hz > 0.0)) return "gain_rate_hz must be > 0";
+                                      if (!(std::hypot(p.q0w, p.q0x, p.q0y) + std::abs(p.q0z) > 0.0))
+                                          return "q0w..q0z must not all be zero";
+                                      if (!std::isnan(p.dip_deg) && !(std::abs(p.dip_deg) < 90.0))
+                                          return "dip_deg must be NaN or in (-90, 90)";
+                                      if (!(p.lm_lambda >= 0.0)) return "lm_lambda must be >= 0";
+                                      if (!(p.lm_alpha > 0.0)) return "lm_alpha must be > 0";
+                                      if (p.lm_iterations < 1) return "lm_iterations must be >= 1";
+                                      if (!(p.max_step_s > 0.0)) return "max_step_s must be > 0";
+                                      return {};
+                                  }};
     return e;
 }
 
@@ -239,21 +234,17 @@ const Entry<ParticleFilterParams, ParticleFilter>& pf_entry() {
         // constructor would silently clamp the particle count).
         [](const P& p) -> std::string {
             if (p.particles < 1 || p.particles > 65536) return "particles must be in 1..65536";
-            for (const double sigma : {p.gyro_noise_rad_s, p.bias_walk_rad_s2, p.bias_init_rad_s,
-                                       p.min_jitter_rad, p.min_bias_jitter_rad_s, p.init_tilt_rad,
-                                       p.init_heading_rad, p.reg_h}) {
-                if (!(sigma >= 0.0))
-                    return "noise, jitter, init and reg_h values must be >= 0";
+            for (const double sigma : {p.gyro_noise_rad_s, p.bias_walk_rad_s2, p.bias_init_rad_s, p.min_jitter_rad,
+                                       p.min_bias_jitter_rad_s, p.init_tilt_rad, p.init_heading_rad, p.reg_h}) {
+                if (!(sigma >= 0.0)) return "noise, jitter, init and reg_h values must be >= 0";
             }
             if (!(p.meas_tilt_rad > 0.0)) return "meas_tilt must be > 0";
             if (!(p.meas_heading_rad > 0.0)) return "meas_heading must be > 0";
-            if (!(p.resample_frac >= 0.0 && p.resample_frac <= 1.0))
-                return "resample_frac must be in [0, 1]";
+            if (!(p.resample_frac >= 0.0 && p.resample_frac <= 1.0)) return "resample_frac must be in [0, 1]";
             if (!(p.bias_shrink > 0.0 && p.bias_shrink <= 1.0)) return "bias_shrink must be in (0, 1]";
             if (!(p.accel_gate > 0.0)) return "accel_gate must be > 0";
             if (!(p.gravity_m_s2 > 0.0)) return "gravity must be > 0";
-            if (!std::isnan(p.dip_deg) && !(std::abs(p.dip_deg) < 90.0))
-                return "dip_deg must be NaN or in (-90, 90)";
+            if (!std::isnan(p.dip_deg) && !(std::abs(p.dip_deg) < 90.0)) return "dip_deg must be NaN or in (-90, 90)";
             if (p.lm_iterations < 1) return "lm_iterations must be >= 1";
             if (!(p.max_step_s > 0.0)) return "max_step_s must be > 0";
             return {};
@@ -280,13 +271,16 @@ std::unique_ptr<OrientationFilter> make_filter(std::string_view name, const Filt
     const bool known = with_entry(name, [&](const auto& e) { out = e.make(name, params, error); });
     if (!known && error) {
         std::string list;
-        for (std::string_view n : filter_names()) list += (list.empty() ? "" : ", ") + std::string(n);
+        for (std::string_view n : filter_names())
+            list += (list.empty() ? "" : ", ") + std::string(n);
         *error = "unknown filter \"" + std::string(name) + "\" (known: " + list + ")";
     }
     return out;
 }
 
-std::vector<std::string_view> filter_names() { return {"mocap", "madgwick", "mahony", "csmo", "pf"}; }
+std::vector<std::string_view> filter_names() {
+    return {"mocap", "madgwick", "mahony", "csmo", "pf"};
+}
 
 std::vector<FilterKey> filter_keys(std::string_view name) {
     std::vector<FilterKey> out;

@@ -19,12 +19,13 @@ Vec4 alignment_gradient(const Quat& q, const Vec3& d, const Vec3& s) {
 
 }  // namespace
 
-Quat q_enu_nwu() { return Quat(std::numbers::sqrt2 / 2.0, 0.0, 0.0, std::numbers::sqrt2 / 2.0); }
+Quat q_enu_nwu() {
+    return Quat(std::numbers::sqrt2 / 2.0, 0.0, 0.0, std::numbers::sqrt2 / 2.0);
+}
 
 Quat nwu_initial_attitude(const MargReading& r, bool from_reading) {
-    const Quat q_enu_sensor = from_reading && r.accel_ok
-                                  ? attitude_from_accel_mag(r.accel_m_s2, r.mag_ut, r.mag_ok)
-                                  : Quat::Identity();
+    const Quat q_enu_sensor =
+        from_reading && r.accel_ok ? attitude_from_accel_mag(r.accel_m_s2, r.mag_ut, r.mag_ok) : Quat::Identity();
     return q_enu_nwu().conjugate() * q_enu_sensor;
 }
 
@@ -39,7 +40,9 @@ std::string MadgwickParams::check() const {
     return {};
 }
 
-MadgwickFilter::MadgwickFilter(const MadgwickParams& params) : params_(params) { reset(); }
+MadgwickFilter::MadgwickFilter(const MadgwickParams& params) : params_(params) {
+    reset();
+}
 
 void MadgwickFilter::reset() {
     state_ = MadgwickState{};
@@ -73,6 +76,8 @@ void MadgwickFilter::update(const ImuSample& sample) {
     q = from_wxyz(to_wxyz(q) + q_dot * dt).normalized();
 }
 
-Quat MadgwickFilter::orientation() const { return (q_enu_nwu() * state_.q_nwu_sensor).normalized(); }
+Quat MadgwickFilter::orientation() const {
+    return (q_enu_nwu() * state_.q_nwu_sensor).normalized();
+}
 
 }  // namespace mocap::filter

@@ -33,11 +33,11 @@ Quat nwu_initial_attitude(const MargReading& reading, bool from_reading);
 Vec3 nwu_field_reference(const Quat& q_nwu_sensor, const Vec3& mag_unit);
 
 struct MadgwickParams {
-    double beta = 0.041;             ///< key "beta": gradient step gain, rad/s (the paper's MARG value
-                                     ///< sqrt(3/4)·gyro error of 2.7 °/s; larger trusts accel/mag more)
+    double beta = 0.041;                 ///< key "beta": gradient step gain, rad/s (the paper's MARG value
+                                         ///< sqrt(3/4)·gyro error of 2.7 °/s; larger trusts accel/mag more)
     bool init_from_first_sample = true;  ///< key "init_from_first_sample": take the first sample's attitude in closed
                                          ///< form from accel + mag; false starts at identity (ENU)
-    double max_step_s = 0.5;         ///< key "max_step_s": larger timestamp steps restart the time base, s
+    double max_step_s = 0.5;             ///< key "max_step_s": larger timestamp steps restart the time base, s
 
     /// Empty if every value is usable, else a message naming the first bad key.
     [[nodiscard]] std::string check() const;

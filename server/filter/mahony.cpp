@@ -12,7 +12,9 @@ std::string MahonyParams::check() const {
     return {};
 }
 
-MahonyFilter::MahonyFilter(const MahonyParams& params) : params_(params) { reset(); }
+MahonyFilter::MahonyFilter(const MahonyParams& params) : params_(params) {
+    reset();
+}
 
 void MahonyFilter::reset() {
     state_ = MahonyState{};
@@ -53,6 +55,8 @@ void MahonyFilter::update(const ImuSample& sample) {
     q = (q * quat_from_rotvec(w * dt)).normalized();
 }
 
-Quat MahonyFilter::orientation() const { return (q_enu_nwu() * state_.q_nwu_sensor).normalized(); }
+Quat MahonyFilter::orientation() const {
+    return (q_enu_nwu() * state_.q_nwu_sensor).normalized();
+}
 
 }  // namespace mocap::filter

@@ -19,13 +19,13 @@
 namespace mocap::filter {
 
 struct MahonyParams {
-    double kp = 1.0;    ///< key "kp": proportional gain, rad/s per unit direction error
-    double ki = 0.02;   ///< key "ki": integral gain, rad/s² per unit direction error (0 disables
-                        ///< the bias estimate)
-    double bias_clip_rad_s = 0.035;  ///< key "bias_clip_rad_s": |bias| limit per axis, rad/s (2 °/s)
+    double kp = 1.0;                     ///< key "kp": proportional gain, rad/s per unit direction error
+    double ki = 0.02;                    ///< key "ki": integral gain, rad/s² per unit direction error (0 disables
+                                         ///< the bias estimate)
+    double bias_clip_rad_s = 0.035;      ///< key "bias_clip_rad_s": |bias| limit per axis, rad/s (2 °/s)
     bool init_from_first_sample = true;  ///< key "init_from_first_sample": closed-form attitude from the first
                                          ///< sample; false starts at identity (ENU)
-    double max_step_s = 0.5;  ///< key "max_step_s": larger timestamp steps restart the time base, s
+    double max_step_s = 0.5;             ///< key "max_step_s": larger timestamp steps restart the time base, s
 
     /// Empty if every value is usable, else a message naming the first bad key.
     [[nodiscard]] std::string check() const;

@@ -17,7 +17,9 @@ Mat43 xi_matrix(const Quat& q) {
 
 namespace {
 
-Quat canonical_from(const Vec4& v) { return canonical(from_wxyz(v.normalized())); }
+Quat canonical_from(const Vec4& v) {
+    return canonical(from_wxyz(v.normalized()));
+}
 
 }  // namespace
 
@@ -68,8 +70,8 @@ MaxEigen max_eigenvector_power(const Mat4& m, const Quat& hint, bool psd) {
     return max_eigenvector(m);
 }
 
-void QuatAccumulator::add(const double* qw, const double* qx, const double* qy,
-                          const double* qz, const double* w, int n) {
+void QuatAccumulator::add(const double* qw, const double* qx, const double* qy, const double* qz, const double* w,
+                          int n) {
     double ww = 0, wx = 0, wy = 0, wz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0, s = 0;
     for (int i = 0; i < n; ++i) {
         const double a = w[i] * qw[i], b = w[i] * qx[i], c = w[i] * qy[i], d = w[i] * qz[i];
@@ -99,14 +101,16 @@ Quat QuatAccumulator::mean(const Quat& hint) const {
 Quat average_quaternions(std::span<const Quat> qs, std::span<const double> weights) {
     assert(qs.size() == weights.size());
     QuatAccumulator acc;
-    for (std::size_t i = 0; i < qs.size(); ++i) acc.add(qs[i], weights[i]);
+    for (std::size_t i = 0; i < qs.size(); ++i)
+        acc.add(qs[i], weights[i]);
     if (!(acc.weight_sum() > 0.0)) return Quat::Identity();
     return max_eigenvector(acc.matrix()).q;
 }
 
 Quat average_quaternions(std::span<const Quat> qs) {
     QuatAccumulator acc;
-    for (const Quat& q : qs) acc.add(q, 1.0);
+    for (const Quat& q : qs)
+        acc.add(q, 1.0);
     if (qs.empty()) return Quat::Identity();
     return max_eigenvector(acc.matrix()).q;
 }
@@ -114,7 +118,8 @@ Quat average_quaternions(std::span<const Quat> qs) {
 Quat average_quaternions(std::span<const Quat> qs, std::span<const Mat3> info) {
     assert(qs.size() == info.size());
     QuatAccumulator acc;
-    for (std::size_t i = 0; i < qs.size(); ++i) acc.add(qs[i], info[i]);
+    for (std::size_t i = 0; i < qs.size(); ++i)
+        acc.add(qs[i], info[i]);
     if (qs.empty()) return Quat::Identity();
     return max_eigenvector(acc.matrix()).q;
 }
@@ -134,7 +139,8 @@ Quat average_two(const Quat& q1, double w1, const Quat& q2, double w2) {
 Mat3 average_covariance(std::span<const Quat> qs, std::span<const Mat3> info) {
     assert(qs.size() == info.size());
     QuatAccumulator acc;
-    for (std::size_t i = 0; i < qs.size(); ++i) acc.add(qs[i], info[i]);
+    for (std::size_t i = 0; i < qs.size(); ++i)
+        acc.add(qs[i], info[i]);
     const MaxEigen me = max_eigenvector(acc.matrix());
     const Mat43 xi = xi_matrix(me.q);
     const Mat3 fisher = me.eigenvalue * Mat3::Identity() - xi.transpose() * acc.matrix() * xi;
@@ -143,7 +149,8 @@ Mat3 average_covariance(std::span<const Quat> qs, std::span<const Mat3> info) {
 
 Mat3 average_covariance_approx(std::span<const Mat3> info) {
     Mat3 sum = Mat3::Zero();
-    for (const Mat3& m : info) sum += m;
+    for (const Mat3& m : info)
+        sum += m;
     return sum.inverse();
 }
 

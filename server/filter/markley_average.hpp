@@ -70,8 +70,7 @@ public:
     }
     /// Adds n quaternions stored as structure of arrays (w, x, y, z components and scalar
     /// weights): the 10 distinct sums of M in one vectorisable pass (~1 ns per quaternion).
-    void add(const double* qw, const double* qx, const double* qy, const double* qz,
-             const double* w, int n);
+    void add(const double* qw, const double* qx, const double* qy, const double* qz, const double* w, int n);
     /// Matrix weight: info = R⁻¹ (rad⁻², sensor frame, symmetric positive semidefinite).
     void add(const Quat& q, const Mat3& info) {
         const Mat43 xi = xi_matrix(q);

@@ -29,8 +29,7 @@ LowPassCoeffs butterworth(double tau_s, double ts_s) {
 // of the inputs so far; then the filter starts in steady state on that mean. Until the
 // sample period is known (ts_s == 0) it keeps averaging.
 template <int N>
-void low_pass(LowPassState<N>& s, const double* x, const LowPassCoeffs& c, double tau_s,
-              double ts_s) {
+void low_pass(LowPassState<N>& s, const double* x, const LowPassCoeffs& c, double tau_s, double ts_s) {
     if (!s.running) {
         ++s.count;
         for (int i = 0; i < N; ++i) {
@@ -55,7 +54,9 @@ void low_pass(LowPassState<N>& s, const double* x, const LowPassCoeffs& c, doubl
     }
 }
 
-Vec3 out3(const LowPassState<3>& s) { return {s.out[0], s.out[1], s.out[2]}; }
+Vec3 out3(const LowPassState<3>& s) {
+    return {s.out[0], s.out[1], s.out[2]};
+}
 
 double gain_from_tau(double tau_s, double ts_s) {
     if (tau_s < 0.0) return 0.0;  // disabled
@@ -123,7 +124,9 @@ std::string MocapFilterParams::check() const {
     return {};
 }
 
-MocapFilter::MocapFilter(const MocapFilterParams& params) : params_(params) { reset(); }
+MocapFilter::MocapFilter(const MocapFilterParams& params) : params_(params) {
+    reset();
+}
 
 void MocapFilter::reset() {
     state_ = MocapFilterState{};
@@ -339,16 +342,14 @@ void MocapFilter::update_mag_guard(const Vec3& mag_e) {
     // noise needs more than twice the configured width, no disturbance of the configured
     // size can be told from noise: the guard stands aside (mag_guard_blind) rather than
     // rejecting at random.
-    const double var_ratio =
-        p.mag_current_tau_s > 0.0 ? std::min(1.0, 0.5 * s.ts_s / p.mag_current_tau_s) : 1.0;
+    const double var_ratio = p.mag_current_tau_s > 0.0 ? std::min(1.0, 0.5 * s.ts_s / p.mag_current_tau_s) : 1.0;
     const double noise = p.mag_noise_margin * std::sqrt(s.mag_noise_var * var_ratio);
     const double norm_for_blind = s.mag_ref_norm > 0.0 ? s.mag_ref_norm : s.mag_norm;
     s.mag_guard_blind = noise > 2.0 * p.mag_norm_th * norm_for_blind;
     const auto agrees = [&](double ref_norm, double ref_dip) {
         const double norm_th = std::max(p.mag_norm_th * ref_norm, noise);
         const double dip_th = std::max(p.mag_dip_th_deg * kDeg, noise / s.mag_norm);
-        return std::abs(s.mag_norm - ref_norm) < norm_th &&
-               std::abs(s.mag_dip_rad - ref_dip) < dip_th;
+        return std::abs(s.mag_norm - ref_norm) < norm_th && std::abs(s.mag_dip_rad - ref_dip) < dip_th;
     };
     if (s.mag_guard_blind) {
         if (s.mag_ref_norm == 0.0) {  // keep a reference for when the noise drops
@@ -429,7 +430,7 @@ void MocapFilter::update_heading_guard() {
     }
     const double dis = std::abs(s.mag_dis_lp_rad);
     if (s.k_mag_init != 0.0) return;  // still converging from the first readings
-    if (s.mag_heading_converging) {     // following a newly accepted field
+    if (s.mag_heading_converging) {   // following a newly accepted field
         if (dis < 0.5 * th) s.mag_heading_converging = false;
         return;
     }
@@ -456,10 +457,9 @@ void MocapFilter::update_mag(const Vec3& mag) {
     const double u_x = std::sin(s.delta_rad), u_y = std::cos(s.delta_rad);
     const double h_ref = s.mag_horizontal_lp.norm();
     const double dot = h.x() * u_x + h.y() * u_y;
-    s.last_mag_disagreement_rad = dot > 0.0 && h_ref > 0.0
-                                      ? std::clamp((h.x() * u_y - h.y() * u_x) / h_ref,
-                                                   -0.5 * std::numbers::pi, 0.5 * std::numbers::pi)
-                                      : wrap_pi(std::atan2(h.x(), h.y()) - s.delta_rad);
+    s.last_mag_disagreement_rad = dot > 0.0 && h_ref > 0.0 ? std::clamp((h.x() * u_y - h.y() * u_x) / h_ref,
+                                                                        -0.5 * std::numbers::pi, 0.5 * std::numbers::pi)
+                                                           : wrap_pi(std::atan2(h.x(), h.y()) - s.delta_rad);
     if (p.mag_guard) update_heading_guard();
     double k = k_mag_;
     if (p.mag_guard && s.ts_s > 0.0) {
@@ -471,8 +471,7 @@ void MocapFilter::update_mag(const Vec3& mag) {
                 k /= p.mag_rejection_factor;
             }
         } else {
-            s.mag_reject_time_s =
-                std::max(s.mag_reject_time_s - p.mag_rejection_factor * s.ts_s, 0.0);
+            s.mag_reject_time_s = std::max(s.mag_reject_time_s - p.mag_rejection_factor * s.ts_s, 0.0);
         }
     }
     // Fast start: for the N-th reading the heading is that of the vector mean of the first
@@ -494,7 +493,9 @@ void MocapFilter::update_mag(const Vec3& mag) {
     s.delta_rad = wrap_pi(s.delta_rad + k * s.last_mag_disagreement_rad);
 }
 
-Quat MocapFilter::orientation_6d() const { return (state_.q_e6_i * state_.q_i_sensor).normalized(); }
+Quat MocapFilter::orientation_6d() const {
+    return (state_.q_e6_i * state_.q_i_sensor).normalized();
+}
 
 Quat MocapFilter::orientation() const {
     const Quat rz(std::cos(0.5 * state_.delta_rad), 0.0, 0.0, std::sin(0.5 * state_.delta_rad));

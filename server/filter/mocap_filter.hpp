@@ -75,56 +75,56 @@ struct MargReading {
 MargReading read_marg(const ImuSample& sample);
 
 struct MocapFilterParams {
-    double tau_acc_s = 3.0;   ///< key "tau_acc_s": inclination correction time constant, s
-    double tau_mag_s = 9.0;   ///< key "tau_mag_s": heading correction time constant, s
+    double tau_acc_s = 3.0;  ///< key "tau_acc_s": inclination correction time constant, s
+    double tau_mag_s = 9.0;  ///< key "tau_mag_s": heading correction time constant, s
 
-    bool rest_bias = true;    ///< key "rest_bias": estimate gyro bias while at rest
-    bool motion_bias = true;  ///< key "motion_bias": estimate gyro bias (horizontal axes) in motion
-    double bias_sigma_init_deg_s = 0.5;     ///< key "bias_sigma_init_deg_s": initial bias std, °/s
-    double bias_forgetting_time_s = 100.0;  ///< key "bias_forgetting_time_s": time for the bias
-                                            ///< uncertainty to grow back by 0.1·init, s
-    double bias_clip_deg_s = 2.0;           ///< key "bias_clip_deg_s": |bias| limit per axis, °/s
-    double bias_sigma_motion_deg_s = 0.1;   ///< key "bias_sigma_motion_deg_s": motion bias
-                                            ///< measurement std, °/s
-    double bias_vertical_forgetting = 1e-4; ///< key "bias_vertical_forgetting": relative weight of
-                                            ///< the (unobservable) vertical axis in motion, 0..1
-    double bias_sigma_rest_deg_s = 0.03;    ///< key "bias_sigma_rest_deg_s": rest bias
-                                            ///< measurement std, °/s
-    double rest_min_time_s = 1.5;     ///< key "rest_min_time_s": stillness needed to declare rest, s
-    double rest_filter_tau_s = 0.5;   ///< key "rest_filter_tau_s": rest detection low-pass, s
-    double rest_th_gyro_deg_s = 2.0;  ///< key "rest_th_gyro_deg_s": gyro deviation threshold, °/s
-    double rest_th_acc_m_s2 = 0.5;    ///< key "rest_th_acc_m_s2": accel deviation threshold, m/s²
+    bool rest_bias = true;                   ///< key "rest_bias": estimate gyro bias while at rest
+    bool motion_bias = true;                 ///< key "motion_bias": estimate gyro bias (horizontal axes) in motion
+    double bias_sigma_init_deg_s = 0.5;      ///< key "bias_sigma_init_deg_s": initial bias std, °/s
+    double bias_forgetting_time_s = 100.0;   ///< key "bias_forgetting_time_s": time for the bias
+                                             ///< uncertainty to grow back by 0.1·init, s
+    double bias_clip_deg_s = 2.0;            ///< key "bias_clip_deg_s": |bias| limit per axis, °/s
+    double bias_sigma_motion_deg_s = 0.1;    ///< key "bias_sigma_motion_deg_s": motion bias
+                                             ///< measurement std, °/s
+    double bias_vertical_forgetting = 1e-4;  ///< key "bias_vertical_forgetting": relative weight of
+                                             ///< the (unobservable) vertical axis in motion, 0..1
+    double bias_sigma_rest_deg_s = 0.03;     ///< key "bias_sigma_rest_deg_s": rest bias
+                                             ///< measurement std, °/s
+    double rest_min_time_s = 1.5;            ///< key "rest_min_time_s": stillness needed to declare rest, s
+    double rest_filter_tau_s = 0.5;          ///< key "rest_filter_tau_s": rest detection low-pass, s
+    double rest_th_gyro_deg_s = 2.0;         ///< key "rest_th_gyro_deg_s": gyro deviation threshold, °/s
+    double rest_th_acc_m_s2 = 0.5;           ///< key "rest_th_acc_m_s2": accel deviation threshold, m/s²
 
     double gyro_noise_ref_deg_s = 2.0;  ///< key "gyro_noise_ref_deg_s": per-sample gyro white noise
                                         ///< the taus are meant for; a measured noise floor above it
                                         ///< shortens tau_acc_s in proportion and moves tau_mag_s
                                         ///< towards its noise-optimal value. 0 disables, °/s
 
-    bool mag_guard = true;  ///< key "mag_guard": reject magnetometer readings that disagree with
-                            ///< the reference field norm / dip
-    double mag_current_tau_s = 0.05;  ///< key "mag_current_tau_s": low-pass of the field vector
-                                      ///< (earth frame) before norm / dip are compared, s
-    double mag_ref_tau_s = 20.0;      ///< key "mag_ref_tau_s": adaptation of the reference, s
-    double mag_norm_th = 0.1;         ///< key "mag_norm_th": relative norm deviation threshold
-    double mag_dip_th_deg = 10.0;     ///< key "mag_dip_th_deg": dip deviation threshold, °
-    double mag_noise_margin = 4.0;    ///< key "mag_noise_margin": thresholds are widened to this
-                                      ///< many standard deviations of the filtered field noise
-    double mag_heading_th_deg = 10.0;  ///< key "mag_heading_th_deg": a heading disagreement (low-passed)
-                                       ///< beyond this flags a disturbance even when norm and dip
-                                       ///< look normal; it clears below half of it. 0 disables, °
-    double mag_heading_tau_s = 1.0;    ///< key "mag_heading_tau_s": low-pass of that disagreement, s
-    double mag_new_time_s = 20.0;     ///< key "mag_new_time_s": a consistent new field is accepted
-                                      ///< after this much time in motion, s
-    double mag_new_first_time_s = 5.0;   ///< key "mag_new_first_time_s": same, for the first field, s
-    double mag_new_min_gyro_deg_s = 20.0;  ///< key "mag_new_min_gyro_deg_s": motion needed for the
-                                           ///< new-field timer to run, °/s
+    bool mag_guard = true;                    ///< key "mag_guard": reject magnetometer readings that disagree with
+                                              ///< the reference field norm / dip
+    double mag_current_tau_s = 0.05;          ///< key "mag_current_tau_s": low-pass of the field vector
+                                              ///< (earth frame) before norm / dip are compared, s
+    double mag_ref_tau_s = 20.0;              ///< key "mag_ref_tau_s": adaptation of the reference, s
+    double mag_norm_th = 0.1;                 ///< key "mag_norm_th": relative norm deviation threshold
+    double mag_dip_th_deg = 10.0;             ///< key "mag_dip_th_deg": dip deviation threshold, °
+    double mag_noise_margin = 4.0;            ///< key "mag_noise_margin": thresholds are widened to this
+                                              ///< many standard deviations of the filtered field noise
+    double mag_heading_th_deg = 10.0;         ///< key "mag_heading_th_deg": a heading disagreement (low-passed)
+                                              ///< beyond this flags a disturbance even when norm and dip
+                                              ///< look normal; it clears below half of it. 0 disables, °
+    double mag_heading_tau_s = 1.0;           ///< key "mag_heading_tau_s": low-pass of that disagreement, s
+    double mag_new_time_s = 20.0;             ///< key "mag_new_time_s": a consistent new field is accepted
+                                              ///< after this much time in motion, s
+    double mag_new_first_time_s = 5.0;        ///< key "mag_new_first_time_s": same, for the first field, s
+    double mag_new_min_gyro_deg_s = 20.0;     ///< key "mag_new_min_gyro_deg_s": motion needed for the
+                                              ///< new-field timer to run, °/s
     double mag_min_undisturbed_time_s = 0.5;  ///< key "mag_min_undisturbed_time_s": agreement time
                                               ///< before the field counts as undisturbed, s
     double mag_max_rejection_time_s = 60.0;   ///< key "mag_max_rejection_time_s": longest full
                                               ///< rejection, s
-    double mag_rejection_factor = 2.0;  ///< key "mag_rejection_factor": gain divisor after the
-                                        ///< rejection time, and the recovery rate of that time
-    double max_step_s = 0.5;  ///< key "max_step_s": larger timestamp steps restart the time base, s
+    double mag_rejection_factor = 2.0;        ///< key "mag_rejection_factor": gain divisor after the
+                                              ///< rejection time, and the recovery rate of that time
+    double max_step_s = 0.5;                  ///< key "max_step_s": larger timestamp steps restart the time base, s
 
     /// Empty if every value is usable, else a message naming the first bad key.
     [[nodiscard]] std::string check() const;
@@ -142,10 +142,10 @@ struct LowPassCoeffs {
 template <int N>
 struct LowPassState {
     std::array<double, std::size_t{2} * N> z{};  ///< filter memory
-    std::array<double, N> sum{};      ///< running sum during the initial averaging
-    std::array<double, N> out{};      ///< last output
-    int count = 0;                    ///< samples averaged so far
-    bool running = false;             ///< initial averaging done
+    std::array<double, N> sum{};                 ///< running sum during the initial averaging
+    std::array<double, N> out{};                 ///< last output
+    int count = 0;                               ///< samples averaged so far
+    bool running = false;                        ///< initial averaging done
 };
 
 struct MocapFilterState {
@@ -156,10 +156,10 @@ struct MocapFilterState {
     Mat3 bias_p = Mat3::Zero();          ///< bias covariance, (0.01 °/s)²
     bool initialised = false;            ///< first sample seen
 
-    double ts_s = 0.0;          ///< sample period the coefficients were computed for (0: unknown)
-    double ts_lp_s = 0.0;       ///< smoothed measured sample period
-    double tau_acc_eff_s = 0.0; ///< tau_acc_s in use (see gyro_noise_ref_deg_s)
-    double tau_mag_eff_s = 0.0; ///< tau_mag_s in use
+    double ts_s = 0.0;           ///< sample period the coefficients were computed for (0: unknown)
+    double ts_lp_s = 0.0;        ///< smoothed measured sample period
+    double tau_acc_eff_s = 0.0;  ///< tau_acc_s in use (see gyro_noise_ref_deg_s)
+    double tau_mag_eff_s = 0.0;  ///< tau_mag_s in use
 
     // Gyro white-noise floor (second differences)
     std::array<Vec3, 2> gyro_prev{Vec3::Zero(), Vec3::Zero()};
@@ -193,13 +193,13 @@ struct MocapFilterState {
     double mag_dip_rad = 0.0;             ///< filtered dip angle (positive: field points down)
     double mag_ref_norm = 0.0;            ///< reference norm (0: none yet)
     double mag_ref_dip_rad = 0.0;
-    double mag_candidate_norm = -1.0;     ///< candidate new field (-1: none)
+    double mag_candidate_norm = -1.0;  ///< candidate new field (-1: none)
     double mag_candidate_dip_rad = 0.0;
     double mag_candidate_time_s = 0.0;
     double mag_undisturbed_time_s = 0.0;
     double mag_reject_time_s = 0.0;
-    bool mag_disturbed = true;            ///< norm / dip off the reference (true until one exists)
-    double k_mag_init = 1.0;              ///< initial-convergence gain 1/N (0 when done)
+    bool mag_disturbed = true;  ///< norm / dip off the reference (true until one exists)
+    double k_mag_init = 1.0;    ///< initial-convergence gain 1/N (0 when done)
     double last_mag_disagreement_rad = 0.0;
     Vec3 mag_horizontal_lp = Vec3::Zero();  ///< horizontal field in the 6D earth frame, averaged
                                             ///< over tau_mag_s (vector mean at the start)
@@ -231,9 +231,7 @@ public:
     /// Inclination-only estimate q_E'_sensor (no heading correction).
     [[nodiscard]] Quat orientation_6d() const;
     /// True while magnetometer readings are being rejected or down-weighted.
-    [[nodiscard]] bool mag_rejected() const {
-        return state_.mag_disturbed || state_.mag_heading_disturbed;
-    }
+    [[nodiscard]] bool mag_rejected() const { return state_.mag_disturbed || state_.mag_heading_disturbed; }
 
 private:
     void compute_coeffs(double ts_s);
@@ -252,8 +250,7 @@ private:
     LowPassCoeffs acc_lp_, rest_lp_, mag_current_lp_;
     double k_mag_ = 0.0, k_mag_ref_ = 0.0, k_mag_noise_ = 0.0, k_dis_ = 0.0;
     double k_noise_fast_ = 0.0, k_noise_floor_ = 0.0;
-    double bias_p0_ = 0.0, bias_v_ = 0.0, bias_motion_w_ = 0.0, bias_vertical_w_ = 0.0,
-           bias_rest_w_ = 0.0;
+    double bias_p0_ = 0.0, bias_v_ = 0.0, bias_motion_w_ = 0.0, bias_vertical_w_ = 0.0, bias_rest_w_ = 0.0;
 };
 
 }  // namespace mocap::filter

@@ -33,9 +33,11 @@ const std::array<double, kTableSize>& normal_table() {
             t[k] = 0.5 * (lo + hi);
         }
         double var = 0.0;
-        for (double z : t) var += z * z;
+        for (double z : t)
+            var += z * z;
         const double s = 1.0 / std::sqrt(var / kTableSize);
-        for (double& z : t) z *= s;
+        for (double& z : t)
+            z *= s;
         return t;
     }();
     return table;
@@ -48,7 +50,9 @@ std::uint64_t splitmix64(std::uint64_t& x) {
     return z ^ (z >> 31);
 }
 
-inline std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+inline std::uint64_t rotl(std::uint64_t x, int k) {
+    return (x << k) | (x >> (64 - k));
+}
 
 // exp([0, δ]) for a half-angle vector δ: a Taylor form below 0.1 rad (error < 2e-9, and
 // the caller normalises), sin/cos above.
@@ -74,8 +78,8 @@ inline double exp_nonpositive(double x) {
     const std::int64_t k = ti - (t < static_cast<double>(ti) ? 1 : 0);
     const double f = (t - static_cast<double>(k)) * 0.6931471805599453;  // in [0, ln 2)
     const double p =
-        1.0 + f * (1.0 + f * (0.5 + f * (1.0 / 6 + f * (1.0 / 24 + f * (1.0 / 120 +
-        f * (1.0 / 720 + f * (1.0 / 5040)))))));
+        1.0 +
+        f * (1.0 + f * (0.5 + f * (1.0 / 6 + f * (1.0 / 24 + f * (1.0 / 120 + f * (1.0 / 720 + f * (1.0 / 5040)))))));
     return p * std::bit_cast<double>(static_cast<std::uint64_t>(k + 1023) << 52);
 }
 
@@ -95,7 +99,8 @@ inline Q4 mul_unit(const Q4& a, const Q4& b) {
 }  // namespace
 
 void ParticleFilter::Rng::seed(std::uint64_t x) {
-    for (std::uint64_t& v : s) v = splitmix64(x);
+    for (std::uint64_t& v : s)
+        v = splitmix64(x);
 }
 
 std::uint64_t ParticleFilter::Rng::next() {
@@ -130,8 +135,8 @@ ParticleFilter::ParticleFilter(const ParticleFilterParams& params)
     : params_(params), n_(std::clamp(params.particles, 1, 65536)), clock_(params.max_step_s) {
     lma_.max_iterations = std::max(1, params.lm_iterations);
     lma_.tolerance_rad = 1e-6;
-    for (auto* v : {&qw_, &qx_, &qy_, &qz_, &bx_, &by_, &bz_, &w_, &cost_, &qw_tmp_, &qx_tmp_,
-                    &qy_tmp_, &qz_tmp_, &bx_tmp_, &by_tmp_, &bz_tmp_})
+    for (auto* v : {&qw_, &qx_, &qy_, &qz_, &bx_, &by_, &bz_, &w_, &cost_, &qw_tmp_, &qx_tmp_, &qy_tmp_, &qz_tmp_,
+                    &bx_tmp_, &by_tmp_, &bz_tmp_})
         v->assign(static_cast<std::size_t>(n_), 0.0);
     noise_.assign(6 * static_cast<std::size_t>(n_), 0.0);
     reset();
@@ -151,9 +156,15 @@ void ParticleFilter::reset() {
     std::fill(w_.begin(), w_.end(), 1.0 / n_);
 }
 
-Quat ParticleFilter::particle(int i) const { return Quat(qw_[i], qx_[i], qy_[i], qz_[i]); }
-Vec3 ParticleFilter::particle_bias(int i) const { return {bx_[i], by_[i], bz_[i]}; }
-double ParticleFilter::weight(int i) const { return w_[i]; }
+Quat ParticleFilter::particle(int i) const {
+    return Quat(qw_[i], qx_[i], qy_[i], qz_[i]);
+}
+Vec3 ParticleFilter::particle_bias(int i) const {
+    return {bx_[i], by_[i], bz_[i]};
+}
+double ParticleFilter::weight(int i) const {
+    return w_[i];
+}
 
 bool ParticleFilter::measure(const ImuSample& sample, Quat& q_m) const {
     if (!sample.has_mag()) return false;
@@ -309,7 +320,8 @@ void ParticleFilter::resample() {
     double c = w_[0];
     int j = 0;
     for (int i = 0; i < n_; ++i) {
-        while (u > c && j < n_ - 1) c += w_[++j];
+        while (u > c && j < n_ - 1)
+            c += w_[++j];
         qw_tmp_[i] = qw_[j];
         qx_tmp_[i] = qx_[j];
         qy_tmp_[i] = qy_[j];

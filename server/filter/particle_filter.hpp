@@ -44,38 +44,39 @@
 namespace mocap::filter {
 
 struct ParticleFilterParams {
-    int particles = 256;                ///< key "particles": particle count N (1..65536)
-    std::uint64_t seed = 1;             ///< key "seed": random seed (same seed, same output)
-    double gyro_noise_rad_s = 0.05;     ///< key "gyro_noise": σ of the rate noise per particle, rad/s
-    double bias_walk_rad_s2 = 2e-4;     ///< key "bias_walk": bias random walk, rad/s per √s
-    double bias_init_rad_s = 0.03;      ///< key "bias_init": σ of the initial bias particles, rad/s
-    double meas_tilt_rad = 0.06;        ///< key "meas_tilt": σ of q_m's tilt error, rad
-    double meas_heading_rad = 0.15;     ///< key "meas_heading": σ of q_m's heading error, rad
-    double resample_frac = 0.5;         ///< key "resample_frac": resample when N_eff < frac · N
-    double reg_h = 0.3;                 ///< key "reg_h": regularisation kernel width / cloud spread
-    double min_jitter_rad = 0.002;      ///< key "min_jitter": floor of the attitude jitter σ, rad
+    int particles = 256;                  ///< key "particles": particle count N (1..65536)
+    std::uint64_t seed = 1;               ///< key "seed": random seed (same seed, same output)
+    double gyro_noise_rad_s = 0.05;       ///< key "gyro_noise": σ of the rate noise per particle, rad/s
+    double bias_walk_rad_s2 = 2e-4;       ///< key "bias_walk": bias random walk, rad/s per √s
+    double bias_init_rad_s = 0.03;        ///< key "bias_init": σ of the initial bias particles, rad/s
+    double meas_tilt_rad = 0.06;          ///< key "meas_tilt": σ of q_m's tilt error, rad
+    double meas_heading_rad = 0.15;       ///< key "meas_heading": σ of q_m's heading error, rad
+    double resample_frac = 0.5;           ///< key "resample_frac": resample when N_eff < frac · N
+    double reg_h = 0.3;                   ///< key "reg_h": regularisation kernel width / cloud spread
+    double min_jitter_rad = 0.002;        ///< key "min_jitter": floor of the attitude jitter σ, rad
     double min_bias_jitter_rad_s = 5e-4;  ///< key "min_bias_jitter": floor of the bias jitter σ, rad/s
-    double bias_shrink = 0.98;          ///< key "bias_shrink": Liu–West a in (0, 1]; 1 = no shrinkage
-    double init_tilt_rad = 0.05;        ///< key "init_tilt": σ of the initial cloud's tilt, rad
-    double init_heading_rad = 0.2;      ///< key "init_heading": σ of the initial cloud's heading, rad
-    double accel_gate = 0.1;            ///< key "accel_gate": skip q_m when | |a|/g − 1 | exceeds this
-    double gravity_m_s2 = 9.81;         ///< key "gravity": g used by the gate, m/s²
+    double bias_shrink = 0.98;            ///< key "bias_shrink": Liu–West a in (0, 1]; 1 = no shrinkage
+    double init_tilt_rad = 0.05;          ///< key "init_tilt": σ of the initial cloud's tilt, rad
+    double init_heading_rad = 0.2;        ///< key "init_heading": σ of the initial cloud's heading, rad
+    double accel_gate = 0.1;              ///< key "accel_gate": skip q_m when | |a|/g − 1 | exceeds this
+    double gravity_m_s2 = 9.81;           ///< key "gravity": g used by the gate, m/s²
     double dip_deg = std::numeric_limits<double>::quiet_NaN();  ///< key "dip_deg": reference
-        ///< field inclination, deg; NaN (default) = each sample's own dip (TRIAD measurement)
-    int lm_iterations = 2;              ///< key "lm_iterations": LMA iterations (finite dip_deg only)
-    double max_step_s = 0.5;            ///< key "max_step_s": larger timestamp steps restart the time base
+                                                                ///< field inclination, deg; NaN (default) = each
+                                                                ///< sample's own dip (TRIAD measurement)
+    int lm_iterations = 2;    ///< key "lm_iterations": LMA iterations (finite dip_deg only)
+    double max_step_s = 0.5;  ///< key "max_step_s": larger timestamp steps restart the time base
 };
 
 /// Observable state (besides the particles themselves).
 struct ParticleFilterState {
-    Quat q_earth_sensor = Quat::Identity();  ///< Markley average of the particles
-    Vec3 gyro_bias_rad_s = Vec3::Zero();     ///< weighted mean bias
-    Quat q_measured = Quat::Identity();      ///< last accepted q_m
-    double n_eff = 0.0;                      ///< effective sample size after the last update
-    bool initialised = false;                ///< particles drawn around a first q_m
-    std::uint64_t resamples = 0;             ///< resampling steps done
+    Quat q_earth_sensor = Quat::Identity();   ///< Markley average of the particles
+    Vec3 gyro_bias_rad_s = Vec3::Zero();      ///< weighted mean bias
+    Quat q_measured = Quat::Identity();       ///< last accepted q_m
+    double n_eff = 0.0;                       ///< effective sample size after the last update
+    bool initialised = false;                 ///< particles drawn around a first q_m
+    std::uint64_t resamples = 0;              ///< resampling steps done
     std::uint64_t rejected_measurements = 0;  ///< samples without a usable q_m
-    std::uint64_t reinitialisations = 0;     ///< weight collapse (all ~0): redrawn around q_m
+    std::uint64_t reinitialisations = 0;      ///< weight collapse (all ~0): redrawn around q_m
 };
 
 class ParticleFilter final : public OrientationFilter {

@@ -26,9 +26,13 @@ Vec3 quat_log(const Quat& q) {
     return v * (theta / vn);
 }
 
-Quat quat_from_rotvec(const Vec3& rotvec_rad) { return quat_exp(0.5 * rotvec_rad); }
+Quat quat_from_rotvec(const Vec3& rotvec_rad) {
+    return quat_exp(0.5 * rotvec_rad);
+}
 
-Vec3 rotvec_from_quat(const Quat& q) { return 2.0 * quat_log(canonical(q)); }
+Vec3 rotvec_from_quat(const Quat& q) {
+    return 2.0 * quat_log(canonical(q));
+}
 
 Quat slerp(const Quat& q0, const Quat& q1, double t) {
     Quat b = q1;
@@ -49,7 +53,9 @@ Quat slerp(const Quat& q0, const Quat& q1, double t) {
     return r.normalized();
 }
 
-Mat3 to_rotation_matrix(const Quat& q) { return q.normalized().toRotationMatrix(); }
+Mat3 to_rotation_matrix(const Quat& q) {
+    return q.normalized().toRotationMatrix();
+}
 
 Quat from_rotation_matrix(const Mat3& r) {
     // Eigen uses Shepperd's method (largest-diagonal branch), numerically stable.
@@ -73,7 +79,9 @@ Quat from_euler_zyx(const EulerZyx& e) {
     return qz * qy * qx;
 }
 
-double angle_rad(const Quat& q) { return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w())); }
+double angle_rad(const Quat& q) {
+    return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w()));
+}
 
 double error_total_rad(const Quat& q_err) {
     return 2.0 * std::acos(std::clamp(std::abs(q_err.w()) / q_err.norm(), 0.0, 1.0));

@@ -18,19 +18,33 @@ using Vec3 = Eigen::Vector3d;
 using Mat3 = Eigen::Matrix3d;
 using Vec4 = Eigen::Vector4d;
 
-inline Vec3 to_vec3(const Vec3d& v) { return {v[0], v[1], v[2]}; }
-inline Vec3d to_array(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
+inline Vec3 to_vec3(const Vec3d& v) {
+    return {v[0], v[1], v[2]};
+}
+inline Vec3d to_array(const Vec3& v) {
+    return {v.x(), v.y(), v.z()};
+}
 
 /// (w, x, y, z) as a 4-vector; the layout used by Markley averaging.
-inline Vec4 to_wxyz(const Quat& q) { return {q.w(), q.x(), q.y(), q.z()}; }
-inline Quat from_wxyz(const Vec4& v) { return Quat(v[0], v[1], v[2], v[3]); }
+inline Vec4 to_wxyz(const Quat& q) {
+    return {q.w(), q.x(), q.y(), q.z()};
+}
+inline Quat from_wxyz(const Vec4& v) {
+    return Quat(v[0], v[1], v[2], v[3]);
+}
 
 /// Hamilton product a ⊗ b.
-inline Quat mul(const Quat& a, const Quat& b) { return a * b; }
+inline Quat mul(const Quat& a, const Quat& b) {
+    return a * b;
+}
 /// Conjugate (the inverse for a unit quaternion).
-inline Quat conj(const Quat& q) { return q.conjugate(); }
+inline Quat conj(const Quat& q) {
+    return q.conjugate();
+}
 /// Rotates v by q: q ⊗ [0, v] ⊗ q*.
-inline Vec3 rotate(const Quat& q, const Vec3& v) { return q._transformVector(v); }
+inline Vec3 rotate(const Quat& q, const Vec3& v) {
+    return q._transformVector(v);
+}
 
 /// The representative with w >= 0 (q and -q are the same rotation).
 Quat canonical(const Quat& q);

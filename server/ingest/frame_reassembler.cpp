@@ -11,17 +11,23 @@ constexpr std::uint8_t kAllParts = 0x7;
 
 std::uint8_t part_bit(mw_function kind) {
     switch (kind) {
-        case MW_FN_ACCEL: return 0x1;
-        case MW_FN_GYRO: return 0x2;
-        default: return 0x4;  // MW_FN_MAG: mw_raw_decode admits only the three kinds
+        case MW_FN_ACCEL:
+            return 0x1;
+        case MW_FN_GYRO:
+            return 0x2;
+        default:
+            return 0x4;  // MW_FN_MAG: mw_raw_decode admits only the three kinds
     }
 }
 
 std::size_t part_offset(mw_function kind) {
     switch (kind) {
-        case MW_FN_ACCEL: return 0;
-        case MW_FN_GYRO: return 3;
-        default: return 6;
+        case MW_FN_ACCEL:
+            return 0;
+        case MW_FN_GYRO:
+            return 3;
+        default:
+            return 6;
     }
 }
 
@@ -43,8 +49,8 @@ void ReassemblyCounters::register_in(CounterGroup& group) const {
     group.add("sync_wraps", sync_wraps);
 }
 
-FrameReassembler::FrameReassembler(std::uint32_t subject_id, Params params,
-                                   ReassemblyCounters& counters, SampleSink sink)
+FrameReassembler::FrameReassembler(std::uint32_t subject_id, Params params, ReassemblyCounters& counters,
+                                   SampleSink sink)
     : subject_id_(subject_id), params_(params), counters_(counters), sink_(std::move(sink)) {}
 
 const mw_status* FrameReassembler::node_status(std::uint8_t node_id) const {
@@ -113,8 +119,8 @@ std::int64_t FrameReassembler::sample_time(std::uint64_t sync, std::int64_t fall
     return s == sync && sync != 0 ? t : fallback_us;
 }
 
-void FrameReassembler::on_frame(const mw_can_frame& frame, std::int64_t sink_time_us,
-                                std::int64_t sink_send_us, std::int64_t received_us) {
+void FrameReassembler::on_frame(const mw_can_frame& frame, std::int64_t sink_time_us, std::int64_t sink_send_us,
+                                std::int64_t received_us) {
     counters_.frames.add();
     mw_message msg;
     if (mw_can_decode(&frame, &msg) < 0) {
@@ -122,11 +128,17 @@ void FrameReassembler::on_frame(const mw_can_frame& frame, std::int64_t sink_tim
         return;
     }
     switch (msg.function) {
-        case MW_FN_SYNC: on_sync(msg.u.sync.counter, sink_time_us); break;
+        case MW_FN_SYNC:
+            on_sync(msg.u.sync.counter, sink_time_us);
+            break;
         case MW_FN_ACCEL:
         case MW_FN_GYRO:
-        case MW_FN_MAG: on_raw(msg.u.raw, sink_time_us, sink_send_us, received_us); break;
-        case MW_FN_ATTITUDE: on_attitude(msg.u.attitude, sink_time_us, sink_send_us, received_us); break;
+        case MW_FN_MAG:
+            on_raw(msg.u.raw, sink_time_us, sink_send_us, received_us);
+            break;
+        case MW_FN_ATTITUDE:
+            on_attitude(msg.u.attitude, sink_time_us, sink_send_us, received_us);
+            break;
         case MW_FN_STATUS: {
             counters_.status_frames.add();
             if (msg.u.status.error_flags != 0) counters_.node_error_reports.add();
@@ -137,7 +149,9 @@ void FrameReassembler::on_frame(const mw_can_frame& frame, std::int64_t sink_tim
             }
             break;
         }
-        case MW_FN_CONFIG: counters_.config_frames.add(); break;
+        case MW_FN_CONFIG:
+            counters_.config_frames.add();
+            break;
     }
 }
 
@@ -155,8 +169,8 @@ bool FrameReassembler::admit(const Node& node, std::uint64_t s) {
     return true;
 }
 
-void FrameReassembler::on_raw(const mw_raw& raw, std::int64_t sink_time_us,
-                              std::int64_t sink_send_us, std::int64_t received_us) {
+void FrameReassembler::on_raw(const mw_raw& raw, std::int64_t sink_time_us, std::int64_t sink_send_us,
+                              std::int64_t received_us) {
     const std::uint64_t s = extend(raw.counter_low, MW_RAW_COUNTER_BITS);
     Node& node = nodes_[raw.node_id];
     if (!admit(node, s)) return;
@@ -183,7 +197,8 @@ void FrameReassembler::on_raw(const mw_raw& raw, std::int64_t sink_time_us,
     slot.parts |= bit;
     slot.received_us = received_us;
     const std::size_t off = part_offset(raw.kind);
-    for (std::size_t i = 0; i < 3; ++i) slot.counts[off + i] = raw.xyz[i];
+    for (std::size_t i = 0; i < 3; ++i)
+        slot.counts[off + i] = raw.xyz[i];
     if (slot.parts == kAllParts) emit_raw(raw.node_id, node, slot);
 }
 
@@ -227,8 +242,8 @@ void FrameReassembler::emit_raw(std::uint8_t node_id, Node& node, Slot& slot) {
     sink_(out);
 }
 
-void FrameReassembler::on_attitude(const mw_attitude& att, std::int64_t sink_time_us,
-                                   std::int64_t sink_send_us, std::int64_t received_us) {
+void FrameReassembler::on_attitude(const mw_attitude& att, std::int64_t sink_time_us, std::int64_t sink_send_us,
+                                   std::int64_t received_us) {
     const std::uint64_t s = extend(att.counter_low, MW_ATT_COUNTER_BITS);
     Node& node = nodes_[att.node_id];
     if (!admit(node, s)) return;
@@ -239,7 +254,8 @@ void FrameReassembler::on_attitude(const mw_attitude& att, std::int64_t sink_tim
     out.has_node_quat = true;
     out.imu.t_us = sample_time(s, sink_time_us);
     out.imu.flags = kImuNoMag;
-    for (std::size_t i = 0; i < 4; ++i) out.node_q_wxyz[i] = att.q[i];
+    for (std::size_t i = 0; i < 4; ++i)
+        out.node_q_wxyz[i] = att.q[i];
     out.times.sink_send_us = sink_send_us;
     out.times.received_us = received_us;
     for (auto& other : node.slots) {

@@ -69,8 +69,7 @@ public:
 
     /// `counters` must outlive the reassembler; `sink` is called synchronously from
     /// on_frame() for every finished sample.
-    FrameReassembler(std::uint32_t subject_id, Params params, ReassemblyCounters& counters,
-                     SampleSink sink);
+    FrameReassembler(std::uint32_t subject_id, Params params, ReassemblyCounters& counters, SampleSink sink);
 
     /// One CAN frame. sink_time_us: the sink's timestamp of the frame (packet timestamp +
     /// offset, or the kernel receive time for SocketCAN); sink_send_us: the packet's
@@ -113,8 +112,7 @@ private:
     std::uint64_t extend(std::uint32_t low, unsigned bits);
     bool admit(const Node& node, std::uint64_t sync);  // false (counted) if late or repeated
     void on_sync(std::uint32_t counter, std::int64_t sink_time_us);
-    void on_raw(const mw_raw& raw, std::int64_t sink_time_us, std::int64_t sink_send_us,
-                std::int64_t received_us);
+    void on_raw(const mw_raw& raw, std::int64_t sink_time_us, std::int64_t sink_send_us, std::int64_t received_us);
     void on_attitude(const mw_attitude& att, std::int64_t sink_time_us, std::int64_t sink_send_us,
                      std::int64_t received_us);
     void emit_raw(std::uint8_t node_id, Node& node, Slot& slot);

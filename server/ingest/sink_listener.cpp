@@ -63,17 +63,17 @@ private:
         idle_timer_.async_wait([self = shared_from_this()](const error_code& ec) {
             if (ec || self->closed_) return;
             self->owner_.c_.idle_timeouts.add();
-            if (self->owner_.log_allowed()) spdlog::warn("sink {}: nothing received for {} s, closing", self->peer_,
-                         self->owner_.config_.idle_timeout_s);
+            if (self->owner_.log_allowed())
+                spdlog::warn("sink {}: nothing received for {} s, closing", self->peer_,
+                             self->owner_.config_.idle_timeout_s);
             self->close();
         });
     }
 
     void do_read() {
-        socket_.async_read_some(asio::buffer(buf_),
-                                [self = shared_from_this()](const error_code& ec, std::size_t n) {
-                                    self->on_read(ec, n);
-                                });
+        socket_.async_read_some(asio::buffer(buf_), [self = shared_from_this()](const error_code& ec, std::size_t n) {
+            self->on_read(ec, n);
+        });
     }
 
     void on_read(const error_code& ec, std::size_t n) {
@@ -109,8 +109,8 @@ private:
         garbage_since_packet_ += discarded;
         if (garbage_since_packet_ > owner_.config_.max_garbage_bytes) {
             c.garbage_closes.add();
-            if (owner_.log_allowed()) spdlog::warn("sink {}: {} bytes without a valid packet, closing", peer_,
-                         garbage_since_packet_);
+            if (owner_.log_allowed())
+                spdlog::warn("sink {}: {} bytes without a valid packet, closing", peer_, garbage_since_packet_);
             close();
             return;
         }
@@ -129,8 +129,7 @@ private:
     bool closed_ = false;
 };
 
-SinkListener::SinkListener(asio::io_context& io, SinkListenerConfig config, const Clock& clock,
-                           SampleSink sink)
+SinkListener::SinkListener(asio::io_context& io, SinkListenerConfig config, const Clock& clock, SampleSink sink)
     : io_(io), config_(std::move(config)), clock_(clock), sink_(std::move(sink)), acceptor_(io) {
     group_.add("connections_accepted", c_.accepted);
     group_.add("connections_refused", c_.refused);
@@ -188,7 +187,8 @@ void SinkListener::stop() {
     // close() looks the connection up in connections_ and finds nothing to erase.
     auto conns = std::move(connections_);
     connections_.clear();
-    for (const auto& c : conns) c->close();
+    for (const auto& c : conns)
+        c->close();
 }
 
 void SinkListener::do_accept() {
@@ -201,7 +201,8 @@ void SinkListener::on_accept(const error_code& ec, tcp::socket socket) {
         if (log_allowed()) spdlog::warn("sink listener: accept: {}", ec.message());
     } else if (connections_.size() >= config_.max_sinks) {
         c_.refused.add();
-        if (log_allowed()) spdlog::warn("sink listener: refusing a connection: max_sinks ({}) reached", config_.max_sinks);
+        if (log_allowed())
+            spdlog::warn("sink listener: refusing a connection: max_sinks ({}) reached", config_.max_sinks);
         error_code ignored;
         socket.close(ignored);
     } else {
@@ -234,8 +235,9 @@ void SinkListener::on_packet(SinkConnection& from, const mw_packet& packet, std:
         if (owner != nullptr) {
             // The sink came back on a new connection before the old one timed out.
             c_.takeovers.add();
-            if (log_allowed()) spdlog::info("sink id {}: now on {}, closing the old connection {}", sink_id,
-                         from.peer(), owner->peer());
+            if (log_allowed())
+                spdlog::info("sink id {}: now on {}, closing the old connection {}", sink_id, from.peer(),
+                             owner->peer());
             SinkConnection* old = owner;
             owner = &from;
             old->close();
@@ -254,8 +256,8 @@ bool SinkListener::log_allowed() {
     const std::int64_t now = clock_.now_us();
     if (now - log_window_start_us_ >= kLogWindowUs || now < log_window_start_us_) {
         if (log_suppressed_ > 0) {
-            spdlog::warn("sink listener: {} more connection events in the last {} s were not logged",
-                         log_suppressed_, kLogWindowUs / 1'000'000);
+            spdlog::warn("sink listener: {} more connection events in the last {} s were not logged", log_suppressed_,
+                         kLogWindowUs / 1'000'000);
         }
         log_window_start_us_ = now;
         log_lines_in_window_ = 0;

@@ -32,11 +32,11 @@ namespace mocap::ingest {
 
 struct SinkListenerConfig {
     std::string host = "0.0.0.0";
-    std::uint16_t port = 7000;               ///< 0 = any free port (see port())
-    std::uint32_t max_sinks = 64;            ///< connections at once; more are refused
-    std::uint32_t max_subjects = 64;         ///< sink ids 1..max_subjects are accepted
-    double idle_timeout_s = 10.0;            ///< no bytes for this long closes the connection
-    std::size_t max_garbage_bytes = 1 << 20; ///< discarded bytes without a valid packet -> close
+    std::uint16_t port = 7000;                ///< 0 = any free port (see port())
+    std::uint32_t max_sinks = 64;             ///< connections at once; more are refused
+    std::uint32_t max_subjects = 64;          ///< sink ids 1..max_subjects are accepted
+    double idle_timeout_s = 10.0;             ///< no bytes for this long closes the connection
+    std::size_t max_garbage_bytes = 1 << 20;  ///< discarded bytes without a valid packet -> close
     FrameReassembler::Params reassembly{};
 };
 
@@ -46,8 +46,7 @@ class SinkListener {
 public:
     /// `clock` stamps received_us; `sink` receives every reassembled sample. Both must
     /// outlive the listener.
-    SinkListener(asio::io_context& io, SinkListenerConfig config, const Clock& clock,
-                 SampleSink sink);
+    SinkListener(asio::io_context& io, SinkListenerConfig config, const Clock& clock, SampleSink sink);
     ~SinkListener();
 
     SinkListener(const SinkListener&) = delete;
@@ -72,8 +71,8 @@ public:
 private:
     friend class SinkConnection;
     struct Counters {  // written on the io thread only (single writer)
-        SingleWriterCounter accepted, refused, closed, idle_timeouts, garbage_closes, bytes,
-            packets, malformed, crc_failures, discarded, sequence_gaps, unknown_sink, takeovers;
+        SingleWriterCounter accepted, refused, closed, idle_timeouts, garbage_closes, bytes, packets, malformed,
+            crc_failures, discarded, sequence_gaps, unknown_sink, takeovers;
     };
 
     void do_accept();

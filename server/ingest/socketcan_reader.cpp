@@ -17,8 +17,7 @@ namespace mocap::ingest {
 
 using boost::system::error_code;
 
-SocketCanReader::SocketCanReader(asio::io_context& io, SocketCanConfig config, const Clock& clock,
-                                 SampleSink sink)
+SocketCanReader::SocketCanReader(asio::io_context& io, SocketCanConfig config, const Clock& clock, SampleSink sink)
     : config_(std::move(config)),
       clock_(clock),
       socket_(io),
@@ -34,7 +33,9 @@ SocketCanReader::SocketCanReader(asio::io_context& io, SocketCanConfig config, c
     reassembly_.register_in(group_);
 }
 
-SocketCanReader::~SocketCanReader() { stop(); }
+SocketCanReader::~SocketCanReader() {
+    stop();
+}
 
 bool SocketCanReader::start(std::string* error) {
     const auto fail = [&](const std::string& what) {
@@ -73,8 +74,7 @@ void SocketCanReader::stop() {
 }
 
 void SocketCanReader::do_wait() {
-    socket_.async_wait(asio::posix::stream_descriptor::wait_read,
-                       [this](const error_code& ec) { on_readable(ec); });
+    socket_.async_wait(asio::posix::stream_descriptor::wait_read, [this](const error_code& ec) { on_readable(ec); });
 }
 
 void SocketCanReader::on_readable(const error_code& ec) {

@@ -60,8 +60,8 @@ private:
     FrameReassembler reassembler_;
     std::uint32_t last_kernel_drops_ = 0;
     bool stopped_ = false;
-    SingleWriterCounter frames_read_, fd_frames_, error_frames_, rtr_frames_, foreign_frames_,
-        kernel_drops_, read_errors_;
+    SingleWriterCounter frames_read_, fd_frames_, error_frames_, rtr_frames_, foreign_frames_, kernel_drops_,
+        read_errors_;
     CounterGroup group_;
 };
 

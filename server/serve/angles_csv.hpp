@@ -18,7 +18,8 @@ namespace mocap::serve {
 
 inline std::string angles_csv_header(const std::vector<std::string>& joint_angle_names) {
     std::string h = "subject,sync,t_s";
-    for (const auto& n : joint_angle_names) h += "," + n + "_deg";
+    for (const auto& n : joint_angle_names)
+        h += "," + n + "_deg";
     h += '\n';
     return h;
 }

@@ -12,8 +12,8 @@
 #include <fstream>
 #include <sstream>
 
-#include "skeleton/bvh.hpp"
 #include "core/errno_text.hpp"
+#include "skeleton/bvh.hpp"
 
 namespace mocap::serve {
 

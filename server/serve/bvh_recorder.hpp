@@ -33,9 +33,9 @@
 namespace mocap::serve {
 
 struct BvhRecorderConfig {
-    std::string directory = ".";      ///< where "" paths go: mocap-<n>.bvh
-    std::uint32_t subject = 0;        ///< 0 = first subject with a frame
-    double flush_interval_s = 1.0;    ///< write + patch the count this often
+    std::string directory = ".";               ///< where "" paths go: mocap-<n>.bvh
+    std::uint32_t subject = 0;                 ///< 0 = first subject with a frame
+    double flush_interval_s = 1.0;             ///< write + patch the count this often
     std::size_t max_buffer_bytes = 16u << 20;  ///< beyond this frames are dropped (counted)
 };
 
@@ -71,11 +71,11 @@ private:
     std::mutex control_mutex_;  // serialises start/stop
 
     std::atomic<bool> recording_{false};
-    std::mutex mutex_;               // guards the fields below
+    std::mutex mutex_;  // guards the fields below
     std::condition_variable wake_;
-    std::string pending_;            // whole lines not yet written
+    std::string pending_;  // whole lines not yet written
     std::uint64_t pending_frames_ = 0;
-    std::uint32_t subject_ = 0;      // assembler thread once recording (set at start)
+    std::uint32_t subject_ = 0;  // assembler thread once recording (set at start)
     bool stop_writer_ = false;
 
     int fd_ = -1;
@@ -94,9 +94,9 @@ inline constexpr int kBvhCountDigits = 10;
 struct BvhRepairResult {
     bool ok = false;
     std::string error;
-    std::uint64_t frames = 0;          ///< complete MOTION lines kept
-    std::uint64_t bytes_cut = 0;       ///< partial last line removed
-    std::uint64_t frames_before = 0;   ///< the count the header claimed
+    std::uint64_t frames = 0;         ///< complete MOTION lines kept
+    std::uint64_t bytes_cut = 0;      ///< partial last line removed
+    std::uint64_t frames_before = 0;  ///< the count the header claimed
 };
 
 /// Repairs a BVH file in place: the count becomes the number of complete MOTION lines

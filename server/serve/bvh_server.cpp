@@ -67,12 +67,12 @@ private:
         queue_.move_into(in_flight_, kMaxBatch);
         if (in_flight_.empty()) return;
         buffers_.clear();
-        for (const auto& s : in_flight_) buffers_.emplace_back(s->data(), s->size());
+        for (const auto& s : in_flight_)
+            buffers_.emplace_back(s->data(), s->size());
         writing_ = true;
-        asio::async_write(socket_, buffers_,
-                          [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
-                              self->on_write(ec);
-                          });
+        asio::async_write(
+            socket_, buffers_,
+            [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) { self->on_write(ec); });
     }
 
     void on_write(const boost::system::error_code& ec) {
@@ -85,10 +85,9 @@ private:
     }
 
     void do_read() {
-        socket_.async_read_some(asio::buffer(read_buf_),
-                                [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
-                                    self->on_read(ec, n);
-                                });
+        socket_.async_read_some(
+            asio::buffer(read_buf_),
+            [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) { self->on_read(ec, n); });
     }
 
     void on_read(const boost::system::error_code& ec, std::size_t n) {
@@ -161,11 +160,17 @@ BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
     greeting_ = std::make_shared<const std::string>(encoder_.hierarchy() + "MOTION\n" + encoder_.frame_time_line());
 }
 
-BvhServer::~BvhServer() { stop(); }
+BvhServer::~BvhServer() {
+    stop();
+}
 
-bool BvhServer::start(std::string& error) { return serve_.start(config_.bind_address, config_.port, error); }
+bool BvhServer::start(std::string& error) {
+    return serve_.start(config_.bind_address, config_.port, error);
+}
 
-void BvhServer::stop() { serve_.stop(); }
+void BvhServer::stop() {
+    serve_.stop();
+}
 
 void BvhServer::admit(asio::ip::tcp::socket socket) {
     const std::uint64_t id = sessions_.next_id();

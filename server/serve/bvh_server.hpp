@@ -44,10 +44,10 @@ namespace mocap::serve {
 
 struct BvhServerConfig {
     std::string bind_address = "0.0.0.0";
-    std::uint16_t port = 7002;        ///< 0 = any free port (tests)
-    std::size_t max_clients = 64;     ///< more are closed at once (counted)
-    std::size_t queue_frames = 64;    ///< per-client queue; the oldest line is dropped beyond it
-    std::uint32_t subject = 0;        ///< 0 = first subject with a frame (per client)
+    std::uint16_t port = 7002;      ///< 0 = any free port (tests)
+    std::size_t max_clients = 64;   ///< more are closed at once (counted)
+    std::size_t queue_frames = 64;  ///< per-client queue; the oldest line is dropped beyond it
+    std::uint32_t subject = 0;      ///< 0 = first subject with a frame (per client)
     std::size_t publish_backlog_frames = 1024;
 };
 
@@ -97,7 +97,7 @@ private:
     std::shared_ptr<const std::string> greeting_;  // HIERARCHY + MOTION + Frame Time
     BvhServerCounters counters_;
 
-    ServeThread serve_;  // before the sessions and the backlog, which use its io_context
+    ServeThread serve_;               // before the sessions and the backlog, which use its io_context
     SessionTable<Session> sessions_;  // serve thread (open(): any thread)
     PublishBacklog backlog_;
 };

@@ -40,7 +40,8 @@ std::size_t ClientSendQueue::move_into(std::vector<Bytes>& out, std::size_t max_
 }
 
 void ClientSendQueue::clear() {
-    while (size_ > 0) static_cast<void>(pop());
+    while (size_ > 0)
+        static_cast<void>(pop());
     head_ = 0;
 }
 

@@ -42,8 +42,7 @@ bool token_equal(std::string_view expected, std::string_view given) {
     return diff == 0;
 }
 
-ClientSession::ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx,
-                             std::size_t lane, std::uint64_t id)
+ClientSession::ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, std::size_t lane, std::uint64_t id)
     : socket_(std::move(socket)),
       timer_(socket_.get_executor()),
       ctx_(ctx),
@@ -76,9 +75,9 @@ void ClientSession::start() {
 void ClientSession::do_read() {
     if (closed_) return;
     const auto area = reader_.write_area();
-    socket_.async_read_some(asio::buffer(area.data(), area.size()),
-                            [self = shared_from_this()](const boost::system::error_code& ec,
-                                                        std::size_t n) { self->on_read(ec, n); });
+    socket_.async_read_some(
+        asio::buffer(area.data(), area.size()),
+        [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) { self->on_read(ec, n); });
 }
 
 void ClientSession::on_read(const boost::system::error_code& ec, std::size_t n) {
@@ -105,13 +104,11 @@ void ClientSession::parse_messages() {
         if (r.status == FrameStatus::kBadPrefix ||
             !in_->ParseFromArray(r.payload.data(), static_cast<int>(r.payload.size()))) {
             ctx_.counters.malformed_messages.fetch_add(1, std::memory_order_relaxed);
-            return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed,
-                                  "unparseable message");
+            return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "unparseable message");
         }
         if (!take_request_token()) {
             ctx_.counters.rate_limited.fetch_add(1, std::memory_order_relaxed);
-            return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited,
-                                  "too many requests");
+            return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, "too many requests");
         }
         if (!handle(*in_)) return;
     }
@@ -175,8 +172,7 @@ void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
     const v1::Subscribe& sub = message.subscribe();
     if (static_cast<std::uint32_t>(sub.subject_ids_size()) > kMaxSubscribeSubjects) {
         ctx_.counters.malformed_messages.fetch_add(1, std::memory_order_relaxed);
-        return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed,
-                              "too many subjects in Subscribe");
+        return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "too many subjects in Subscribe");
     }
     unsubscribe();
     subjects_.assign(sub.subject_ids().begin(), sub.subject_ids().end());
@@ -192,7 +188,8 @@ void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
 
     reply_->Clear();
     v1::Subscribed* ack = reply_->mutable_subscribed();
-    for (std::uint32_t s : subjects_) ack->add_subject_ids(s);
+    for (std::uint32_t s : subjects_)
+        ack->add_subject_ids(s);
     ack->set_decimation(decimation_);
     ack->set_fields(fields_);
     ack->set_queue_frames(static_cast<std::uint32_t>(frames_.capacity()));
@@ -243,8 +240,7 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
         counter.fetch_add(1, std::memory_order_relaxed);
         std::uint64_t suppressed = 0;
         if (ctx_.log.allow(LogLimiter::kControlRefused, suppressed)) {
-            spdlog::warn("serve: control request from client {} refused: {} ({} suppressed)",
-                         id_, why, suppressed);
+            spdlog::warn("serve: control request from client {} refused: {} ({} suppressed)", id_, why, suppressed);
         }
         return ControlResult::failure(why);
     };
@@ -263,15 +259,12 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
         auto unsupported = [] { return ControlResult::failure("not supported by this server"); };
         switch (request.action_case()) {
             case R::kCalibrate: {
-                const auto pose = request.calibrate().pose() == v1::POSE_N ? CalibrationPose::kN
-                                                                            : CalibrationPose::kT;
-                result = h.calibrate ? h.calibrate(request.calibrate().subject_id(), pose)
-                                     : unsupported();
+                const auto pose = request.calibrate().pose() == v1::POSE_N ? CalibrationPose::kN : CalibrationPose::kT;
+                result = h.calibrate ? h.calibrate(request.calibrate().subject_id(), pose) : unsupported();
                 break;
             }
             case R::kStartRecording:
-                result = h.start_recording ? h.start_recording(request.start_recording().path())
-                                           : unsupported();
+                result = h.start_recording ? h.start_recording(request.start_recording().path()) : unsupported();
                 break;
             case R::kStopRecording:
                 result = h.stop_recording ? h.stop_recording() : unsupported();
@@ -283,8 +276,7 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
                 result = ControlResult::failure("no action in request");
                 break;
         }
-        (result.ok ? ctx_.counters.control_ok : ctx_.counters.control_failed)
-            .fetch_add(1, std::memory_order_relaxed);
+        (result.ok ? ctx_.counters.control_ok : ctx_.counters.control_failed).fetch_add(1, std::memory_order_relaxed);
     }
     reply_->Clear();
     v1::ControlReply* reply = reply_->mutable_control_reply();
@@ -351,11 +343,12 @@ void ClientSession::do_write() {
         }
         return;
     }
-    for (const SharedBytes& b : in_flight_) buffers_.emplace_back(b->data(), b->size());
+    for (const SharedBytes& b : in_flight_)
+        buffers_.emplace_back(b->data(), b->size());
     writing_ = true;
-    asio::async_write(socket_, buffers_,
-                      [self = shared_from_this()](const boost::system::error_code& ec,
-                                                  std::size_t n) { self->on_write(ec, n); });
+    asio::async_write(
+        socket_, buffers_,
+        [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) { self->on_write(ec, n); });
 }
 
 void ClientSession::on_write(const boost::system::error_code& ec, std::size_t n) {
@@ -376,9 +369,7 @@ void ClientSession::on_write(const boost::system::error_code& ec, std::size_t n)
 
 void ClientSession::arm_timer(std::chrono::milliseconds after) {
     timer_.expires_after(after);
-    timer_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
-        self->on_timer(ec);
-    });
+    timer_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) { self->on_timer(ec); });
 }
 
 void ClientSession::on_timer(const boost::system::error_code& ec) {
@@ -389,19 +380,16 @@ void ClientSession::on_timer(const boost::system::error_code& ec) {
     if (closing_) return close();  // the client did not take its Goodbye in time
     if (!subscribed_) {
         ctx_.counters.idle_timeouts.fetch_add(1, std::memory_order_relaxed);
-        protocol_error(CloseReason::kTimeout, LogLimiter::kIdle,
-                       "nothing received within subscribe_timeout_ms");
+        protocol_error(CloseReason::kTimeout, LogLimiter::kIdle, "nothing received within subscribe_timeout_ms");
     }
 }
 
 void ClientSession::fail(const boost::system::error_code& ec, const char* what) {
     if (ec == asio::error::operation_aborted) return;  // our own cancel/close
-    if (ec != asio::error::eof && ec != asio::error::connection_reset &&
-        ec != asio::error::broken_pipe) {
+    if (ec != asio::error::eof && ec != asio::error::connection_reset && ec != asio::error::broken_pipe) {
         std::uint64_t suppressed = 0;
         if (ctx_.log.allow(LogLimiter::kIoError, suppressed)) {
-            spdlog::info("serve: client {} {}: {} ({} similar suppressed)", id_, what,
-                         ec.message(), suppressed);
+            spdlog::info("serve: client {} {}: {} ({} similar suppressed)", id_, what, ec.message(), suppressed);
         }
     }
     close();

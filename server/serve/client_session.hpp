@@ -74,8 +74,7 @@ public:
     static constexpr std::size_t kMaxPendingReplies = 16;
 
     /// `socket` must belong to the lane's io_context.
-    ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, std::size_t lane,
-                  std::uint64_t id);
+    ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, std::size_t lane, std::uint64_t id);
     ~ClientSession();
     ClientSession(const ClientSession&) = delete;
     ClientSession& operator=(const ClientSession&) = delete;

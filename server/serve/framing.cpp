@@ -31,11 +31,9 @@ bool append_delimited(const google::protobuf::MessageLite& message, std::string&
     return message.SerializeWithCachedSizesToArray(dst) == dst + size;
 }
 
-DelimitedReader::DelimitedReader(std::size_t max_message_bytes)
-    : max_message_bytes_(max_message_bytes) {
+DelimitedReader::DelimitedReader(std::size_t max_message_bytes) : max_message_bytes_(max_message_bytes) {
     // Start small; a server-side reader (max a few KiB) reaches its full size at once.
-    buf_.resize(std::min<std::size_t>(max_message_bytes + kMaxLengthPrefixBytes,
-                                      std::size_t{64} * 1024));
+    buf_.resize(std::min<std::size_t>(max_message_bytes + kMaxLengthPrefixBytes, std::size_t{64} * 1024));
 }
 
 std::span<std::uint8_t> DelimitedReader::write_area() {
@@ -54,7 +52,9 @@ std::span<std::uint8_t> DelimitedReader::write_area() {
     return {buf_.data() + end_, buf_.size() - end_};
 }
 
-void DelimitedReader::commit(std::size_t n) { end_ = std::min(end_ + n, buf_.size()); }
+void DelimitedReader::commit(std::size_t n) {
+    end_ = std::min(end_ + n, buf_.size());
+}
 
 FrameResult DelimitedReader::next() {
     if (error_ != FrameStatus::kNeedMore) return {error_, {}};

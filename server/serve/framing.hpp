@@ -63,8 +63,8 @@ public:
 private:
     std::size_t max_message_bytes_;
     std::vector<std::uint8_t> buf_;
-    std::size_t begin_ = 0;  ///< first unconsumed byte
-    std::size_t end_ = 0;    ///< one past the last received byte
+    std::size_t begin_ = 0;                       ///< first unconsumed byte
+    std::size_t end_ = 0;                         ///< one past the last received byte
     FrameStatus error_ = FrameStatus::kNeedMore;  ///< sticky kTooLarge/kBadPrefix
 };
 

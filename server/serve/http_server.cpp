@@ -134,9 +134,7 @@ public:
         ws_.set_option(websocket::stream_base::decorator(
             [](websocket::response_type& res) { res.set(http::field::server, "mocapd"); }));
         ws_.read_message_max(kMaxWsMessageBytes);
-        ws_.async_accept(request_, [self = shared_from_this()](const beast::error_code& ec) {
-            self->on_accept(ec);
-        });
+        ws_.async_accept(request_, [self = shared_from_this()](const beast::error_code& ec) { self->on_accept(ec); });
     }
 
     // A frame for whoever watches its subject; oldest queued frame dropped when full.
@@ -169,9 +167,8 @@ private:
     }
 
     void do_read() {
-        ws_.async_read(read_buf_, [self = shared_from_this()](const beast::error_code& ec, std::size_t) {
-            self->on_read(ec);
-        });
+        ws_.async_read(read_buf_,
+                       [self = shared_from_this()](const beast::error_code& ec, std::size_t) { self->on_read(ec); });
     }
 
     void on_read(const beast::error_code& ec) {
@@ -185,8 +182,8 @@ private:
         if (closed_ || writing_) return;
         in_flight_is_frame_ = false;
         if (const std::uint64_t dropped = frames_.take_unreported_drops(); dropped > 0) {
-            in_flight_ = std::make_shared<const std::string>(fmt::format(
-                R"({{"type":"drops","dropped":{},"dropped_total":{}}})", dropped, frames_.dropped_total()));
+            in_flight_ = std::make_shared<const std::string>(
+                fmt::format(R"({{"type":"drops","dropped":{},"dropped_total":{}}})", dropped, frames_.dropped_total()));
         } else if (!replies_.empty()) {
             in_flight_ = std::move(replies_.front());
             replies_.pop_front();
@@ -199,9 +196,7 @@ private:
         writing_ = true;
         ws_.text(true);
         ws_.async_write(asio::buffer(*in_flight_),
-                        [self = shared_from_this()](const beast::error_code& ec, std::size_t) {
-                            self->on_write(ec);
-                        });
+                        [self = shared_from_this()](const beast::error_code& ec, std::size_t) { self->on_write(ec); });
     }
 
     void on_write(const beast::error_code& ec) {
@@ -264,9 +259,7 @@ private:
         parser_->body_limit(kMaxRequestBodyBytes);
         stream_.expires_after(std::chrono::seconds(server_.config_.idle_timeout_s));
         http::async_read(stream_, buffer_, *parser_,
-                         [self = shared_from_this()](const beast::error_code& ec, std::size_t) {
-                             self->on_read(ec);
-                         });
+                         [self = shared_from_this()](const beast::error_code& ec, std::size_t) { self->on_read(ec); });
     }
 
     void on_read(const beast::error_code& ec) {
@@ -323,7 +316,8 @@ private:
             if (!read_only) return send_text(request, http::status::method_not_allowed, "GET only\n");
             http::response<http::span_body<const char>> res{http::status::ok, request.version()};
             res.set(http::field::server, "mocapd");
-            res.set(http::field::content_type, beast::string_view(asset.content_type.data(), asset.content_type.size()));
+            res.set(http::field::content_type,
+                    beast::string_view(asset.content_type.data(), asset.content_type.size()));
             res.set(http::field::cache_control, "no-cache");
             res.body() = beast::span<const char>(asset.body.data(), asset.body.size());
             res.keep_alive(request.keep_alive());
@@ -355,8 +349,9 @@ private:
             reply(status, ControlResult::failure(why));
         };
         const auto token_field = request.find("X-Mocap-Token");
-        const std::string_view token =
-            token_field == request.end() ? std::string_view() : std::string_view(token_field->value().data(), token_field->value().size());
+        const std::string_view token = token_field == request.end()
+                                           ? std::string_view()
+                                           : std::string_view(token_field->value().data(), token_field->value().size());
         if (config.control_token.empty()) {
             return refuse(counters.control_refused_disabled, http::status::forbidden,
                           "control disabled (no token configured)");
@@ -374,8 +369,7 @@ private:
             const std::string_view pose = query_value(query, "pose").value_or("t");
             if (!subject || (pose != "t" && pose != "n")) {
                 counters.bad_requests.fetch_add(1, std::memory_order_relaxed);
-                return reply(http::status::bad_request,
-                             ControlResult::failure("expected ?subject=<id>&pose=t|n"));
+                return reply(http::status::bad_request, ControlResult::failure("expected ?subject=<id>&pose=t|n"));
             }
             if (h.calibrate) result = h.calibrate(*subject, pose == "n" ? CalibrationPose::kN : CalibrationPose::kT);
         } else if (path == "/api/record/start") {
@@ -386,7 +380,8 @@ private:
             counters.bad_requests.fetch_add(1, std::memory_order_relaxed);
             return reply(http::status::not_found, ControlResult::failure("unknown control action"));
         }
-        if (!result) return reply(http::status::not_implemented, ControlResult::failure("not supported by this server"));
+        if (!result)
+            return reply(http::status::not_implemented, ControlResult::failure("not supported by this server"));
         (result->ok ? counters.control_ok : counters.control_failed).fetch_add(1, std::memory_order_relaxed);
         reply(result->ok ? http::status::ok : http::status::conflict, *result);
     }
@@ -472,11 +467,17 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
     }
 }
 
-HttpServer::~HttpServer() { stop(); }
+HttpServer::~HttpServer() {
+    stop();
+}
 
-bool HttpServer::start(std::string& error) { return serve_.start(config_.bind_address, config_.port, error); }
+bool HttpServer::start(std::string& error) {
+    return serve_.start(config_.bind_address, config_.port, error);
+}
 
-void HttpServer::stop() { serve_.stop(); }
+void HttpServer::stop() {
+    serve_.stop();
+}
 
 void HttpServer::admit(asio::ip::tcp::socket socket) {
     const std::uint64_t id = sessions_.next_id();
@@ -501,7 +502,8 @@ std::size_t HttpServer::active_subjects(std::int64_t window_us) const {
     const std::int64_t now = now_us();
     std::lock_guard lock(subjects_mutex_);
     std::size_t n = 0;
-    for (const auto& [id, last_us] : subject_last_us_) n += now - last_us <= window_us ? 1 : 0;
+    for (const auto& [id, last_us] : subject_last_us_)
+        n += now - last_us <= window_us ? 1 : 0;
     return n;
 }
 
@@ -533,9 +535,12 @@ std::string HttpServer::hello_json(std::uint32_t subject) const {
 
 std::string HttpServer::metrics_text() {
     MetricsSnapshot m = handlers_.metrics ? handlers_.metrics() : MetricsSnapshot{};
-    for (NamedCounter& c : counters_.snapshot()) m.counters.push_back(std::move(c));
-    m.gauges.push_back({"http_clients", "HTTP and WebSocket connections open now", static_cast<double>(sessions_.open())});
-    m.gauges.push_back({"http_ws_clients", "Viewer WebSocket connections open now", static_cast<double>(ws_clients_.load())});
+    for (NamedCounter& c : counters_.snapshot())
+        m.counters.push_back(std::move(c));
+    m.gauges.push_back(
+        {"http_clients", "HTTP and WebSocket connections open now", static_cast<double>(sessions_.open())});
+    m.gauges.push_back(
+        {"http_ws_clients", "Viewer WebSocket connections open now", static_cast<double>(ws_clients_.load())});
     m.gauges.push_back({"subjects_active", "Subjects that delivered a frame in the last 2 s",
                         static_cast<double>(active_subjects(2'000'000))});
     return render_prometheus(m);

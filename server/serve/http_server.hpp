@@ -34,7 +34,8 @@
 // Threads: one ServeThread (own io_context) runs the acceptor, every HTTP and WebSocket
 // session, and the metrics/health/control callbacks. publish() may be called from any
 // thread (the assembler): it encodes only while a WebSocket is open and hands the frame
-// over through a PublishBacklog of publish_backlog_frames (beyond: dropped, counted). Ownership: the daemon owns the server; stop() or the destructor closes all.
+// over through a PublishBacklog of publish_backlog_frames (beyond: dropped, counted). Ownership: the daemon owns the
+// server; stop() or the destructor closes all.
 #pragma once
 
 #include <atomic>
@@ -62,12 +63,12 @@ namespace mocap::serve {
 
 struct HttpServerConfig {
     std::string bind_address = "0.0.0.0";
-    std::uint16_t port = 8080;               ///< 0 = any free port (tests)
-    std::size_t max_clients = 64;            ///< HTTP + WebSocket connections at once
-    std::size_t ws_queue_frames = 16;        ///< per WebSocket; oldest dropped beyond it
+    std::uint16_t port = 8080;         ///< 0 = any free port (tests)
+    std::size_t max_clients = 64;      ///< HTTP + WebSocket connections at once
+    std::size_t ws_queue_frames = 16;  ///< per WebSocket; oldest dropped beyond it
     std::size_t publish_backlog_frames = 1024;
-    std::uint32_t idle_timeout_s = 30;       ///< an HTTP connection idle this long is closed
-    std::string control_token;               ///< empty = control refused
+    std::uint32_t idle_timeout_s = 30;  ///< an HTTP connection idle this long is closed
+    std::string control_token;          ///< empty = control refused
     bool control_loopback_only = true;
     /// Wall clock (CLOCK_REALTIME µs) for encoded_us; empty = system_clock.
     std::function<std::int64_t()> wall_clock_us;
@@ -93,7 +94,7 @@ struct HealthStatus {
 
 /// Called on the serve thread; must return quickly and be safe from any thread.
 struct HttpHandlers {
-    ControlHandlers control;                  ///< calibrate, start/stop_recording used
+    ControlHandlers control;                   ///< calibrate, start/stop_recording used
     std::function<MetricsSnapshot()> metrics;  ///< daemon counters, gauges, latencies
     std::function<HealthStatus()> health;      ///< empty = always healthy
 };
@@ -168,7 +169,7 @@ private:
     HttpServerCounters counters_;
     LogLimiter log_;  ///< one refusal line per 10 s, not one per request
 
-    ServeThread serve_;  // before the sessions and the backlog, which use its io_context
+    ServeThread serve_;               // before the sessions and the backlog, which use its io_context
     SessionTable<Session> sessions_;  // HTTP and WebSocket; serve thread (open(): any thread)
     std::unordered_map<std::uint64_t, std::shared_ptr<WsSession>> ws_sessions_;  // serve thread
     PublishBacklog backlog_;

@@ -10,8 +10,8 @@ namespace mocap::serve {
 
 struct PoseBroadcaster::Lane {
     asio::io_context* io = nullptr;
-    std::mutex mutex;                    // guards pending, wake_posted
-    std::vector<EncodedFrame> pending;   // filled by publish()
+    std::mutex mutex;                   // guards pending, wake_posted
+    std::vector<EncodedFrame> pending;  // filled by publish()
     bool wake_posted = false;
     // Lane thread only:
     std::vector<EncodedFrame> draining;  // swapped with pending, so neither reallocates
@@ -19,10 +19,8 @@ struct PoseBroadcaster::Lane {
     std::vector<std::shared_ptr<ClientSession>> all_subjects;
 };
 
-PoseBroadcaster::PoseBroadcaster(const std::vector<asio::io_context*>& lanes,
-                                 std::size_t backlog_frames,
-                                 std::function<std::int64_t()> wall_clock_us,
-                                 ServeCounters& counters)
+PoseBroadcaster::PoseBroadcaster(const std::vector<asio::io_context*>& lanes, std::size_t backlog_frames,
+                                 std::function<std::int64_t()> wall_clock_us, ServeCounters& counters)
     : backlog_frames_(std::max<std::size_t>(backlog_frames, 1)),
       wall_clock_us_(std::move(wall_clock_us)),
       counters_(counters) {
@@ -95,17 +93,17 @@ void PoseBroadcaster::drain(Lane& lane) {
     // synchronously, so the index cannot change while it is walked.
     for (const EncodedFrame& frame : lane.draining) {
         if (auto it = lane.by_subject.find(frame.subject_id); it != lane.by_subject.end()) {
-            for (const auto& session : it->second) session->deliver(frame);
+            for (const auto& session : it->second)
+                session->deliver(frame);
         }
-        for (const auto& session : lane.all_subjects) session->deliver(frame);
+        for (const auto& session : lane.all_subjects)
+            session->deliver(frame);
     }
     lane.draining.clear();
 }
 
-void PoseBroadcaster::subscribe(std::size_t lane_index,
-                                const std::shared_ptr<ClientSession>& session,
-                                const std::vector<std::uint32_t>& subjects,
-                                std::uint32_t fields) {
+void PoseBroadcaster::subscribe(std::size_t lane_index, const std::shared_ptr<ClientSession>& session,
+                                const std::vector<std::uint32_t>& subjects, std::uint32_t fields) {
     Lane& lane = *lanes_.at(lane_index);
     field_users_[normalize_fields(fields)].fetch_add(1, std::memory_order_relaxed);
     if (subjects.empty()) {
@@ -120,8 +118,7 @@ void PoseBroadcaster::subscribe(std::size_t lane_index,
 }
 
 void PoseBroadcaster::unsubscribe(std::size_t lane_index, const ClientSession* session,
-                                  const std::vector<std::uint32_t>& subjects,
-                                  std::uint32_t fields) {
+                                  const std::vector<std::uint32_t>& subjects, std::uint32_t fields) {
     Lane& lane = *lanes_.at(lane_index);
     field_users_[normalize_fields(fields)].fetch_sub(1, std::memory_order_relaxed);
     auto remove_from = [session](std::vector<std::shared_ptr<ClientSession>>& list) {

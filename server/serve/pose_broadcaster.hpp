@@ -63,8 +63,8 @@ public:
     void subscribe(std::size_t lane, const std::shared_ptr<ClientSession>& session,
                    const std::vector<std::uint32_t>& subjects, std::uint32_t fields);
     /// Lane thread only; undoes subscribe() for the same arguments.
-    void unsubscribe(std::size_t lane, const ClientSession* session,
-                     const std::vector<std::uint32_t>& subjects, std::uint32_t fields);
+    void unsubscribe(std::size_t lane, const ClientSession* session, const std::vector<std::uint32_t>& subjects,
+                     std::uint32_t fields);
 
     [[nodiscard]] std::size_t lane_count() const { return lanes_.size(); }
 

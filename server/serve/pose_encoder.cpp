@@ -17,8 +17,8 @@ SharedBytes encode_server_message(const v1::ServerMessage& message) {
 PoseEncoder::PoseEncoder() : message_(std::make_unique<v1::ServerMessage>()) {}
 PoseEncoder::~PoseEncoder() = default;
 
-SharedBytes PoseEncoder::encode_frame(const SubjectFrame& frame, const SkeletonPose& pose,
-                                      std::uint32_t fields, std::int64_t encoded_us) {
+SharedBytes PoseEncoder::encode_frame(const SubjectFrame& frame, const SkeletonPose& pose, std::uint32_t fields,
+                                      std::int64_t encoded_us) {
     fields = normalize_fields(fields);
     const std::uint32_t n = frame.segment_count;
     assert(n <= kMaxSegments);
@@ -48,18 +48,22 @@ SharedBytes PoseEncoder::encode_frame(const SubjectFrame& frame, const SkeletonP
         dst->Reserve(static_cast<int>(4 * n));
         for (std::uint32_t i = 0; i < n; ++i) {
             const std::array<double, 4>& q = quat_of(i);
-            for (double c : q) dst->AddAlreadyReserved(static_cast<float>(c));
+            for (double c : q)
+                dst->AddAlreadyReserved(static_cast<float>(c));
         }
     };
     if (fields & kFieldOrientations) {
-        put_quats(out->mutable_q_world_segment_wxyz(),
-                  [&](std::uint32_t i) -> const auto& { return pose.q_world_segment_wxyz[i]; });
+        put_quats(
+            out->mutable_q_world_segment_wxyz(), [&](std::uint32_t i) -> const auto& {
+                return pose.q_world_segment_wxyz[i];
+            });
     }
     if (fields & kFieldPositions) {
         auto* dst = out->mutable_position_m();
         dst->Reserve(static_cast<int>(3 * n));
         for (std::uint32_t i = 0; i < n; ++i) {
-            for (double c : pose.position_m[i]) dst->AddAlreadyReserved(static_cast<float>(c));
+            for (double c : pose.position_m[i])
+                dst->AddAlreadyReserved(static_cast<float>(c));
         }
     }
     if (fields & kFieldJointAngles) {
@@ -72,9 +76,10 @@ SharedBytes PoseEncoder::encode_frame(const SubjectFrame& frame, const SkeletonP
         }
     }
     if (fields & kFieldRaw) {
-        put_quats(out->mutable_q_earth_sensor_wxyz(), [&](std::uint32_t i) -> const auto& {
-            return frame.segments[i].q_earth_sensor_wxyz;
-        });
+        put_quats(
+            out->mutable_q_earth_sensor_wxyz(), [&](std::uint32_t i) -> const auto& {
+                return frame.segments[i].q_earth_sensor_wxyz;
+            });
     }
     return encode_server_message(*message_);
 }

@@ -58,8 +58,8 @@ public:
     /// stage stamps come from frame.times except encoded_us, given here (wall µs).
     /// Precondition (asserted): pose.segment_count == frame.segment_count when
     /// orientations, positions or joint angles are selected.
-    SharedBytes encode_frame(const SubjectFrame& frame, const SkeletonPose& pose,
-                             std::uint32_t fields, std::int64_t encoded_us);
+    SharedBytes encode_frame(const SubjectFrame& frame, const SkeletonPose& pose, std::uint32_t fields,
+                             std::int64_t encoded_us);
 
 private:
     std::unique_ptr<v1::ServerMessage> message_;  ///< reused scratch message

@@ -19,7 +19,8 @@ inline constexpr std::size_t kMaxJointAngles = 3 * kMaxSegments;
 /// kMaxSegments identity quaternions (w = 1): the pose of a segment nobody has set.
 constexpr std::array<std::array<double, 4>, kMaxSegments> identity_quaternions() {
     std::array<std::array<double, 4>, kMaxSegments> out{};
-    for (auto& q : out) q = {1.0, 0.0, 0.0, 0.0};
+    for (auto& q : out)
+        q = {1.0, 0.0, 0.0, 0.0};
     return out;
 }
 
@@ -29,8 +30,7 @@ constexpr std::array<std::array<double, 4>, kMaxSegments> identity_quaternions()
 struct SkeletonPose {
     std::uint16_t segment_count = 0;  ///< must equal SubjectFrame::segment_count
     /// World-from-segment orientation after sensor-to-segment calibration, (w,x,y,z).
-    std::array<std::array<double, 4>, kMaxSegments> q_world_segment_wxyz =
-        identity_quaternions();
+    std::array<std::array<double, 4>, kMaxSegments> q_world_segment_wxyz = identity_quaternions();
     /// Segment origin (its joint with the parent) in the world frame, metres.
     std::array<Vec3d, kMaxSegments> position_m{};
     /// Flag bits (SegmentFlags) OR-ed onto SubjectFrame::segments[i].flags, e.g.

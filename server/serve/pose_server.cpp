@@ -29,14 +29,15 @@ PoseServer::PoseServer(ServeConfig config, ControlHandlers handlers)
     broadcaster_ = std::make_unique<PoseBroadcaster>(std::move(ios), config_.publish_backlog_frames,
                                                      config_.wall_clock_us, counters_);
     session_context_ = std::make_unique<SessionContext>(SessionContext{
-        config_, handlers_, counters_, log_, *broadcaster_, [this] { return hello(); },
-        config_.wall_clock_us,
+        config_, handlers_, counters_, log_, *broadcaster_, [this] { return hello(); }, config_.wall_clock_us,
         [this](std::size_t lane, std::uint64_t id) { on_session_closed(lane, id); }});
     goodbye_full_ = encode_goodbye(CloseReason::kServerFull, "client limit reached");
     set_description({});
 }
 
-PoseServer::~PoseServer() { stop(); }
+PoseServer::~PoseServer() {
+    stop();
+}
 
 void PoseServer::set_description(const ServeDescription& description) {
     v1::ServerMessage message;
@@ -96,8 +97,8 @@ bool PoseServer::start(std::string& error) {
             lane.io.run();
         });
     }
-    spdlog::info("serve: listening on {}:{} ({} thread(s), max {} clients)", config_.bind_address,
-                 bound_port_.load(), lanes_.size(), config_.max_clients);
+    spdlog::info("serve: listening on {}:{} ({} thread(s), max {} clients)", config_.bind_address, bound_port_.load(),
+                 lanes_.size(), config_.max_clients);
     return true;
 }
 
@@ -115,8 +116,10 @@ void PoseServer::stop() {
             // Copy: close() erases from the table through on_session_closed().
             std::vector<std::shared_ptr<ClientSession>> sessions;
             sessions.reserve(lane.sessions.size());
-            for (auto& [id, session] : lane.sessions) sessions.push_back(session);
-            for (auto& session : sessions) session->close();
+            for (auto& [id, session] : lane.sessions)
+                sessions.push_back(session);
+            for (auto& session : sessions)
+                session->close();
             lane.io.stop();  // remaining handlers are destroyed with the io_context
         });
     }
@@ -128,8 +131,7 @@ void PoseServer::stop() {
 
 void PoseServer::do_accept() {
     asio::io_context& target = lanes_[next_lane_]->io;
-    acceptor_->async_accept(target, [this](const boost::system::error_code& ec,
-                                           asio::ip::tcp::socket socket) {
+    acceptor_->async_accept(target, [this](const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
         on_accept(ec, std::move(socket));
     });
 }
@@ -156,16 +158,15 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
         counters_.connections_rejected_full.fetch_add(1, std::memory_order_relaxed);
         std::uint64_t suppressed = 0;
         if (log_.allow(LogLimiter::kClientFull, suppressed)) {
-            spdlog::warn("serve: client limit {} reached, connection refused ({} suppressed)",
-                         config_.max_clients, suppressed);
+            spdlog::warn("serve: client limit {} reached, connection refused ({} suppressed)", config_.max_clients,
+                         suppressed);
         }
         reject(socket);
     } else {
         active_clients_.fetch_add(1);
         counters_.connections_accepted.fetch_add(1, std::memory_order_relaxed);
-        asio::post(lanes_[lane]->io, [this, lane, s = std::move(socket)]() mutable {
-            start_session(lane, std::move(s));
-        });
+        asio::post(lanes_[lane]->io,
+                   [this, lane, s = std::move(socket)]() mutable { start_session(lane, std::move(s)); });
     }
     do_accept();
 }
@@ -184,9 +185,7 @@ void PoseServer::start_session(std::size_t lane, asio::ip::tcp::socket socket) {
     boost::system::error_code ignored;
     socket.set_option(asio::ip::tcp::no_delay(true), ignored);  // frames are small and urgent
     if (config_.send_buffer_bytes > 0) {
-        socket.set_option(asio::socket_base::send_buffer_size(
-                              static_cast<int>(config_.send_buffer_bytes)),
-                          ignored);
+        socket.set_option(asio::socket_base::send_buffer_size(static_cast<int>(config_.send_buffer_bytes)), ignored);
     }
     const std::uint64_t id = next_id_.fetch_add(1);
     auto session = std::make_shared<ClientSession>(std::move(socket), *session_context_, lane, id);

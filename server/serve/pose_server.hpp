@@ -62,16 +62,12 @@ public:
     [[nodiscard]] std::uint16_t port() const { return bound_port_.load(); }
 
     /// Any thread; see PoseBroadcaster::publish.
-    void publish(const SubjectFrame& frame, const SkeletonPose& pose) {
-        broadcaster_->publish(frame, pose);
-    }
+    void publish(const SubjectFrame& frame, const SkeletonPose& pose) { broadcaster_->publish(frame, pose); }
 
     /// Connected clients (including ones still handshaking).
     [[nodiscard]] std::size_t client_count() const { return active_clients_.load(); }
     [[nodiscard]] const ServeCounters& counters() const { return counters_; }
-    [[nodiscard]] std::vector<NamedCounter> counter_snapshot() const {
-        return counters_.snapshot();
-    }
+    [[nodiscard]] std::vector<NamedCounter> counter_snapshot() const { return counters_.snapshot(); }
     [[nodiscard]] const ServeConfig& config() const { return config_; }
 
 private:

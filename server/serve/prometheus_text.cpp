@@ -21,7 +21,8 @@ std::string sanitize(std::string_view in) {
         if (c == '_' && (out.empty() || out.back() == '_')) continue;
         out += c;
     }
-    while (!out.empty() && out.back() == '_') out.pop_back();
+    while (!out.empty() && out.back() == '_')
+        out.pop_back();
     return out;
 }
 
@@ -88,7 +89,8 @@ std::string prometheus_counter_name(std::string_view dotted, double* divisor) {
         it = tokens.erase(it);
     }
     std::string name = "mocapd";
-    for (const auto& t : tokens) name += "_" + t;
+    for (const auto& t : tokens)
+        name += "_" + t;
     if (!unit.empty()) name += "_" + unit;
     return name + "_total";
 }
@@ -111,13 +113,15 @@ std::string render_prometheus(const MetricsSnapshot& snapshot) {
     }
     for (const auto& [name, f] : counters) {
         std::string help = "mocapd counter";
-        for (std::size_t i = 0; i < f.sources.size(); ++i) help += (i == 0 ? " " : " + ") + f.sources[i];
+        for (std::size_t i = 0; i < f.sources.size(); ++i)
+            help += (i == 0 ? " " : " + ") + f.sources[i];
         family(out, name, "counter", help);
         fmt::format_to(std::back_inserter(out), "{} {}\n", name, number(f.value));
     }
 
     std::map<std::string, const MetricGauge*> gauges;
-    for (const MetricGauge& g : snapshot.gauges) gauges["mocapd_" + sanitize(g.name)] = &g;
+    for (const MetricGauge& g : snapshot.gauges)
+        gauges["mocapd_" + sanitize(g.name)] = &g;
     for (const auto& [name, g] : gauges) {
         family(out, name, "gauge", g->help);
         fmt::format_to(std::back_inserter(out), "{} {}\n", name, number(g->value));
@@ -138,11 +142,10 @@ std::string render_prometheus(const MetricsSnapshot& snapshot) {
                 while (bucket < kLatencyBuckets && latency_bucket_upper_us(bucket) <= le_us) {
                     cumulative += s.buckets[bucket++];
                 }
-                fmt::format_to(std::back_inserter(out), "{}_bucket{{stage=\"{}\",le=\"{}\"}} {}\n", name,
-                               stage, number(le_s), cumulative);
+                fmt::format_to(std::back_inserter(out), "{}_bucket{{stage=\"{}\",le=\"{}\"}} {}\n", name, stage,
+                               number(le_s), cumulative);
             }
-            fmt::format_to(std::back_inserter(out), "{}_bucket{{stage=\"{}\",le=\"+Inf\"}} {}\n", name, stage,
-                           s.count);
+            fmt::format_to(std::back_inserter(out), "{}_bucket{{stage=\"{}\",le=\"+Inf\"}} {}\n", name, stage, s.count);
             fmt::format_to(std::back_inserter(out), "{}_sum{{stage=\"{}\"}} {}\n", name, stage,
                            number(static_cast<double>(s.sum_us) / 1e6));
             fmt::format_to(std::back_inserter(out), "{}_count{{stage=\"{}\"}} {}\n", name, stage, s.count);

@@ -45,9 +45,8 @@ struct MetricsSnapshot {
 };
 
 /// Upper bounds (seconds) of the latency histogram's buckets; +Inf is added.
-inline constexpr std::array<double, 16> kLatencyBucketsS{
-    0.00005, 0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01,
-    0.025,   0.05,   0.1,     0.25,   0.5,   1.0,   2.5,    10.0};
+inline constexpr std::array<double, 16> kLatencyBucketsS{0.00005, 0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01,
+                                                         0.025,   0.05,   0.1,     0.25,   0.5,   1.0,    2.5,   10.0};
 
 /// Prometheus name of counter "component.name" (with the _total suffix); *divisor is
 /// set to what its value is divided by to be in the named unit (1, 1e3 for ms, 1e6 for µs).

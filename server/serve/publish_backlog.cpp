@@ -29,7 +29,8 @@ void PublishBacklog::drain() {
         std::lock_guard lock(mutex_);
         draining_.swap(pending_);
     }
-    for (const SubjectText& frame : draining_) deliver_(frame);
+    for (const SubjectText& frame : draining_)
+        deliver_(frame);
     draining_.clear();
 }
 

@@ -9,8 +9,8 @@
 #include <cstring>
 #include <ctime>
 
-#include "mocap/v1/recording.pb.h"
 #include "core/errno_text.hpp"
+#include "mocap/v1/recording.pb.h"
 
 namespace mocap::serve {
 
@@ -68,7 +68,8 @@ void append_raw_sample_record(const SegmentSample& s, std::string& out) {
     r->set_t_us(s.imu.t_us);
     r->set_imu_flags(s.imu.flags);
     if (s.has_node_quat) {
-        for (const double q : s.node_q_wxyz) r->add_node_q_wxyz(static_cast<float>(q));
+        for (const double q : s.node_q_wxyz)
+            r->add_node_q_wxyz(static_cast<float>(q));
     } else {
         for (int i = 0; i < 3; ++i) {
             r->add_gyro_rad_s(static_cast<float>(s.imu.gyro_rad_s[static_cast<std::size_t>(i)]));
@@ -91,7 +92,9 @@ RawRecorder::RawRecorder(RawRecorderConfig config, const Clock& clock)
     buffer_.reserve(1u << 20);
 }
 
-RawRecorder::~RawRecorder() { stop(); }
+RawRecorder::~RawRecorder() {
+    stop();
+}
 
 bool RawRecorder::start(std::string* error) {
     series_stamp_ = utc_stamp(clock_.now_us());
@@ -187,8 +190,9 @@ void RawRecorder::writer_loop() {
             ++n;
         }
         const std::int64_t now = clock_.now_us();
-        const bool rotate = fd_ >= 0 && ((config_.rotate_bytes != 0 && file_bytes_ + buffer_.size() >= config_.rotate_bytes) ||
-                                         (rotate_us > 0 && now - file_opened_us_ >= rotate_us));
+        const bool rotate =
+            fd_ >= 0 && ((config_.rotate_bytes != 0 && file_bytes_ + buffer_.size() >= config_.rotate_bytes) ||
+                         (rotate_us > 0 && now - file_opened_us_ >= rotate_us));
         if (stopping) {
             close_file();
             return;
@@ -265,7 +269,8 @@ int RawRecordingReader::next(SegmentSample& out, std::string* error) {
         out.imu.flags = static_cast<std::uint8_t>(r.imu_flags());
         if (r.node_q_wxyz_size() == 4) {
             out.has_node_quat = true;
-            for (int i = 0; i < 4; ++i) out.node_q_wxyz[static_cast<std::size_t>(i)] = r.node_q_wxyz(i);
+            for (int i = 0; i < 4; ++i)
+                out.node_q_wxyz[static_cast<std::size_t>(i)] = r.node_q_wxyz(i);
         } else if (r.gyro_rad_s_size() == 3 && r.accel_m_s2_size() == 3 && r.mag_ut_size() == 3) {
             for (int i = 0; i < 3; ++i) {
                 const auto k = static_cast<std::size_t>(i);

@@ -39,11 +39,11 @@ namespace mocap::serve {
 
 struct RawRecorderConfig {
     std::string directory = ".";
-    double flush_interval_s = 1.0;          ///< write() at least this often
+    double flush_interval_s = 1.0;            ///< write() at least this often
     std::uint64_t rotate_bytes = 256u << 20;  ///< start a new file beyond this size; 0 = never
-    double rotate_s = 3600.0;               ///< start a new file after this long; 0 = never
-    std::size_t ring_capacity = 16384;      ///< samples between ingest and the writer (power of 2)
-    bool fsync_on_rotate = true;            ///< fsync a file when it is closed
+    double rotate_s = 3600.0;                 ///< start a new file after this long; 0 = never
+    std::size_t ring_capacity = 16384;        ///< samples between ingest and the writer (power of 2)
+    bool fsync_on_rotate = true;              ///< fsync a file when it is closed
 };
 
 class RawRecorder {

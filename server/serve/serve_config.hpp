@@ -15,38 +15,38 @@
 namespace mocap::serve {
 
 struct ServeConfig {
-    std::string bind_address = "0.0.0.0";  ///< IPv4/IPv6 literal to listen on
-    std::uint16_t port = 7001;             ///< 0 = any free port (tests); see PoseServer::port()
-    std::size_t io_threads = 1;            ///< serve threads; each owns a share of the clients
-    std::size_t max_clients = 256;         ///< connections beyond this get Goodbye(SERVER_FULL)
-    std::size_t queue_frames = 64;         ///< per-client frame queue; the oldest frame is
-                                           ///< dropped (and announced) when it is full
-    std::uint32_t subscribe_timeout_ms = 5000;  ///< an unsubscribed client must send a valid
-                                                ///< message at least this often
+    std::string bind_address = "0.0.0.0";           ///< IPv4/IPv6 literal to listen on
+    std::uint16_t port = 7001;                      ///< 0 = any free port (tests); see PoseServer::port()
+    std::size_t io_threads = 1;                     ///< serve threads; each owns a share of the clients
+    std::size_t max_clients = 256;                  ///< connections beyond this get Goodbye(SERVER_FULL)
+    std::size_t queue_frames = 64;                  ///< per-client frame queue; the oldest frame is
+                                                    ///< dropped (and announced) when it is full
+    std::uint32_t subscribe_timeout_ms = 5000;      ///< an unsubscribed client must send a valid
+                                                    ///< message at least this often
     std::uint32_t max_client_message_bytes = 4096;  ///< longer ClientMessages close the link
-    double max_client_messages_per_s = 20.0;  ///< sustained request rate per client
-    std::uint32_t client_message_burst = 40;  ///< requests allowed at once before the rate applies
+    double max_client_messages_per_s = 20.0;        ///< sustained request rate per client
+    std::uint32_t client_message_burst = 40;        ///< requests allowed at once before the rate applies
     /// SO_SNDBUF per client (0 = kernel default, which grows to MiBs: tens of seconds of
     /// one subject's frames held in the kernel for a stalled client before its queue
     /// drops anything). Bounded, a lagging client's data stays fresh.
     std::uint32_t send_buffer_bytes = 128 * 1024;
-    std::uint32_t close_grace_ms = 1000;  ///< time a closing client gets to read its Goodbye
+    std::uint32_t close_grace_ms = 1000;        ///< time a closing client gets to read its Goodbye
     std::size_t publish_backlog_frames = 4096;  ///< frames waiting for one serve thread;
                                                 ///< beyond it frames are dropped (counted)
-    std::string control_token;         ///< empty = every control request is refused
-    bool control_loopback_only = true;  ///< refuse control from non-loopback peers
-    std::uint32_t frame_rate_hz = 100;  ///< announced in Hello
-    std::string world_frame = "ENU";    ///< announced in Hello ("ENU" or "NED")
-    std::string server_version = "mocapd";  ///< announced in Hello
+    std::string control_token;                  ///< empty = every control request is refused
+    bool control_loopback_only = true;          ///< refuse control from non-loopback peers
+    std::uint32_t frame_rate_hz = 100;          ///< announced in Hello
+    std::string world_frame = "ENU";            ///< announced in Hello ("ENU" or "NED")
+    std::string server_version = "mocapd";      ///< announced in Hello
     /// Wall clock (CLOCK_REALTIME µs) for encoded_us and Stats; empty = system_clock.
     std::function<std::int64_t()> wall_clock_us;
 };
 
 struct SegmentInfo {
     std::string name;
-    int parent = -1;                    ///< index of the parent segment; -1 = root
-    std::array<double, 3> offset_m{};   ///< joint position in the parent's frame
-    std::uint32_t node_id = 0;          ///< CAN node id of the segment's sensor
+    int parent = -1;                   ///< index of the parent segment; -1 = root
+    std::array<double, 3> offset_m{};  ///< joint position in the parent's frame
+    std::uint32_t node_id = 0;         ///< CAN node id of the segment's sensor
 };
 
 struct SubjectInfo {

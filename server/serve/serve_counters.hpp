@@ -21,11 +21,11 @@ struct ServeCounters {
     C connections_rejected_full{0};  ///< client limit reached
     C connections_closed{0};
     C accept_errors{0};
-    C frames_published{0};   ///< frames handed to publish()
-    C frames_encoded{0};     ///< encodings (one per frame and field selection in use)
-    C frames_sent{0};        ///< frame deliveries written to clients (sum over clients)
-    C frames_dropped{0};     ///< oldest frames dropped from lagging clients' queues
-    C backlog_dropped{0};    ///< frames dropped because a serve thread fell behind publish()
+    C frames_published{0};  ///< frames handed to publish()
+    C frames_encoded{0};    ///< encodings (one per frame and field selection in use)
+    C frames_sent{0};       ///< frame deliveries written to clients (sum over clients)
+    C frames_dropped{0};    ///< oldest frames dropped from lagging clients' queues
+    C backlog_dropped{0};   ///< frames dropped because a serve thread fell behind publish()
     C bytes_sent{0};
     C subscriptions{0};
     C malformed_messages{0};  ///< unparseable message or garbage length prefix
@@ -36,8 +36,8 @@ struct ServeCounters {
     C write_errors{0};
     C stats_requests{0};
     C control_ok{0};
-    C control_failed{0};             ///< authorised, but the action reported an error
-    C control_refused_disabled{0};   ///< no token configured
+    C control_failed{0};            ///< authorised, but the action reported an error
+    C control_refused_disabled{0};  ///< no token configured
     C control_refused_not_loopback{0};
     C control_refused_no_token{0};
     C control_refused_bad_token{0};
@@ -65,9 +65,9 @@ public:
 
     /// True if a line may be logged now; `suppressed` = lines held back since the last one.
     bool allow(Kind kind, std::uint64_t& suppressed) {
-        const std::int64_t now = std::chrono::duration_cast<std::chrono::milliseconds>(
-                                     std::chrono::steady_clock::now().time_since_epoch())
-                                     .count();
+        const std::int64_t now =
+            std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
+                .count();
         std::int64_t last = last_ms_[kind].load(std::memory_order_relaxed);
         if (last != 0 && now - last < interval_ms_) {
             suppressed_[kind].fetch_add(1, std::memory_order_relaxed);

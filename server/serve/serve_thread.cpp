@@ -11,12 +11,11 @@
 namespace mocap::serve {
 
 ServeThread::ServeThread(Names names, std::size_t max_clients, Counters counters, Hooks hooks)
-    : names_(std::move(names)),
-      max_clients_(max_clients),
-      counters_(counters),
-      hooks_(std::move(hooks)) {}
+    : names_(std::move(names)), max_clients_(max_clients), counters_(counters), hooks_(std::move(hooks)) {}
 
-ServeThread::~ServeThread() { stop(); }
+ServeThread::~ServeThread() {
+    stop();
+}
 
 bool ServeThread::start(const std::string& bind_address, std::uint16_t port, std::string& error) {
     acceptor_ = listen_tcp(io_, bind_address, port, error);

@@ -44,9 +44,9 @@ public:
         std::string serves;       ///< what the start-up line says is served: "live BVH"
     };
     struct Hooks {
-        std::function<std::size_t()> open_clients;                 ///< connections open now
+        std::function<std::size_t()> open_clients;                ///< connections open now
         std::function<void(asio::ip::tcp::socket socket)> admit;  ///< start a session
-        std::function<void()> close_all;                           ///< at stop()
+        std::function<void()> close_all;                          ///< at stop()
     };
 
     ServeThread(Names names, std::size_t max_clients, Counters counters, Hooks hooks);

@@ -42,8 +42,10 @@ public:
     void close_all() {
         std::vector<std::shared_ptr<Session>> all;
         all.reserve(sessions_.size());
-        for (auto& [id, session] : sessions_) all.push_back(session);
-        for (auto& session : all) session->close();
+        for (auto& [id, session] : sessions_)
+            all.push_back(session);
+        for (auto& session : all)
+            session->close();
     }
     /// Calls `f(Session&)` for each listed session; `f` may close (and so remove) it.
     template <class F>

@@ -12,9 +12,8 @@ std::unique_ptr<asio::ip::tcp::acceptor> listen_tcp(asio::io_context& io, const 
     }
     const asio::ip::tcp::endpoint endpoint(address, port);
     auto acceptor = std::make_unique<asio::ip::tcp::acceptor>(io);
-    if (acceptor->open(endpoint.protocol(), ec) ||
-        acceptor->set_option(asio::socket_base::reuse_address(true), ec) || acceptor->bind(endpoint, ec) ||
-        acceptor->listen(asio::socket_base::max_listen_connections, ec)) {
+    if (acceptor->open(endpoint.protocol(), ec) || acceptor->set_option(asio::socket_base::reuse_address(true), ec) ||
+        acceptor->bind(endpoint, ec) || acceptor->listen(asio::socket_base::max_listen_connections, ec)) {
         error = "bind " + bind_address + ":" + std::to_string(port) + ": " + ec.message();
         return nullptr;
     }

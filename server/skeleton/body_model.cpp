@@ -55,8 +55,8 @@ BodyModel default_body_model(double height_m, std::string_view default_filter) {
     }
     for (const double side : {1.0, -1.0}) {
         const bool left = side > 0;
-        const int th = add(left ? seg::kLeftThigh : seg::kRightThigh, pelvis, Vec3(0, side * hip_y, 0),
-                           Vec3(0, 0, -thigh));
+        const int th =
+            add(left ? seg::kLeftThigh : seg::kRightThigh, pelvis, Vec3(0, side * hip_y, 0), Vec3(0, 0, -thigh));
         const int ca = add(left ? seg::kLeftCalf : seg::kRightCalf, th, Vec3(0, 0, -thigh), Vec3(0, 0, -shank));
         add(left ? seg::kLeftFoot : seg::kRightFoot, ca, Vec3(0, 0, -shank), Vec3(foot_fwd, 0, -ankle_z));
     }
@@ -74,7 +74,9 @@ bool valid_name(const std::string& n) {
     return true;
 }
 
-bool valid_offset(const Vec3& v) { return v.allFinite() && v.norm() < 5.0; }
+bool valid_offset(const Vec3& v) {
+    return v.allFinite() && v.norm() < 5.0;
+}
 
 }  // namespace
 
@@ -86,8 +88,8 @@ std::vector<std::string> validate(const BodyModel& model) {
         return errors;
     }
     if (n > kMaxSegments) {
-        errors.push_back("body model has " + std::to_string(n) + " segments, at most " +
-                         std::to_string(kMaxSegments) + " are supported");
+        errors.push_back("body model has " + std::to_string(n) + " segments, at most " + std::to_string(kMaxSegments) +
+                         " are supported");
     }
     if (!std::isfinite(model.root_height_m)) errors.emplace_back("root height is not finite");
     std::set<std::string> names;

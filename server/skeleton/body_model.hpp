@@ -47,12 +47,12 @@ inline std::array<Vec3, kMaxSegments> zero_vec3s() {
 }
 
 struct SegmentDef {
-    std::string name;             ///< [A-Za-z0-9_]+, unique (also the BVH joint name)
-    int parent = -1;              ///< index of the parent segment, -1 for the root
+    std::string name;              ///< [A-Za-z0-9_]+, unique (also the BVH joint name)
+    int parent = -1;               ///< index of the parent segment, -1 for the root
     Vec3 offset_m = Vec3::Zero();  ///< proximal joint in the parent's frame (T-pose), m
     Vec3 end_m = Vec3::Zero();     ///< distal tip in this segment's frame (T-pose), m
-    int node_id = -1;             ///< CAN node id of the sensor on it (0..127), -1 = none
-    std::string filter;           ///< orientation filter name for this segment's sensor
+    int node_id = -1;              ///< CAN node id of the sensor on it (0..127), -1 = none
+    std::string filter;            ///< orientation filter name for this segment's sensor
 };
 
 struct BodyModel {

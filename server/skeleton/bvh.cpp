@@ -15,7 +15,9 @@ namespace {
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 
-bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\f' || c == '\v'; }
+bool is_space(char c) {
+    return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\f' || c == '\v';
+}
 
 /// Whitespace tokenizer that keeps line numbers; braces are tokens of their own even when
 /// glued to a name ("Hips{").
@@ -36,7 +38,8 @@ public:
             ++pos_;
             return s_.substr(start, 1);
         }
-        while (pos_ < s_.size() && !is_space(s_[pos_]) && s_[pos_] != '{' && s_[pos_] != '}') ++pos_;
+        while (pos_ < s_.size() && !is_space(s_[pos_]) && s_[pos_] != '{' && s_[pos_] != '}')
+            ++pos_;
         if (pos_ - start > max_token_) {
             too_long_ = true;
             return {};
@@ -71,9 +74,13 @@ private:
     bool too_long_ = false;
 };
 
-bool valid_joint_name(std::string_view t) { return !t.empty() && t != "{" && t != "}"; }
+bool valid_joint_name(std::string_view t) {
+    return !t.empty() && t != "{" && t != "}";
+}
 
-std::string at(const Lexer& lx, const std::string& msg) { return "line " + std::to_string(lx.line()) + ": " + msg; }
+std::string at(const Lexer& lx, const std::string& msg) {
+    return "line " + std::to_string(lx.line()) + ": " + msg;
+}
 
 std::string quoted(std::string_view t) {
     std::string q;  // built by append: g++ 12 warns falsely (-Wrestrict) on "'" + std::string
@@ -190,8 +197,8 @@ std::string parse_hierarchy_block(Lexer& lx, const BvhLimits& limits, BvhClip& c
             }
         } else if (t == "}") {
             if (!top.offset_seen) {
-                return at(lx, (top.end_site ? std::string("End Site of ") : std::string("joint ")) + quoted(joint.name) +
-                                  " has no OFFSET");
+                return at(lx, (top.end_site ? std::string("End Site of ") : std::string("joint ")) +
+                                  quoted(joint.name) + " has no OFFSET");
             }
             if (!top.end_site && !top.channels_seen) return at(lx, "joint " + quoted(joint.name) + " has no CHANNELS");
             stack.pop_back();
@@ -240,7 +247,9 @@ void append_number(std::string& out, double v, int decimals) {
     }
 }
 
-void append_indent(std::string& out, std::size_t depth) { out.append(depth, '\t'); }
+void append_indent(std::string& out, std::size_t depth) {
+    out.append(depth, '\t');
+}
 
 void append_vec(std::string& out, const Vec3& v, int decimals) {
     for (int k = 0; k < 3; ++k) {
@@ -276,7 +285,8 @@ void append_hierarchy(std::string& out, std::size_t n, Parent parent, Name name,
     };
     for (std::size_t i = 0; i < n; ++i) {
         const int p = parent(i);
-        while (!open.empty() && open.back() != p) close_top();
+        while (!open.empty() && open.back() != p)
+            close_top();
         const std::size_t depth = open.size();
         line(depth, p < 0 ? "ROOT " : "JOINT ");
         out += name(i);
@@ -290,7 +300,8 @@ void append_hierarchy(std::string& out, std::size_t n, Parent parent, Name name,
         out += '\n';
         open.push_back(static_cast<int>(i));
     }
-    while (!open.empty()) close_top();
+    while (!open.empty())
+        close_top();
 }
 
 }  // namespace
@@ -332,10 +343,12 @@ std::string parse_bvh_motion_line(std::string_view line, std::span<double> out) 
     std::size_t count = 0;
     std::size_t i = 0;
     while (true) {
-        while (i < line.size() && is_space(line[i])) ++i;
+        while (i < line.size() && is_space(line[i]))
+            ++i;
         if (i >= line.size()) break;
         const std::size_t start = i;
-        while (i < line.size() && !is_space(line[i])) ++i;
+        while (i < line.size() && !is_space(line[i]))
+            ++i;
         const std::string_view tok = line.substr(start, i - start);
         if (count >= out.size()) {
             return "too many values: expected " + std::to_string(out.size());
@@ -397,7 +410,8 @@ BvhParseResult parse_bvh(std::string_view text, const BvhLimits& limits) {
         const bool blank = std::all_of(line.begin(), line.end(), is_space);
         if (!blank) {
             if (rows >= frames) {
-                r.error = "line " + std::to_string(line_no) + ": more motion rows than Frames: " + std::to_string(frames);
+                r.error =
+                    "line " + std::to_string(line_no) + ": more motion rows than Frames: " + std::to_string(frames);
                 return r;
             }
             const std::string e = parse_bvh_motion_line(line, row);
@@ -420,7 +434,9 @@ BvhParseResult parse_bvh(std::string_view text, const BvhLimits& limits) {
     return r;
 }
 
-Quat q_enu_bvh() { return Quat(0.5, 0.5, 0.5, 0.5); }
+Quat q_enu_bvh() {
+    return Quat(0.5, 0.5, 0.5, 0.5);
+}
 
 void bvh_global_pose(const BvhClip& clip, std::span<const double> frame_values, double unit_m,
                      std::span<Quat> q_enu_joint, std::span<Vec3> p_enu_joint_m) {
@@ -546,9 +562,9 @@ void append_bvh_motion_line(const BodyModel& model, const BvhWriteOptions& optio
     }
     for (std::size_t i = 0; i < n; ++i) {
         const int parent = model.segments[i].parent;
-        const Quat q_local = parent < 0 ? q_world_segment[i]
-                                        : q_world_segment[static_cast<std::size_t>(parent)].conjugate() *
-                                              q_world_segment[i];
+        const Quat q_local = parent < 0
+                                 ? q_world_segment[i]
+                                 : q_world_segment[static_cast<std::size_t>(parent)].conjugate() * q_world_segment[i];
         const auto angles = to_euler(options.order, qp_inv * q_local.normalized() * qp);
         for (const double a : angles) {
             out += ' ';

@@ -57,13 +57,13 @@ std::string_view to_string(BvhChannel c);
 
 struct BvhJoint {
     std::string name;
-    int parent = -1;                        ///< index into BvhClip::joints, -1 for the root
-    Vec3 offset = Vec3::Zero();             ///< in file units, BVH axes
-    std::array<BvhChannel, 6> channels{};   ///< first channel_count are used, in file order
+    int parent = -1;                       ///< index into BvhClip::joints, -1 for the root
+    Vec3 offset = Vec3::Zero();            ///< in file units, BVH axes
+    std::array<BvhChannel, 6> channels{};  ///< first channel_count are used, in file order
     std::uint8_t channel_count = 0;
-    std::size_t first_channel = 0;          ///< index of its first value in a motion row
+    std::size_t first_channel = 0;  ///< index of its first value in a motion row
     bool has_end_site = false;
-    Vec3 end_offset = Vec3::Zero();         ///< End Site offset (file units), if any
+    Vec3 end_offset = Vec3::Zero();  ///< End Site offset (file units), if any
 };
 
 struct BvhClip {
@@ -108,8 +108,12 @@ std::string parse_bvh_motion_line(std::string_view line, std::span<double> out);
 
 /// q_enu_bvh (see the file comment) and the vector mapping both ways.
 Quat q_enu_bvh();
-inline Vec3 enu_from_bvh(const Vec3& v) { return {v.z(), v.x(), v.y()}; }
-inline Vec3 bvh_from_enu(const Vec3& v) { return {v.y(), v.z(), v.x()}; }
+inline Vec3 enu_from_bvh(const Vec3& v) {
+    return {v.z(), v.x(), v.y()};
+}
+inline Vec3 bvh_from_enu(const Vec3& v) {
+    return {v.y(), v.z(), v.x()};
+}
 
 /// Every joint's orientation q_enu_joint and position (metres, ENU) for one frame row.
 /// unit_m = metres per file unit (1 for the CMU clips, 0.01 for centimetre files).
@@ -139,8 +143,7 @@ std::size_t bvh_values_per_frame(const BodyModel& model);
 /// (q_world_segment[i] for model segment i; world = ENU or the heading-aligned body frame)
 /// and the root joint position in metres (world axes).
 void append_bvh_motion_line(const BodyModel& model, const BvhWriteOptions& options,
-                            std::span<const Quat> q_world_segment, const Vec3& root_position_m,
-                            std::string& out);
+                            std::span<const Quat> q_world_segment, const Vec3& root_position_m, std::string& out);
 
 // --- Mapping a BVH skeleton onto a BodyModel --------------------------------------------
 

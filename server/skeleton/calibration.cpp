@@ -12,19 +12,28 @@ namespace mocap::skeleton {
 
 std::string_view to_string(CalibrationPose p) {
     switch (p) {
-        case CalibrationPose::kTPose: return "t-pose";
-        case CalibrationPose::kNPose: return "n-pose";
-        case CalibrationPose::kCustom: return "custom";
+        case CalibrationPose::kTPose:
+            return "t-pose";
+        case CalibrationPose::kNPose:
+            return "n-pose";
+        case CalibrationPose::kCustom:
+            return "custom";
     }
     return "t-pose";
 }
 
-std::string_view to_string(HeadingMode m) { return m == HeadingMode::kKeepEarth ? "earth" : "align"; }
+std::string_view to_string(HeadingMode m) {
+    return m == HeadingMode::kKeepEarth ? "earth" : "align";
+}
 
 namespace {
 
-Quat rot_z(double a) { return Quat(std::cos(0.5 * a), 0.0, 0.0, std::sin(0.5 * a)); }
-Quat rot_x(double a) { return Quat(std::cos(0.5 * a), std::sin(0.5 * a), 0.0, 0.0); }
+Quat rot_z(double a) {
+    return Quat(std::cos(0.5 * a), 0.0, 0.0, std::sin(0.5 * a));
+}
+Quat rot_x(double a) {
+    return Quat(std::cos(0.5 * a), std::sin(0.5 * a), 0.0, 0.0);
+}
 
 /// True if `i` is `root` or one of its descendants (parents come first in a valid model).
 bool in_subtree(const BodyModel& model, int i, int root) {
@@ -51,7 +60,8 @@ std::array<Quat, kMaxSegments> pose_orientations(const BodyModel& model, Calibra
 }
 
 void CalibrationCollector::reset() {
-    for (auto& a : acc_) a.reset();
+    for (auto& a : acc_)
+        a.reset();
     count_.fill(0);
 }
 
@@ -147,7 +157,8 @@ CalibrationResult calibrate_from_means(const BodyModel& model, std::span<const Q
     for (std::size_t i = 0; i < n; ++i) {
         if (!has_sample[i]) continue;
         const Quat expected = q_heading * pose[i].normalized();
-        c.q_sensor_segment[i] = filter::canonical((q_earth_sensor_mean[i].normalized().conjugate() * expected).normalized());
+        c.q_sensor_segment[i] =
+            filter::canonical((q_earth_sensor_mean[i].normalized().conjugate() * expected).normalized());
         c.calibrated[i] = true;
     }
     r.calibration = c;
@@ -189,12 +200,16 @@ void append_quat(std::string& out, const Quat& q) {
 }
 
 std::string_view trim(std::string_view s) {
-    while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-    while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.remove_suffix(1);
+    while (!s.empty() && (s.front() == ' ' || s.front() == '\t'))
+        s.remove_prefix(1);
+    while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r'))
+        s.remove_suffix(1);
     return s;
 }
 
-bool parse_number(std::string_view t, double& v) { return core::parse_number(trim(t), v); }
+bool parse_number(std::string_view t, double& v) {
+    return core::parse_number(trim(t), v);
+}
 
 bool parse_string(std::string_view t, std::string_view& out) {
     t = trim(t);
@@ -298,7 +313,8 @@ CalibrationResult parse_calibration(const BodyModel& model, std::string_view tex
         }
         std::string_view sv;
         if (key == "format") {
-            if (!parse_string(value, sv) || sv != "mocapd-calibration") return fail("format must be \"mocapd-calibration\"");
+            if (!parse_string(value, sv) || sv != "mocapd-calibration")
+                return fail("format must be \"mocapd-calibration\"");
             have_format = true;
         } else if (key == "version") {
             double v = 0;

@@ -70,12 +70,12 @@ struct CalibrationOptions {
     std::array<Quat, kMaxSegments> custom_pose = identity_quats();
     HeadingMode heading_mode = HeadingMode::kAlignToForward;
     FacingSource facing_source = FacingSource::kGiven;
-    double facing_heading_rad = 0.0;  ///< ψ for kGiven
-    int facing_segment = 0;           ///< segment whose sensor gives ψ for kFromSensorAxis
+    double facing_heading_rad = 0.0;          ///< ψ for kGiven
+    int facing_segment = 0;                   ///< segment whose sensor gives ψ for kFromSensorAxis
     Vec3 facing_sensor_axis = Vec3::UnitX();  ///< that sensor's forward-pointing axis
-    std::size_t min_samples = 10;     ///< per calibrated segment
-    double max_spread_rad = 0.035;    ///< RMS angular spread over the still period (~2°)
-    bool allow_missing = false;       ///< segments with a sensor but no samples: uncalibrated
+    std::size_t min_samples = 10;             ///< per calibrated segment
+    double max_spread_rad = 0.035;            ///< RMS angular spread over the still period (~2°)
+    bool allow_missing = false;               ///< segments with a sensor but no samples: uncalibrated
 };
 
 /// Collects q_earth_sensor samples of a still period per segment (Markley accumulator: the

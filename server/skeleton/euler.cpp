@@ -21,7 +21,9 @@ std::optional<RotationOrder> parse_rotation_order(std::string_view text) {
     return order;
 }
 
-char axis_letter(Axis a) { return static_cast<char>('X' + static_cast<int>(a)); }
+char axis_letter(Axis a) {
+    return static_cast<char>('X' + static_cast<int>(a));
+}
 
 std::string to_string(const RotationOrder& order) {
     return {axis_letter(order.axes[0]), axis_letter(order.axes[1]), axis_letter(order.axes[2])};
@@ -32,9 +34,12 @@ Quat axis_rotation(Axis a, double angle_rad) {
     const double s = std::sin(h);
     const double c = std::cos(h);
     switch (a) {
-        case Axis::kX: return Quat(c, s, 0.0, 0.0);
-        case Axis::kY: return Quat(c, 0.0, s, 0.0);
-        case Axis::kZ: return Quat(c, 0.0, 0.0, s);
+        case Axis::kX:
+            return Quat(c, s, 0.0, 0.0);
+        case Axis::kY:
+            return Quat(c, 0.0, s, 0.0);
+        case Axis::kZ:
+            return Quat(c, 0.0, 0.0, s);
     }
     return Quat::Identity();
 }

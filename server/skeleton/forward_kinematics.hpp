@@ -24,7 +24,7 @@ struct SkeletonPose {
     std::size_t segment_count = 0;
     std::array<Quat, kMaxSegments> q_world_segment = identity_quats();
     std::array<Vec3, kMaxSegments> joint_position_m = zero_vec3s();  ///< proximal joint of each segment
-    std::array<Vec3, kMaxSegments> end_position_m = zero_vec3s();  ///< distal tip of each segment
+    std::array<Vec3, kMaxSegments> end_position_m = zero_vec3s();    ///< distal tip of each segment
 };
 
 /// (0, 0, model.root_height_m) plus the root's own offset.

@@ -10,25 +10,32 @@ namespace {
 /// One joint's sequence: the axis and left-side sign of each anatomical angle, and the
 /// order in which they are applied (indices into {flexion, abduction, rotation}).
 struct JointConvention {
-    std::array<Axis, 3> axis;            // flexion, abduction, rotation
-    std::array<double, 3> left_sign;     // flexion, abduction, rotation
-    std::array<int, 3> order;            // e.g. {0, 1, 2}: flexion, then abduction, then rotation
-    double neutral_left_x_rad;           // q_neutral = Rx(angle) on the left, Rx(-angle) on the right
+    std::array<Axis, 3> axis;         // flexion, abduction, rotation
+    std::array<double, 3> left_sign;  // flexion, abduction, rotation
+    std::array<int, 3> order;         // e.g. {0, 1, 2}: flexion, then abduction, then rotation
+    double neutral_left_x_rad;        // q_neutral = Rx(angle) on the left, Rx(-angle) on the right
 };
 
 JointConvention convention(JointKind kind) {
     constexpr double kHalfPi = std::numbers::pi / 2;
     switch (kind) {
-        case JointKind::kHip: return {{Axis::kY, Axis::kX, Axis::kZ}, {-1, 1, -1}, {0, 1, 2}, 0.0};
-        case JointKind::kKnee: return {{Axis::kY, Axis::kX, Axis::kZ}, {1, 1, -1}, {0, 1, 2}, 0.0};
-        case JointKind::kAnkle: return {{Axis::kY, Axis::kX, Axis::kZ}, {-1, -1, -1}, {0, 1, 2}, 0.0};
-        case JointKind::kShoulder: return {{Axis::kY, Axis::kX, Axis::kZ}, {-1, 1, -1}, {1, 0, 2}, -kHalfPi};
-        case JointKind::kElbow: return {{Axis::kZ, Axis::kX, Axis::kY}, {-1, 1, 1}, {0, 1, 2}, 0.0};
+        case JointKind::kHip:
+            return {{Axis::kY, Axis::kX, Axis::kZ}, {-1, 1, -1}, {0, 1, 2}, 0.0};
+        case JointKind::kKnee:
+            return {{Axis::kY, Axis::kX, Axis::kZ}, {1, 1, -1}, {0, 1, 2}, 0.0};
+        case JointKind::kAnkle:
+            return {{Axis::kY, Axis::kX, Axis::kZ}, {-1, -1, -1}, {0, 1, 2}, 0.0};
+        case JointKind::kShoulder:
+            return {{Axis::kY, Axis::kX, Axis::kZ}, {-1, 1, -1}, {1, 0, 2}, -kHalfPi};
+        case JointKind::kElbow:
+            return {{Axis::kZ, Axis::kX, Axis::kY}, {-1, 1, 1}, {0, 1, 2}, 0.0};
     }
     return {{Axis::kY, Axis::kX, Axis::kZ}, {1, 1, 1}, {0, 1, 2}, 0.0};
 }
 
-double side_sign(Axis a, Side side) { return (side == Side::kRight && a != Axis::kY) ? -1.0 : 1.0; }
+double side_sign(Axis a, Side side) {
+    return (side == Side::kRight && a != Axis::kY) ? -1.0 : 1.0;
+}
 
 Quat neutral(const JointConvention& c, Side side) {
     const double a = side == Side::kLeft ? c.neutral_left_x_rad : -c.neutral_left_x_rad;

@@ -23,8 +23,8 @@
 namespace mocap::skeleton {
 
 struct PoseSmootherParams {
-    double alpha = 1.0;               ///< fixed blend factor in (0, 1] when time_constant_s == 0
-    double time_constant_s = 0.0;     ///< > 0: α from the timestamps
+    double alpha = 1.0;                   ///< fixed blend factor in (0, 1] when time_constant_s == 0
+    double time_constant_s = 0.0;         ///< > 0: α from the timestamps
     std::int64_t reset_gap_us = 500'000;  ///< a longer gap restarts at the input
 };
 

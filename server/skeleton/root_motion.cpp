@@ -19,12 +19,15 @@ void FootContactRootTracker::reset(const Vec3& root_position_m) {
 Vec3 FootContactRootTracker::candidate(const BodyModel& model, const SkeletonPose& pose, int c) const {
     const auto foot = static_cast<std::size_t>(feet_[static_cast<std::size_t>(c / 3)]);
     switch (c % 3) {
-        case 0: return pose.end_position_m[foot];
+        case 0:
+            return pose.end_position_m[foot];
         case 1: {
             const Vec3& e = model.segments[foot].end_m;
-            return pose.joint_position_m[foot] + pose.q_world_segment[foot]._transformVector(Vec3(-e.x() / 3.0, 0.0, e.z()));
+            return pose.joint_position_m[foot] +
+                   pose.q_world_segment[foot]._transformVector(Vec3(-e.x() / 3.0, 0.0, e.z()));
         }
-        default: return pose.joint_position_m[foot];
+        default:
+            return pose.joint_position_m[foot];
     }
 }
 

@@ -22,8 +22,7 @@ namespace mocap {
 namespace {
 
 std::int64_t steady_ns() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(
-               std::chrono::steady_clock::now().time_since_epoch())
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
         .count();
 }
 
@@ -65,7 +64,7 @@ void BM_SpscRingTwoThreads(benchmark::State& state) {
 BENCHMARK(BM_SpscRingTwoThreads)->UseRealTime();
 
 class TrivialProcessor : public SegmentProcessor {
-  public:
+public:
     bool process(const SegmentSample& in, SegmentPose& out) override {
         out.q_earth_sensor_wxyz = {1.0, 0.0, 0.0, static_cast<double>(in.sync)};
         return true;
@@ -154,7 +153,9 @@ void counter_add4(benchmark::State& state) {
     benchmark::DoNotOptimize(frames.value() + samples.value());
     state.SetItemsProcessed(state.iterations() * 4);
 }
-void BM_CounterAdd(benchmark::State& state) { counter_add4<Counter>(state); }
+void BM_CounterAdd(benchmark::State& state) {
+    counter_add4<Counter>(state);
+}
 BENCHMARK(BM_CounterAdd);
 void BM_SingleWriterCounterAdd(benchmark::State& state) {
     counter_add4<SingleWriterCounter>(state);
@@ -173,7 +174,7 @@ void BM_LatencySnapshotP99(benchmark::State& state) {
 BENCHMARK(BM_LatencySnapshotP99);
 
 class NullSink : public FrameSink {
-  public:
+public:
     void on_frame(const SubjectFrame& f) override { benchmark::DoNotOptimize(f.sync); }
 };
 
@@ -198,7 +199,7 @@ void BM_SubjectAssemblerFrame15(benchmark::State& state) {
 BENCHMARK(BM_SubjectAssemblerFrame15);
 
 class CountingSink : public FrameSink {
-  public:
+public:
     void on_frame(const SubjectFrame& f) override {
         benchmark::DoNotOptimize(f.sync);
         ++frames;

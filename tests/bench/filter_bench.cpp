@@ -25,7 +25,8 @@ const std::vector<ImuSample>& samples() {
         const sim::Scenario sc = sim::make_scenario(sim::ScenarioKind::realistic, 1);
         std::vector<ImuSample> out;
         out.reserve(sc.rows.size());
-        for (const sim::ScenarioRow& r : sc.rows) out.push_back(r.sample);
+        for (const sim::ScenarioRow& r : sc.rows)
+            out.push_back(r.sample);
         return out;
     }();
     return s;
@@ -35,7 +36,8 @@ void run(benchmark::State& state, OrientationFilter& f) {
     const std::vector<ImuSample>& buf = samples();
     const std::int64_t period_us = buf.back().t_us - buf.front().t_us + 10000;
     // Warm up past the start (initialisation, filter start-up averaging).
-    for (std::size_t i = 0; i < 1000; ++i) f.update(buf[i]);
+    for (std::size_t i = 0; i < 1000; ++i)
+        f.update(buf[i]);
     std::size_t i = 1000;
     std::int64_t offset_us = 0;
     for (auto _ : state) {

@@ -41,16 +41,17 @@ const Instants& instants() {
             f.push_back(s);
             for (std::uint8_t node = 1; node <= kNodes; ++node) {
                 for (unsigned part = 0; part < 3; ++part) {
-                    const mw_raw r = {static_cast<mw_function>(MW_FN_ACCEL + part), node,
-                                      {100, -200, 2048}, static_cast<std::uint16_t>(k)};
+                    const mw_raw r = {static_cast<mw_function>(MW_FN_ACCEL + part),
+                                      node,
+                                      {100, -200, 2048},
+                                      static_cast<std::uint16_t>(k)};
                     s.offset_us = static_cast<std::uint16_t>(200u + node * 60u + part * 20u);
                     if (mw_raw_encode(&r, &s.frame) != MW_OK) std::abort();
                     f.push_back(s);
                 }
             }
             std::vector<std::uint8_t> b(mw_packet_size(f.data(), f.size()));
-            if (mw_packet_encode(&h, f.data(), f.size(), b.data(), b.size()) !=
-                static_cast<std::int32_t>(b.size()))
+            if (mw_packet_encode(&h, f.data(), f.size(), b.data(), b.size()) != static_cast<std::int32_t>(b.size()))
                 std::abort();
             in.headers.push_back(h);
             in.frames.push_back(std::move(f));
@@ -90,8 +91,7 @@ void BM_IngestPacket15(benchmark::State& state) {
     for (auto _ : state) {
         const std::vector<std::uint8_t>& b = in.bytes[k];
         std::size_t used = 0;
-        if (mw_stream_decoder_feed(decoder.get(), b.data(), b.size(), &used, packet.get()) !=
-            MW_STREAM_PACKET) {
+        if (mw_stream_decoder_feed(decoder.get(), b.data(), b.size(), &used, packet.get()) != MW_STREAM_PACKET) {
             state.SkipWithError("packet not decoded");
             break;
         }

@@ -35,8 +35,12 @@ void BM_Crc32(benchmark::State& state) {
     state.SetBytesProcessed(static_cast<std::int64_t>(state.iterations()) * state.range(0));
 }
 
-void BM_Crc32Bytewise(benchmark::State& state) { BM_Crc32<mw_crc32_update_bytewise>(state); }
-void BM_Crc32Slice8(benchmark::State& state) { BM_Crc32<mw_crc32_update>(state); }
+void BM_Crc32Bytewise(benchmark::State& state) {
+    BM_Crc32<mw_crc32_update_bytewise>(state);
+}
+void BM_Crc32Slice8(benchmark::State& state) {
+    BM_Crc32<mw_crc32_update>(state);
+}
 
 BENCHMARK(BM_Crc32Bytewise)->Arg(64)->Arg(640)->Arg(1460)->Arg(16384);
 BENCHMARK(BM_Crc32Slice8)->Arg(64)->Arg(640)->Arg(1460)->Arg(16384);

@@ -136,10 +136,9 @@ TEST(Evaluation, JsonHasTheContractKeys) {
     r.convergence_time_s = 3.5;
     r.first_below_s = 0.25;
     const std::string j = eval_json(r, "ma\"d");
-    for (const char* key :
-         {"\"rmse_total_deg\":1.5", "\"rmse_heading_deg\":1.25", "\"rmse_inclination_deg\":0",
-          "\"rmse_roll_deg\":0", "\"rmse_pitch_deg\":0", "\"rmse_yaw_deg\":0", "\"samples\":42",
-          "\"convergence_time_s\":3.5", "\"first_below_s\":0.25", "\"filter\":\"ma\\\"d\""}) {
+    for (const char* key : {"\"rmse_total_deg\":1.5", "\"rmse_heading_deg\":1.25", "\"rmse_inclination_deg\":0",
+                            "\"rmse_roll_deg\":0", "\"rmse_pitch_deg\":0", "\"rmse_yaw_deg\":0", "\"samples\":42",
+                            "\"convergence_time_s\":3.5", "\"first_below_s\":0.25", "\"filter\":\"ma\\\"d\""}) {
         EXPECT_NE(j.find(key), std::string::npos) << key << " in " << j;
     }
     EXPECT_EQ(j.front(), '{');
@@ -152,7 +151,7 @@ TEST(Evaluation, JsonHasTheContractKeys) {
 
 // A filter that reports a fixed orientation, to check run_filter's frame and masks.
 class FixedFilter final : public filter::OrientationFilter {
-  public:
+public:
     explicit FixedFilter(const Quat& q) : q_(q) {}
     void update(const ImuSample&) override { ++updates_; }
     [[nodiscard]] Quat orientation() const override { return q_; }
@@ -160,7 +159,7 @@ class FixedFilter final : public filter::OrientationFilter {
     [[nodiscard]] std::string_view name() const override { return "fixed"; }
     int updates_ = 0;
 
-  private:
+private:
     Quat q_;
 };
 
@@ -187,8 +186,7 @@ TEST(FilterRun, SkipWindowMovementMaskAndNedOutput) {
     EXPECT_NEAR(evaluate(enu.compared).rmse_total_deg, 180.0, 1e-6);
     const RunOutput ned = run_filter(f, rec, {EarthFrame::ned, 0.0});
     EXPECT_NEAR(evaluate(ned.compared).rmse_total_deg, 0.0, 1e-6);
-    EXPECT_NEAR(filter::angle_rad(ned.estimates[0].q * filter::conj(filter::q_enu_ned())), 0.0,
-                1e-12);
+    EXPECT_NEAR(filter::angle_rad(ned.estimates[0].q * filter::conj(filter::q_enu_ned())), 0.0, 1e-12);
     EXPECT_EQ(evaluate(ned.compared).samples, 9u);
 }
 

@@ -61,9 +61,7 @@ TEST(RecordingCsv, RoundTripOfASimulatedRecording) {
 
 TEST(RecordingCsv, OptionalColumnsMayBeMissingAndOrderIsFree) {
     Recording rec;
-    ASSERT_FALSE(
-        parse(std::string(kHeader) + "\n0,1,2,3,4,5,6,7,8,9\n0.01,1,2,3,4,5,6,7,8,9\n", rec)
-            .has_value());
+    ASSERT_FALSE(parse(std::string(kHeader) + "\n0,1,2,3,4,5,6,7,8,9\n0.01,1,2,3,4,5,6,7,8,9\n", rec).has_value());
     EXPECT_FALSE(rec.has_reference);
     EXPECT_FALSE(rec.has_movement);
     ASSERT_EQ(rec.rows.size(), 2u);
@@ -159,14 +157,12 @@ TEST(RecordingCsv, ErrorsNameTheLine) {
     EXPECT_EQ(e.line, 2u);
     e = parse_error(h);
     EXPECT_NE(e.message.find("no samples"), std::string::npos);
-    EXPECT_EQ(
-        parse_error(h + ok + "0.01,0,x,0,0,0,9.8,20,0,-40\n").to_string().rfind("line 3: ", 0), 0u);
+    EXPECT_EQ(parse_error(h + ok + "0.01,0,x,0,0,0,9.8,20,0,-40\n").to_string().rfind("line 3: ", 0), 0u);
 }
 
 TEST(RecordingCsv, OrientationOutput) {
     std::ostringstream out;
-    ASSERT_TRUE(
-        write_orientation_csv(out, {{0, Quat::Identity()}, {10'000, Quat(0.5, 0.5, 0.5, 0.5)}}));
+    ASSERT_TRUE(write_orientation_csv(out, {{0, Quat::Identity()}, {10'000, Quat(0.5, 0.5, 0.5, 0.5)}}));
     EXPECT_EQ(out.str(), "t,qw,qx,qy,qz\n0.000000,1,0,0,0\n0.010000,0.5,0.5,0.5,0.5\n");
 }
 

@@ -13,8 +13,7 @@ using filter::Quat;
 using filter::Vec3;
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
-constexpr ScenarioKind kAllKinds[] = {ScenarioKind::fourati, ScenarioKind::realistic,
-                                      ScenarioKind::magnetic};
+constexpr ScenarioKind kAllKinds[] = {ScenarioKind::fourati, ScenarioKind::realistic, ScenarioKind::magnetic};
 
 bool same_rows(const Scenario& a, const Scenario& b) {
     if (a.rows.size() != b.rows.size()) return false;
@@ -85,10 +84,8 @@ TEST(Scenario, NoiselessGyroIntegratesToTruth) {
         Quat q = s.rows.front().q_earth_sensor;
         double worst = 0.0;
         for (std::size_t i = 1; i < s.rows.size(); ++i) {
-            const double dt =
-                1e-6 * static_cast<double>(s.rows[i].sample.t_us - s.rows[i - 1].sample.t_us);
-            q = (q * filter::quat_from_rotvec(filter::to_vec3(s.rows[i].sample.gyro_rad_s) * dt))
-                    .normalized();
+            const double dt = 1e-6 * static_cast<double>(s.rows[i].sample.t_us - s.rows[i - 1].sample.t_us);
+            q = (q * filter::quat_from_rotvec(filter::to_vec3(s.rows[i].sample.gyro_rad_s) * dt)).normalized();
             worst = std::max(worst, filter::angle_rad(q * filter::conj(s.rows[i].q_earth_sensor)));
         }
         EXPECT_LT(worst * kRadToDeg, 1e-6) << scenario_name(k);
@@ -105,15 +102,12 @@ TEST(Scenario, AccelAndMagFollowTruth) {
             const Quat q_se = filter::conj(row.q_earth_sensor);
             const Vec3 f = filter::to_vec3(row.sample.accel_m_s2);
             const Vec3 m = filter::to_vec3(row.sample.mag_ut);
-            ASSERT_LT(
-                (f - filter::rotate(q_se, row.lin_acc_earth_m_s2 + s.spec.gravity_up_m_s2)).norm(),
-                1e-9);
+            ASSERT_LT((f - filter::rotate(q_se, row.lin_acc_earth_m_s2 + s.spec.gravity_up_m_s2)).norm(), 1e-9);
             ASSERT_LT((m - filter::rotate(q_se, row.mag_earth_ut)).norm(), 1e-9);
             if (!row.moving) {
                 ++rest;
                 ASSERT_LT(row.lin_acc_earth_m_s2.norm(), 1e-12);
-                ASSERT_LT((filter::to_vec3(row.sample.gyro_rad_s) - s.gyro_bias_rad_s).norm(),
-                          1e-12);
+                ASSERT_LT((filter::to_vec3(row.sample.gyro_rad_s) - s.gyro_bias_rad_s).norm(), 1e-12);
                 // Specific force points up: rotated back to earth it is +9.81 on z.
                 ASSERT_NEAR(filter::rotate(row.q_earth_sensor, f).z(), 9.81, 1e-9);
             }
@@ -130,14 +124,12 @@ TEST(Scenario, AccelAtRestMatchesGravityWithinNoise) {
     std::size_t n = 0;
     for (const ScenarioRow& row : s.rows) {
         if (row.moving) continue;
-        const Vec3 expected =
-            filter::rotate(filter::conj(row.q_earth_sensor), s.spec.gravity_up_m_s2);
+        const Vec3 expected = filter::rotate(filter::conj(row.q_earth_sensor), s.spec.gravity_up_m_s2);
         sum_sq += (filter::to_vec3(row.sample.accel_m_s2) - expected).squaredNorm();
         n += 3;
     }
     ASSERT_GT(n, 1000u);
-    EXPECT_NEAR(std::sqrt(sum_sq / static_cast<double>(n)), s.spec.accel_noise_m_s2,
-                0.1 * s.spec.accel_noise_m_s2);
+    EXPECT_NEAR(std::sqrt(sum_sq / static_cast<double>(n)), s.spec.accel_noise_m_s2, 0.1 * s.spec.accel_noise_m_s2);
 }
 
 // Table II: σ = 0.4 on every axis of every sensor (rad/s, m/s², G = 40 µT), zero mean.
@@ -156,8 +148,7 @@ TEST(Scenario, FouratiNoiseIsTableTwo) {
         const Vec3 e[3] = {
             filter::to_vec3(row.sample.gyro_rad_s) - row.gyro_true_rad_s,
             filter::to_vec3(row.sample.accel_m_s2) - filter::rotate(q_se, s.spec.gravity_up_m_s2),
-            (filter::to_vec3(row.sample.mag_ut) - filter::rotate(q_se, row.mag_earth_ut)) /
-                100.0,  // G
+            (filter::to_vec3(row.sample.mag_ut) - filter::rotate(q_se, row.mag_earth_ut)) / 100.0,  // G
         };
         for (int i = 0; i < 3; ++i) {
             sum[i] += e[i];

@@ -69,7 +69,8 @@ pid_t spawn(const std::vector<std::string>& argv, const fs::path& out, const fs:
         (void)o;
         (void)e;
         std::vector<char*> args;
-        for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+        for (const auto& a : argv)
+            args.push_back(const_cast<char*>(a.c_str()));
         args.push_back(nullptr);
         ::execv(args[0], args.data());
         std::_Exit(127);
@@ -95,7 +96,8 @@ protected:
     void SetUp() override {
         dir_ = fs::temp_directory_path() / ("mocap_stream_e2e_" + std::to_string(::getpid()));
         fs::create_directories(dir_);
-        for (int attempt = 0; attempt < 3 && daemon_ < 0; ++attempt) start_daemon();
+        for (int attempt = 0; attempt < 3 && daemon_ < 0; ++attempt)
+            start_daemon();
         ASSERT_GT(daemon_, 0) << slurp(dir_ / "mocapd.err");
     }
     void TearDown() override {
@@ -110,8 +112,8 @@ protected:
         sink_port_ = free_port();
         pose_port_ = free_port();
         const int bvh_port = free_port();
-        if (sink_port_ <= 0 || pose_port_ <= 0 || bvh_port <= 0 || sink_port_ == pose_port_ ||
-            bvh_port == sink_port_ || bvh_port == pose_port_) {
+        if (sink_port_ <= 0 || pose_port_ <= 0 || bvh_port <= 0 || sink_port_ == pose_port_ || bvh_port == sink_port_ ||
+            bvh_port == pose_port_) {
             return;
         }
         std::ofstream(dir_ / "mocapd.toml") << "[log]\nlevel = \"warn\"\n"
@@ -119,8 +121,8 @@ protected:
                                             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\n"
                                             << "[skeleton]\ncalibration_dir = \"" << dir_.string() << "\"\n"
                                             << "[outputs]\nbvh_listen = \"127.0.0.1:" << bvh_port << "\"\n";
-        const pid_t pid = spawn({MOCAPD_BIN, "--config", (dir_ / "mocapd.toml").string()}, dir_ / "mocapd.out",
-                                dir_ / "mocapd.err");
+        const pid_t pid =
+            spawn({MOCAPD_BIN, "--config", (dir_ / "mocapd.toml").string()}, dir_ / "mocapd.out", dir_ / "mocapd.err");
         for (int i = 0; i < 100; ++i) {
             if (accepts(pose_port_) && accepts(sink_port_)) {
                 daemon_ = pid;
@@ -144,9 +146,9 @@ TEST_F(StreamEndToEnd, TwoSubjectsArriveWithAllFifteenSegments) {
                              "--subjects", "2", "--duration", "3", "--sink-rate-stats"},
                             dir_ / "sim.out", dir_ / "sim.err");
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    const pid_t client = spawn({MOCAP_CLIENT_BIN, "--connect", "127.0.0.1:" + std::to_string(pose_port_), "cat",
-                                "--frames", "200", "--json"},
-                               dir_ / "client.out", dir_ / "client.err");
+    const pid_t client = spawn(
+        {MOCAP_CLIENT_BIN, "--connect", "127.0.0.1:" + std::to_string(pose_port_), "cat", "--frames", "200", "--json"},
+        dir_ / "client.out", dir_ / "client.err");
     const int client_rc = wait_exit(client);
     const int sim_rc = wait_exit(sim);
     EXPECT_EQ(sim_rc, 0) << slurp(dir_ / "sim.err");
@@ -211,15 +213,16 @@ TEST_F(StreamEndToEnd, TruthFileMatchesTheFramesOnTheWire) {
     ASSERT_EQ(::listen(listener, 4), 0);
     const int port = ntohs(a.sin_port);
     const fs::path truth = dir_ / "truth.csv";
-    const pid_t sim = spawn({MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(port), "--subjects", "1",
-                             "--mode", "quat", "--noise-scale", "0", "--calibrate-s", "0.5", "--duration", "1.5",
-                             "--truth", truth.string()},
-                            dir_ / "sim.out", dir_ / "sim.err");
+    const pid_t sim =
+        spawn({MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(port), "--subjects", "1", "--mode",
+               "quat", "--noise-scale", "0", "--calibrate-s", "0.5", "--duration", "1.5", "--truth", truth.string()},
+              dir_ / "sim.out", dir_ / "sim.err");
     const int conn = ::accept(listener, nullptr, nullptr);
     ASSERT_GE(conn, 0);
     std::vector<std::uint8_t> bytes;
     std::uint8_t buf[65536];
-    for (ssize_t n; (n = ::recv(conn, buf, sizeof buf, 0)) > 0;) bytes.insert(bytes.end(), buf, buf + n);
+    for (ssize_t n; (n = ::recv(conn, buf, sizeof buf, 0)) > 0;)
+        bytes.insert(bytes.end(), buf, buf + n);
     ::close(conn);
     ::close(listener);
     ASSERT_EQ(wait_exit(sim), 0) << slurp(dir_ / "sim.err");
@@ -229,11 +232,13 @@ TEST_F(StreamEndToEnd, TruthFileMatchesTheFramesOnTheWire) {
     std::istringstream rows(slurp(truth));
     std::string row;
     std::getline(rows, row);
-    EXPECT_EQ(row, "t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,sensor_qx,sensor_qy,sensor_qz");
+    EXPECT_EQ(row,
+              "t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,sensor_qx,sensor_qy,sensor_qz");
     while (std::getline(rows, row)) {
         std::vector<std::string> c;
         std::stringstream cells(row);
-        for (std::string cell; std::getline(cells, cell, ',');) c.push_back(cell);
+        for (std::string cell; std::getline(cells, cell, ',');)
+            c.push_back(cell);
         ASSERT_EQ(c.size(), 13u) << row;
         EXPECT_EQ(c[1], "1");
         expected[{std::stoi(c[3]), std::stoi(c[4]) & 0x3FFF}] = {std::stod(c[9]), std::stod(c[10]), std::stod(c[11]),

@@ -12,7 +12,9 @@
 namespace mocap::sim {
 namespace {
 
-double angle_between(const Quat& a, const Quat& b) { return filter::angle_rad(filter::conj(a) * b); }
+double angle_between(const Quat& a, const Quat& b) {
+    return filter::angle_rad(filter::conj(a) * b);
+}
 
 const std::string kWalkClip = std::string(MOCAP_MOTION_DIR) + "/cmu_131_01_walk.bvh";
 
@@ -96,7 +98,8 @@ TEST(StreamMotion, BvhSourceReproducesTheMappedClip) {
         clip->orientations(clip->calibrate_s() + tm0, 0.0, Vec3::Zero(), a, ra);
         for (double tm = tm0 + 0.01; tm <= tm1; tm += 0.01) {
             clip->orientations(clip->calibrate_s() + tm, 0.0, Vec3::Zero(), b, rb);
-            for (std::size_t i = 0; i < model.size(); ++i) worst = std::max(worst, angle_between(a[i], b[i]));
+            for (std::size_t i = 0; i < model.size(); ++i)
+                worst = std::max(worst, angle_between(a[i], b[i]));
             *root_jump = std::max(*root_jump, (rb - ra).norm());
             a = b;
             ra = rb;

@@ -73,7 +73,8 @@ TEST(StreamNode, WalkSensorAccelerationIsZeroAtRestAndCentripetalWhileWalking) {
     EXPECT_LT(accel(1.0).norm(), 1e-9);
     Vec3 mean = Vec3::Zero();
     const int n = 1000;  // 10 s = 9 strides at 0.9 Hz
-    for (int k = 0; k < n; ++k) mean += accel(6.0 + k * dt) / n;
+    for (int k = 0; k < n; ++k)
+        mean += accel(6.0 + k * dt) / n;
     // The heading turns by θ = v·T/R = 3 rad over the window, so the mean of the centripetal
     // vector shrinks by sin(θ/2)/(θ/2).
     EXPECT_NEAR(std::hypot(mean.x(), mean.y()), 0.36 * std::sin(1.5) / 1.5, 0.02);
@@ -95,15 +96,18 @@ TEST(StreamNode, RawFramesDecodeToTheTruthWithinQuantisation) {
     EXPECT_EQ(msg.u.raw.node_id, 7);
     EXPECT_EQ(msg.u.raw.counter_low, 0x2345u);
     ASSERT_EQ(mw_accel_to_m_s2(msg.u.raw.xyz, MW_ACCEL_16G, v), MW_OK);
-    for (int i = 0; i < 3; ++i) EXPECT_NEAR(v[i], truth.accel_m_s2[i], 0.51 * mw_accel_m_s2_per_lsb(MW_ACCEL_16G));
+    for (int i = 0; i < 3; ++i)
+        EXPECT_NEAR(v[i], truth.accel_m_s2[i], 0.51 * mw_accel_m_s2_per_lsb(MW_ACCEL_16G));
     ASSERT_EQ(mw_can_decode(&frames[1], &msg), MW_OK);
     EXPECT_EQ(msg.function, MW_FN_GYRO);
     ASSERT_EQ(mw_gyro_to_rad_s(msg.u.raw.xyz, MW_GYRO_2000DPS, v), MW_OK);
-    for (int i = 0; i < 3; ++i) EXPECT_NEAR(v[i], truth.gyro_rad_s[i], 0.51 * mw_gyro_rad_s_per_lsb(MW_GYRO_2000DPS));
+    for (int i = 0; i < 3; ++i)
+        EXPECT_NEAR(v[i], truth.gyro_rad_s[i], 0.51 * mw_gyro_rad_s_per_lsb(MW_GYRO_2000DPS));
     ASSERT_EQ(mw_can_decode(&frames[2], &msg), MW_OK);
     EXPECT_EQ(msg.function, MW_FN_MAG);
     ASSERT_EQ(mw_mag_to_ut(msg.u.raw.xyz, v), MW_OK);
-    for (int i = 0; i < 3; ++i) EXPECT_NEAR(v[i], truth.mag_ut[i], 0.51 * MW_MAG_UT_PER_LSB);
+    for (int i = 0; i < 3; ++i)
+        EXPECT_NEAR(v[i], truth.mag_ut[i], 0.51 * MW_MAG_UT_PER_LSB);
     EXPECT_GT(truth.gyro_rad_s.norm(), 1.0) << "the test moved the sensor";
 }
 

@@ -34,11 +34,10 @@ std::string slurp(const fs::path& p) {
 }
 
 class ToolsEndToEnd : public ::testing::Test {
-  protected:
+protected:
     void SetUp() override {
         const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() /
-               ("mocap_tools_e2e_" + std::to_string(::getpid()) + "_" + info->name());
+        dir_ = fs::temp_directory_path() / ("mocap_tools_e2e_" + std::to_string(::getpid()) + "_" + info->name());
         fs::create_directories(dir_);
     }
     void TearDown() override { fs::remove_all(dir_); }
@@ -56,12 +55,8 @@ class ToolsEndToEnd : public ::testing::Test {
         return r;
     }
 
-    std::string sim(const std::string& args) const {
-        return std::string(MOCAP_SIM_BIN) + " csv " + args;
-    }
-    std::string filt(const std::string& args) const {
-        return std::string(MOCAP_FILTER_BIN) + " " + args;
-    }
+    std::string sim(const std::string& args) const { return std::string(MOCAP_SIM_BIN) + " csv " + args; }
+    std::string filt(const std::string& args) const { return std::string(MOCAP_FILTER_BIN) + " " + args; }
 
     fs::path dir_;
 };
@@ -94,12 +89,9 @@ mocap::filter::Quat first_quat(const std::string& csv) {
 }
 
 TEST_F(ToolsEndToEnd, SimWritesTheContractFileDeterministically) {
-    ASSERT_EQ(run(sim("--scenario realistic --seed 2 --out " + path("a.csv").string())).exit_code,
-              0);
-    ASSERT_EQ(run(sim("--scenario realistic --seed 2 --out " + path("b.csv").string())).exit_code,
-              0);
-    ASSERT_EQ(run(sim("--scenario realistic --seed 3 --out " + path("c.csv").string())).exit_code,
-              0);
+    ASSERT_EQ(run(sim("--scenario realistic --seed 2 --out " + path("a.csv").string())).exit_code, 0);
+    ASSERT_EQ(run(sim("--scenario realistic --seed 2 --out " + path("b.csv").string())).exit_code, 0);
+    ASSERT_EQ(run(sim("--scenario realistic --seed 3 --out " + path("c.csv").string())).exit_code, 0);
     const std::string a = slurp(path("a.csv"));
     EXPECT_EQ(a.rfind("t,gx,gy,gz,ax,ay,az,mx,my,mz,qw,qx,qy,qz,movement\n", 0), 0u);
     EXPECT_EQ(count_lines(a), 9002u);  // header + 90 s at 100 Hz + 1
@@ -116,11 +108,10 @@ TEST_F(ToolsEndToEnd, SimWritesTheContractFileDeterministically) {
 TEST_F(ToolsEndToEnd, FilterEvaluatesASimulatedRecording) {
     const std::string in = path("in.csv").string(), out = path("out.csv").string();
     ASSERT_EQ(run(sim("--scenario realistic --seed 4 --out " + in)).exit_code, 0);
-    const ToolRun r =
-        run(filt("--filter madgwick --in " + in + " --out " + out + " --eval --skip-seconds 5"));
+    const ToolRun r = run(filt("--filter madgwick --in " + in + " --out " + out + " --eval --skip-seconds 5"));
     ASSERT_EQ(r.exit_code, 0) << r.err;
-    for (const char* key : {"rmse_total_deg", "rmse_heading_deg", "rmse_inclination_deg",
-                            "rmse_roll_deg", "rmse_pitch_deg", "rmse_yaw_deg", "samples"}) {
+    for (const char* key : {"rmse_total_deg", "rmse_heading_deg", "rmse_inclination_deg", "rmse_roll_deg",
+                            "rmse_pitch_deg", "rmse_yaw_deg", "samples"}) {
         EXPECT_TRUE(std::isfinite(json_number(r.out, key))) << key;
     }
     EXPECT_NE(r.out.find("\"filter\":\"madgwick\""), std::string::npos) << r.out;
@@ -144,23 +135,18 @@ TEST_F(ToolsEndToEnd, NedFrameGivesTheSameTotalErrorAndNedOutput) {
     const std::string enu_in = path("enu.csv").string(), ned_in = path("ned.csv").string();
     ASSERT_EQ(run(sim("--scenario fourati --seed 6 --out " + enu_in)).exit_code, 0);
     ASSERT_EQ(run(sim("--scenario fourati --seed 6 --frame ned --out " + ned_in)).exit_code, 0);
-    const ToolRun a = run(
-        filt("--filter madgwick --in " + enu_in + " --out " + path("a.csv").string() + " --eval"));
-    const ToolRun b = run(filt("--filter madgwick --frame ned --in " + ned_in + " --out " +
-                               path("b.csv").string() + " --eval"));
+    const ToolRun a = run(filt("--filter madgwick --in " + enu_in + " --out " + path("a.csv").string() + " --eval"));
+    const ToolRun b =
+        run(filt("--filter madgwick --frame ned --in " + ned_in + " --out " + path("b.csv").string() + " --eval"));
     ASSERT_EQ(a.exit_code, 0) << a.err;
     ASSERT_EQ(b.exit_code, 0) << b.err;
     for (const char* key : {"rmse_total_deg", "rmse_heading_deg", "rmse_inclination_deg"}) {
-        EXPECT_NEAR(json_number(a.out, key), json_number(b.out, key),
-                    1e-3 * json_number(a.out, key) + 1e-4)
-            << key;
+        EXPECT_NEAR(json_number(a.out, key), json_number(b.out, key), 1e-3 * json_number(a.out, key) + 1e-4) << key;
     }
     // The NED output is q_enu_ned ⊗ the ENU output.
     const auto q_enu = first_quat(slurp(path("a.csv")));
     const auto q_ned = first_quat(slurp(path("b.csv")));
-    EXPECT_LT(
-        mocap::filter::angle_rad(q_ned * mocap::filter::conj(mocap::filter::q_enu_ned() * q_enu)),
-        1e-6);
+    EXPECT_LT(mocap::filter::angle_rad(q_ned * mocap::filter::conj(mocap::filter::q_enu_ned() * q_enu)), 1e-6);
     // The fourati truth starts on NED's axes: the NED file's first reference is identity.
     std::ifstream in(ned_in);
     std::string header, row;
@@ -172,8 +158,7 @@ TEST_F(ToolsEndToEnd, NedFrameGivesTheSameTotalErrorAndNedOutput) {
     for (double& x : v)
         fields >> x;
     ASSERT_TRUE(fields) << row;
-    EXPECT_LT(mocap::filter::angle_rad(mocap::filter::Quat(v[10], v[11], v[12], v[13])), 1e-9)
-        << row;
+    EXPECT_LT(mocap::filter::angle_rad(mocap::filter::Quat(v[10], v[11], v[12], v[13])), 1e-9) << row;
 }
 
 TEST_F(ToolsEndToEnd, MalformedInputIsRejectedWithTheLine) {
@@ -207,22 +192,16 @@ TEST_F(ToolsEndToEnd, MalformedInputIsRejectedWithTheLine) {
     r = run(filt("--filter madgwick --in " + in + " --out " + out + " --eval"));
     EXPECT_NE(r.exit_code, 0);
     EXPECT_NE(r.err.find("qw,qx,qy,qz"), std::string::npos) << r.err;
-    EXPECT_NE(run(filt("--filter madgwick --in " + path("missing.csv").string() + " --out " + out))
-                  .exit_code,
-              0);
+    EXPECT_NE(run(filt("--filter madgwick --in " + path("missing.csv").string() + " --out " + out)).exit_code, 0);
 }
 
 TEST_F(ToolsEndToEnd, BadFilterNameOrParamsAreCommandLineErrors) {
     const std::string in = path("in.csv").string(), out = path("out.csv").string();
     ASSERT_EQ(run(sim("--scenario fourati --out " + in)).exit_code, 0);
     EXPECT_EQ(run(filt("--filter no-such-filter --in " + in + " --out " + out)).exit_code, 2);
-    EXPECT_EQ(run(filt("--filter madgwick --param beta --in " + in + " --out " + out)).exit_code,
-              2);
-    EXPECT_EQ(
-        run(filt("--filter madgwick --param no_such_key=1 --in " + in + " --out " + out)).exit_code,
-        2);
-    EXPECT_EQ(
-        run(filt("--filter madgwick --param beta=abc --in " + in + " --out " + out)).exit_code, 2);
+    EXPECT_EQ(run(filt("--filter madgwick --param beta --in " + in + " --out " + out)).exit_code, 2);
+    EXPECT_EQ(run(filt("--filter madgwick --param no_such_key=1 --in " + in + " --out " + out)).exit_code, 2);
+    EXPECT_EQ(run(filt("--filter madgwick --param beta=abc --in " + in + " --out " + out)).exit_code, 2);
     EXPECT_NE(run(filt("--filter madgwick --frame nwu --in " + in + " --out " + out)).exit_code, 0);
     EXPECT_NE(run(filt("--filter madgwick --in " + in)).exit_code, 0);
     // --list names every filter the contract requires, with its keys.
@@ -234,8 +213,7 @@ TEST_F(ToolsEndToEnd, BadFilterNameOrParamsAreCommandLineErrors) {
     EXPECT_NE(list.out.find(" beta="), std::string::npos);
     // A valid parameter changes the result.
     const ToolRun a = run(filt("--filter madgwick --in " + in + " --out " + out + " --eval"));
-    const ToolRun b =
-        run(filt("--filter madgwick --param beta=0.2 --in " + in + " --out " + out + " --eval"));
+    const ToolRun b = run(filt("--filter madgwick --param beta=0.2 --in " + in + " --out " + out + " --eval"));
     ASSERT_EQ(a.exit_code, 0) << a.err;
     ASSERT_EQ(b.exit_code, 0) << b.err;
     EXPECT_NE(json_number(a.out, "rmse_total_deg"), json_number(b.out, "rmse_total_deg"));

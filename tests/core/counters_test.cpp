@@ -16,8 +16,12 @@ void expect_only_goes_up() {
     EXPECT_EQ(c.value(), 42u);
 }
 
-TEST(Counter, OnlyGoesUp) { expect_only_goes_up<Counter>(); }
-TEST(SingleWriterCounter, OnlyGoesUp) { expect_only_goes_up<SingleWriterCounter>(); }
+TEST(Counter, OnlyGoesUp) {
+    expect_only_goes_up<Counter>();
+}
+TEST(SingleWriterCounter, OnlyGoesUp) {
+    expect_only_goes_up<SingleWriterCounter>();
+}
 
 TEST(CounterGroup, NamesEntriesAndSumsParts) {
     Counter a, b, c;
@@ -70,7 +74,9 @@ void expect_reader_sees_two_writers(int adds) {
     EXPECT_EQ(*group.value("events"), 4u * static_cast<std::uint64_t>(adds));
 }
 
-TEST(CounterGroup, ReaderSeesConcurrentWriters) { expect_reader_sees_two_writers<Counter>(50'000); }
+TEST(CounterGroup, ReaderSeesConcurrentWriters) {
+    expect_reader_sees_two_writers<Counter>(50'000);
+}
 
 // Both kinds can be parts of one entry (e.g. a per-thread single-writer part per thread).
 TEST(CounterGroup, SumsSingleWriterAndSharedParts) {

@@ -20,8 +20,7 @@ TEST(LatencyBuckets, AreContiguousAndNarrow) {
         ASSERT_EQ(latency_bucket_index(hi), i);
         ASSERT_EQ(latency_bucket_lower_us(i + 1), hi + 1);
         // Width at most 1/32 of the bucket's lower bound (exact below 32 µs).
-        ASSERT_LE((hi - lo + 1) * kLatencySubBuckets,
-                  std::max<std::uint64_t>(lo, kLatencySubBuckets));
+        ASSERT_LE((hi - lo + 1) * kLatencySubBuckets, std::max<std::uint64_t>(lo, kLatencySubBuckets));
     }
     EXPECT_EQ(latency_bucket_index(UINT64_MAX), kLatencyBuckets - 1);
     EXPECT_EQ(latency_bucket_index(std::uint64_t{1} << 40), kLatencyBuckets - 1);
@@ -64,8 +63,7 @@ TEST(LatencyHistogram, PercentilesMatchSortedReferenceWithinOneBucket) {
     ASSERT_EQ(s.count, ref.size());
     EXPECT_EQ(s.max_us, ref.back());
     for (double p : {1.0, 10.0, 50.0, 90.0, 99.0, 99.9, 100.0}) {
-        const auto rank =
-            static_cast<std::size_t>(std::ceil(p / 100.0 * static_cast<double>(ref.size())));
+        const auto rank = static_cast<std::size_t>(std::ceil(p / 100.0 * static_cast<double>(ref.size())));
         const std::uint64_t truth = ref[std::max<std::size_t>(rank, 1) - 1];
         const std::uint64_t got = s.percentile_us(p);
         EXPECT_GE(got, truth) << "p" << p;

@@ -16,7 +16,7 @@ namespace mocap {
 namespace {
 
 class SteadyClock : public Clock {
-  public:
+public:
     std::int64_t now_us() const noexcept override {
         return std::chrono::duration_cast<std::chrono::microseconds>(
                    std::chrono::steady_clock::now().time_since_epoch())
@@ -25,7 +25,7 @@ class SteadyClock : public Clock {
 };
 
 class SyncProcessor : public SegmentProcessor {
-  public:
+public:
     bool process(const SegmentSample& in, SegmentPose& out) override {
         out.q_earth_sensor_wxyz = {1.0, static_cast<double>(in.sync), 0.0, 0.0};
         return true;
@@ -33,7 +33,7 @@ class SyncProcessor : public SegmentProcessor {
 };
 
 class CheckingSink : public FrameSink {
-  public:
+public:
     void on_frame(const SubjectFrame& f) override {
         auto& last = last_sync[f.subject_id];
         if (f.sync <= last) ++out_of_order;
@@ -43,8 +43,7 @@ class CheckingSink : public FrameSink {
             if (f.segments[k].flags != 0) ++stale;
             if (f.segments[k].q_earth_sensor_wxyz[1] != static_cast<double>(f.sync)) ++wrong;
         }
-        if (f.times.assembled_us < f.times.filtered_us ||
-            f.times.filtered_us < f.times.dequeued_us ||
+        if (f.times.assembled_us < f.times.filtered_us || f.times.filtered_us < f.times.dequeued_us ||
             f.times.dequeued_us < f.times.received_us) {
             ++bad_times;
         }
@@ -88,8 +87,7 @@ TEST(Pipeline, IngestWorkersAssemblerDeliverEveryFrameInOrder) {
             if (ingest_done.load(std::memory_order_acquire)) break;
             const std::int64_t deadline = assembler.next_deadline_us();
             const std::int64_t now = clock.now_us();
-            pool.wait_for_output(
-                deadline == kNoDeadline ? 10'000 : std::max<std::int64_t>(deadline - now, 0));
+            pool.wait_for_output(deadline == kNoDeadline ? 10'000 : std::max<std::int64_t>(deadline - now, 0));
         }
         while (pool.drain(on_pose) != 0) {
         }

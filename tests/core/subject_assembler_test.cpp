@@ -9,7 +9,7 @@ namespace mocap {
 namespace {
 
 class RecordingSink : public FrameSink {
-  public:
+public:
     void on_frame(const SubjectFrame& frame) override { frames.push_back(frame); }
     std::vector<SubjectFrame> frames;
 };
@@ -40,8 +40,7 @@ AssemblerConfig config(bool skip_dead = true, std::size_t window = 32) {
     return c;
 }
 
-void feed(SubjectAssembler& a, std::uint64_t sync, std::vector<std::uint16_t> segments,
-          std::int64_t now_us) {
+void feed(SubjectAssembler& a, std::uint64_t sync, std::vector<std::uint16_t> segments, std::int64_t now_us) {
     for (std::uint16_t k : segments)
         a.on_pose(pose(1, k, sync), now_us);
 }

@@ -16,7 +16,7 @@ namespace {
 // Writes a pose derived from the sync so the consumer can check the pose belongs to the
 // sample; remembers the last sync it saw to check order on the worker thread itself.
 class OrderCheckingProcessor : public SegmentProcessor {
-  public:
+public:
     bool process(const SegmentSample& in, SegmentPose& out) override {
         if (seen_ != 0 && in.sync <= last_sync_) ++out_of_order_;
         last_sync_ = in.sync;
@@ -27,13 +27,13 @@ class OrderCheckingProcessor : public SegmentProcessor {
     std::uint64_t seen_ = 0;  // read by the test only after stop() joined the workers
     std::uint64_t out_of_order_ = 0;
 
-  private:
+private:
     std::uint64_t last_sync_ = 0;
 };
 
 // Blocks inside process() until released, to fill the input ring deterministically.
 class GateProcessor : public SegmentProcessor {
-  public:
+public:
     bool process(const SegmentSample&, SegmentPose&) override {
         entered_.store(true, std::memory_order_release);
         for (int i = 0; i < 200'000 && !open_.load(std::memory_order_acquire); ++i) {
@@ -46,15 +46,13 @@ class GateProcessor : public SegmentProcessor {
 };
 
 class RejectOddProcessor : public SegmentProcessor {
-  public:
+public:
     bool process(const SegmentSample& in, SegmentPose&) override { return in.sync % 2 == 0; }
 };
 
 class TickClock : public Clock {
-  public:
-    std::int64_t now_us() const noexcept override {
-        return t_.fetch_add(10, std::memory_order_relaxed) + 10;
-    }
+public:
+    std::int64_t now_us() const noexcept override { return t_.fetch_add(10, std::memory_order_relaxed) + 10; }
     mutable std::atomic<std::int64_t> t_{1000};
 };
 

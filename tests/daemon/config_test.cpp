@@ -125,13 +125,15 @@ filter = "pf"
 
 TEST(Config, SegmentErrors) {
     std::string err;
-    EXPECT_FALSE(parse("[[skeleton.segment]]\nname = \"a\"\nnode = 1\n[[skeleton.segment]]\n"
-                       "name = \"b\"\nparent = \"zz\"\nnode = 2\n",
-                       &err));
+    EXPECT_FALSE(
+        parse("[[skeleton.segment]]\nname = \"a\"\nnode = 1\n[[skeleton.segment]]\n"
+              "name = \"b\"\nparent = \"zz\"\nnode = 2\n",
+              &err));
     EXPECT_EQ(err, "test.toml:6: skeleton.segment.parent: parent must be a segment listed earlier");
-    EXPECT_FALSE(parse("[[skeleton.segment]]\nname = \"a\"\nnode = 1\n[[skeleton.segment]]\n"
-                       "name = \"b\"\nparent = \"a\"\nnode = 1\n",
-                       &err));
+    EXPECT_FALSE(
+        parse("[[skeleton.segment]]\nname = \"a\"\nnode = 1\n[[skeleton.segment]]\n"
+              "name = \"b\"\nparent = \"a\"\nnode = 1\n",
+              &err));
     EXPECT_EQ(err, "test.toml:7: skeleton.segment.node: node id used twice");
     EXPECT_FALSE(parse("[[skeleton.segment]]\nname = \"a\"\nnode = 99\n", &err));
     EXPECT_EQ(err, "test.toml:3: skeleton.segment.node: must be between 1 and 63");
@@ -170,10 +172,11 @@ TEST(ConfigOutputs, DefaultsAndValues) {
     EXPECT_DOUBLE_EQ(d->raw_rotate_s, s.raw_rotate_s);
     EXPECT_EQ(d->raw_ring_capacity, s.raw_ring_capacity);
 
-    const auto c = parse_config("[outputs]\nbvh_live = false\nbvh_listen = \"127.0.0.1:9002\"\nbvh_unit = \"m\"\n"
-                                "bvh_rotation_order = \"XYZ\"\nbvh_subject = 3\nraw_record = true\n"
-                                "raw_rotate_mb = 1.5\nrecord_dir = \"/tmp/x\"\n",
-                                "t.toml", &err);
+    const auto c = parse_config(
+        "[outputs]\nbvh_live = false\nbvh_listen = \"127.0.0.1:9002\"\nbvh_unit = \"m\"\n"
+        "bvh_rotation_order = \"XYZ\"\nbvh_subject = 3\nraw_record = true\n"
+        "raw_rotate_mb = 1.5\nrecord_dir = \"/tmp/x\"\n",
+        "t.toml", &err);
     ASSERT_TRUE(c) << err;
     EXPECT_FALSE(c->bvh_live);
     EXPECT_EQ(c->bvh_listen.port, 9002);
@@ -235,9 +238,10 @@ TEST(Config, HttpSectionDefaultsValuesAndErrors) {
     EXPECT_EQ(d->http_max_clients, s.http_max_clients);
     EXPECT_EQ(d->http_ws_queue_frames, s.http_ws_queue_frames);
 
-    const auto c = parse("[http]\nenabled = false\nlisten = \"127.0.0.1:9090\"\nmax_clients = 3\n"
-                         "ws_queue_frames = 2\n",
-                         &err);
+    const auto c = parse(
+        "[http]\nenabled = false\nlisten = \"127.0.0.1:9090\"\nmax_clients = 3\n"
+        "ws_queue_frames = 2\n",
+        &err);
     ASSERT_TRUE(c) << err;
     EXPECT_FALSE(c->http_enabled);
     EXPECT_EQ(c->http_listen, (Endpoint{"127.0.0.1", 9090}));

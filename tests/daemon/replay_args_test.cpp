@@ -23,8 +23,8 @@ TEST(ReplayArgs, CalibrateAtTakesSecondsSubjectAndPose) {
 TEST(ReplayArgs, CalibrateAtRejectsWhatSscanfAccepted) {
     ReplayCalibration c;
     std::string error;
-    for (const char* bad : {"", "x", "1x", "-1", "nan", "1:0", "1:-1", "1:4294967296", "1:2:X", "1:2:TT",
-                            "1:2:T:4", "1:", "1e999"}) {
+    for (const char* bad :
+         {"", "x", "1x", "-1", "nan", "1:0", "1:-1", "1:4294967296", "1:2:X", "1:2:TT", "1:2:T:4", "1:", "1e999"}) {
         error.clear();
         EXPECT_FALSE(parse_replay_calibration(bad, &c, &error)) << bad;
         EXPECT_NE(error.find("SECONDS[:SUBJECT[:T|N]]"), std::string::npos) << bad;

@@ -16,7 +16,9 @@ Quat random_quat(std::mt19937& rng) {
     return Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
 }
 
-double qdist(const Quat& a, const Quat& b) { return angle_rad(a * b.conjugate()); }
+double qdist(const Quat& a, const Quat& b) {
+    return angle_rad(a * b.conjugate());
+}
 
 // Noiseless measurements of a sensor at attitude q (specific force at rest = up).
 struct Pair {

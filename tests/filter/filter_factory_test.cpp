@@ -74,7 +74,8 @@ TEST(FilterFactory, ListedKeysAreExactlyTheDocumentedOnes) {
         const std::set<std::string> documented = documented_keys(where.first, where.second);
         EXPECT_FALSE(documented.empty()) << where.first;
         std::set<std::string> listed;
-        for (const FilterKey& k : filter_keys(name)) listed.insert(std::string(k.key));
+        for (const FilterKey& k : filter_keys(name))
+            listed.insert(std::string(k.key));
         EXPECT_EQ(listed, documented) << name;
     }
 }
@@ -131,7 +132,9 @@ TEST(FilterFactory, RejectsUnknownNamesKeysAndBadValues) {
     EXPECT_EQ(make_filter("nope", {}), nullptr);
 }
 
-TEST(FilterFactory, UnknownNameHasNoKeys) { EXPECT_TRUE(filter_keys("nope").empty()); }
+TEST(FilterFactory, UnknownNameHasNoKeys) {
+    EXPECT_TRUE(filter_keys("nope").empty());
+}
 
 }  // namespace
 }  // namespace mocap::filter

@@ -42,8 +42,7 @@ TEST(Madgwick, ConvergesFromIdentityAtRest) {
 }
 
 TEST(Madgwick, TracksNoiselessRotation) {
-    const auto rows = testing::constant_rate(from_euler_zyx({0.2, 0.1, 0.5}), Vec3(0.3, -0.5, 0.8),
-                                             100.0, 20.0);
+    const auto rows = testing::constant_rate(from_euler_zyx({0.2, 0.1, 0.5}), Vec3(0.3, -0.5, 0.8), 100.0, 20.0);
     MadgwickFilter f;
     // First-order integration of the published algorithm: small lag, no drift.
     EXPECT_LT(testing::run(f, rows, 0.0).worst_deg, 1.0);
@@ -57,7 +56,8 @@ TEST(Madgwick, WithoutMagnetometerOnlyInclinationIsCorrected) {
     p.init_from_first_sample = false;
     MadgwickFilter f(p);
     auto rows = still(from_euler_zyx({0.5, 0.0, 0.0}), 30.0);
-    for (auto& r : rows) r.sample.flags = kImuNoMag;
+    for (auto& r : rows)
+        r.sample.flags = kImuNoMag;
     const testing::Rmse r = testing::run(f, rows, 29.9);
     EXPECT_LT(r.inclination_deg, 0.2);
     EXPECT_LT(r.heading_deg, 1.0);

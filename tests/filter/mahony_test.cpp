@@ -11,10 +11,10 @@ namespace {
 using testing::kRadToDeg;
 
 // A sensor held still at `truth` (100 Hz, dip 60°) whose gyro reads a constant bias.
-std::vector<sim::ScenarioRow> still(const Quat& truth, double duration_s,
-                                    const Vec3& bias = Vec3::Zero()) {
+std::vector<sim::ScenarioRow> still(const Quat& truth, double duration_s, const Vec3& bias = Vec3::Zero()) {
     auto rows = testing::constant_rate(truth, Vec3::Zero(), 100.0, duration_s);
-    for (auto& r : rows) r.sample.gyro_rad_s = to_array(bias);
+    for (auto& r : rows)
+        r.sample.gyro_rad_s = to_array(bias);
     return rows;
 }
 
@@ -53,8 +53,7 @@ TEST(Mahony, BiasEstimateIsClipped) {
 }
 
 TEST(Mahony, TracksNoiselessRotation) {
-    const auto rows = testing::constant_rate(from_euler_zyx({0.2, 0.1, 0.5}), Vec3(0.3, -0.5, 0.8),
-                                             100.0, 20.0);
+    const auto rows = testing::constant_rate(from_euler_zyx({0.2, 0.1, 0.5}), Vec3(0.3, -0.5, 0.8), 100.0, 20.0);
     MahonyFilter f;
     EXPECT_LT(testing::run(f, rows, 0.0).worst_deg, 1.0);
 }
@@ -74,7 +73,8 @@ TEST(Mahony, WithoutMagnetometerHeadingIsLeftAlone) {
     p.ki = 0.0;
     MahonyFilter f(p);
     auto rows = still(from_euler_zyx({0.5, 0.0, 0.0}), 30.0);
-    for (auto& r : rows) r.sample.flags = kImuNoMag;
+    for (auto& r : rows)
+        r.sample.flags = kImuNoMag;
     const testing::Rmse r = testing::run(f, rows, 29.9);
     EXPECT_LT(r.inclination_deg, 0.2);
     EXPECT_LT(r.heading_deg, 1.0);

@@ -18,9 +18,13 @@ Vec3 random_vec(std::mt19937& rng, double sigma) {
     return {n(rng), n(rng), n(rng)};
 }
 
-double qdist(const Quat& a, const Quat& b) { return angle_rad(a * b.conjugate()); }
+double qdist(const Quat& a, const Quat& b) {
+    return angle_rad(a * b.conjugate());
+}
 
-Quat neg(const Quat& q) { return Quat(-q.w(), -q.x(), -q.y(), -q.z()); }
+Quat neg(const Quat& q) {
+    return Quat(-q.w(), -q.x(), -q.y(), -q.z());
+}
 
 TEST(MarkleyAverage, XiMatrixIsTheConjugateProductAndOrthonormal) {
     std::mt19937 rng(3);
@@ -116,8 +120,8 @@ TEST(MarkleyAverage, MatrixWeightsTrustEachInputAlongItsGoodAxis) {
     // Input a is precise about x and vague about z, b the opposite: the average takes
     // each axis from the input that is sure about it.
     const Quat truth = Quat::Identity();
-    const Quat a = quat_from_rotvec(Vec3(0.0, 0.0, 0.2));   // error on z only
-    const Quat b = quat_from_rotvec(Vec3(0.2, 0.0, 0.0));   // error on x only
+    const Quat a = quat_from_rotvec(Vec3(0.0, 0.0, 0.2));  // error on z only
+    const Quat b = quat_from_rotvec(Vec3(0.2, 0.0, 0.0));  // error on x only
     const Mat3 ia = Vec3(1e4, 1.0, 1e-4).asDiagonal();     // sure about x, not z
     const Mat3 ib = Vec3(1e-4, 1.0, 1e4).asDiagonal();     // sure about z, not x
     const std::vector<Quat> qs{a, b};
@@ -154,7 +158,8 @@ TEST(MarkleyAverage, CovarianceMatchesMonteCarloSpreadOfTheAverage) {
     Mat3 emp = Mat3::Zero();
     for (int t = 0; t < trials; ++t) {
         std::vector<Quat> qs;
-        for (int i = 0; i < n; ++i) qs.push_back(truth * quat_from_rotvec(random_vec(rng, sigma)));
+        for (int i = 0; i < n; ++i)
+            qs.push_back(truth * quat_from_rotvec(random_vec(rng, sigma)));
         const Vec3 e = rotvec_from_quat(truth.conjugate() * average_quaternions(qs));
         emp += e * e.transpose() / trials;
     }

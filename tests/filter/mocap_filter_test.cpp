@@ -16,10 +16,10 @@ namespace {
 using testing::kRadToDeg;
 
 // A sensor held still at `truth` (100 Hz, 48 µT at 60° dip) whose gyro reads a bias.
-std::vector<sim::ScenarioRow> still(const Quat& truth, double duration_s,
-                                    const Vec3& bias = Vec3::Zero()) {
+std::vector<sim::ScenarioRow> still(const Quat& truth, double duration_s, const Vec3& bias = Vec3::Zero()) {
     auto rows = testing::constant_rate(truth, Vec3::Zero(), 100.0, duration_s);
-    for (auto& r : rows) r.sample.gyro_rad_s = to_array(bias);
+    for (auto& r : rows)
+        r.sample.gyro_rad_s = to_array(bias);
     return rows;
 }
 
@@ -59,8 +59,7 @@ TEST(MocapFilter, FirstSampleGivesTheClosedFormAttitude) {
 TEST(MocapFilter, TracksNoiselessRotationAtSeveralRates) {
     // The coefficients follow the sample period measured on the timestamps.
     for (const double rate_hz : {50.0, 100.0, 286.0, 1000.0}) {
-        const auto rows = testing::constant_rate(from_euler_zyx({0.2, 0.1, 0.5}),
-                                                 Vec3(0.3, -0.5, 0.8), rate_hz, 20.0);
+        const auto rows = testing::constant_rate(from_euler_zyx({0.2, 0.1, 0.5}), Vec3(0.3, -0.5, 0.8), rate_hz, 20.0);
         MocapFilter f;
         const testing::Rmse r = testing::run(f, rows, 0.0);
         EXPECT_LT(r.worst_deg, 0.2) << rate_hz;
@@ -104,16 +103,14 @@ TEST(MocapFilter, RealisticScenarioWithinTwoDegrees) {
         EXPECT_LT(r.inclination_deg, 0.6) << seed;
         EXPECT_EQ(f.state().mag_disturbances, 0u) << seed;  // no false alarms
         // The constant bias is learned (sensor z only at rest: tolerance 0.1 °/s).
-        EXPECT_LT((f.gyro_bias_rad_s() - sc.gyro_bias_rad_s).cwiseAbs().maxCoeff() * kRadToDeg, 0.1)
-            << seed;
+        EXPECT_LT((f.gyro_bias_rad_s() - sc.gyro_bias_rad_s).cwiseAbs().maxCoeff() * kRadToDeg, 0.1) << seed;
     }
 }
 
 TEST(MocapFilter, BeatsCsmoOnEveryScenario) {
     // CSMO is started at the truth; the default filter initialises itself. Seed 1 of each
     // scenario (docs/accuracy.md has all seeds).
-    for (const auto kind :
-         {sim::ScenarioKind::fourati, sim::ScenarioKind::realistic, sim::ScenarioKind::magnetic}) {
+    for (const auto kind : {sim::ScenarioKind::fourati, sim::ScenarioKind::realistic, sim::ScenarioKind::magnetic}) {
         const sim::Scenario sc = sim::make_scenario(kind, 1);
         MocapFilter m;
         Csmo c = csmo_at_truth(sc);
@@ -181,9 +178,8 @@ TEST(MocapFilter, AcceptsAPersistentNewField) {
     // adopts it after mag_new_time_s of motion.
     const Quat q0 = from_euler_zyx({0.2, 0.1, 0.0});
     const Vec3 w(0.05, -0.05, 0.6);  // 35 °/s: enough motion for the new-field timer
-    const Vec3 new_field = 1.2 * 48.0 *
-                           (Eigen::AngleAxisd(0.5236, Vec3::UnitZ()) *
-                            field_direction_enu(48.0 * std::numbers::pi / 180.0));
+    const Vec3 new_field =
+        1.2 * 48.0 * (Eigen::AngleAxisd(0.5236, Vec3::UnitZ()) * field_direction_enu(48.0 * std::numbers::pi / 180.0));
     auto rows = testing::constant_rate(q0, w, 100.0, 80.0);
     MocapFilter f;
     bool rejected_after_change = false;
@@ -197,14 +193,16 @@ TEST(MocapFilter, AcceptsAPersistentNewField) {
     EXPECT_EQ(f.state().mag_fields_accepted, 2u);  // the first field and the new one
     EXPECT_FALSE(f.mag_rejected());
     // The heading now follows the new field (30° off the old truth, converging at tau_mag_s).
-    const double heading_deg = to_euler_zyx(f.orientation() * rows.back().q_earth_sensor.conjugate()).yaw_rad * kRadToDeg;
+    const double heading_deg =
+        to_euler_zyx(f.orientation() * rows.back().q_earth_sensor.conjugate()).yaw_rad * kRadToDeg;
     EXPECT_NEAR(std::abs(heading_deg), 30.0, 6.0);
 }
 
 TEST(MocapFilter, SamplesWithoutMagnetometerKeepInclination) {
     const sim::Scenario sc = sim::make_scenario(sim::ScenarioKind::realistic, 2);
     auto rows = sc.rows;
-    for (auto& r : rows) r.sample.flags = kImuNoMag;
+    for (auto& r : rows)
+        r.sample.flags = kImuNoMag;
     MocapFilter f;
     const testing::Rmse r = testing::run(f, rows, 5.0);
     EXPECT_LT(r.inclination_deg, 0.6);

@@ -21,16 +21,19 @@ void* operator new(std::size_t n) {
     if (void* p = std::malloc(n ? n : 1)) return p;
     throw std::bad_alloc();
 }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p) noexcept {
+    std::free(p);
+}
+void operator delete(void* p, std::size_t) noexcept {
+    std::free(p);
+}
 
 namespace mocap::filter {
 namespace {
 
 using testing::kRadToDeg;
 
-double mean_total(const ParticleFilterParams& p, sim::ScenarioKind kind,
-                  std::initializer_list<std::uint64_t> seeds) {
+double mean_total(const ParticleFilterParams& p, sim::ScenarioKind kind, std::initializer_list<std::uint64_t> seeds) {
     double s = 0.0;
     for (const std::uint64_t seed : seeds) {
         ParticleFilter f(p);
@@ -57,7 +60,8 @@ TEST(ParticleFilter, SameSeedSameOutputOtherSeedOtherOutput) {
     EXPECT_TRUE(differs);
     // reset() replays the same sequence.
     a.reset();
-    for (std::size_t k = 0; k < 1000; ++k) a.update(sc.rows[k].sample);
+    for (std::size_t k = 0; k < 1000; ++k)
+        a.update(sc.rows[k].sample);
     EXPECT_EQ(a.orientation().coeffs(), b.orientation().coeffs());
 }
 
@@ -137,8 +141,7 @@ TEST(ParticleFilter, FouratiScenarioWithItsNoiseLevels) {
     p.accel_gate = 1.0;
     for (const std::uint64_t seed : {1u, 2u, 3u}) {
         ParticleFilter f(p);
-        const testing::Rmse r =
-            testing::run(f, sim::make_scenario(sim::ScenarioKind::fourati, seed).rows, 5.0);
+        const testing::Rmse r = testing::run(f, sim::make_scenario(sim::ScenarioKind::fourati, seed).rows, 5.0);
         EXPECT_LT(r.roll_deg, 1.5) << seed;
         EXPECT_LT(r.pitch_deg, 1.5) << seed;
         EXPECT_LT(r.yaw_deg, 9.0) << seed;
@@ -168,7 +171,8 @@ TEST(ParticleFilter, GatesLinearAccelerationAndMissingMagnetometer) {
     const double w0 = f.weight(0);
     const double yaw0 = to_euler_zyx(f.orientation()).yaw_rad;
     ImuSample s = rows[2].sample;
-    for (double& a : s.accel_m_s2) a *= 1.5;  // 0.5 g of linear acceleration
+    for (double& a : s.accel_m_s2)
+        a *= 1.5;  // 0.5 g of linear acceleration
     f.update(s);
     EXPECT_EQ(f.state().rejected_measurements, rejected + 1);
     EXPECT_EQ(f.weight(0), w0);  // no measurement, no reweighting
@@ -207,7 +211,8 @@ TEST(ParticleFilter, UpdateDoesNotAllocate) {
         ParticleFilter f(p);
         f.update(sc.rows[0].sample);
         const long before = g_allocations.load();
-        for (std::size_t k = 1; k < 2000; ++k) f.update(sc.rows[k].sample);
+        for (std::size_t k = 1; k < 2000; ++k)
+            f.update(sc.rows[k].sample);
         EXPECT_EQ(g_allocations.load() - before, 0) << fixed_dip;
         EXPECT_GT(f.state().resamples, 0u);
     }

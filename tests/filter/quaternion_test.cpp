@@ -16,7 +16,9 @@ Quat random_quat(std::mt19937& rng) {
     return Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
 }
 
-double qdist(const Quat& a, const Quat& b) { return angle_rad(a * b.conjugate()); }
+double qdist(const Quat& a, const Quat& b) {
+    return angle_rad(a * b.conjugate());
+}
 
 TEST(Quaternion, HamiltonProductMatchesHandExpansion) {
     const Quat a(1, 2, 3, 4), b(5, 6, 7, 8);
@@ -116,10 +118,10 @@ TEST(Quaternion, BroadErrorMetricsSplitHeadingAndInclination) {
 
 TEST(Quaternion, EnuNedConversionSwapsAxes) {
     const Quat q = q_enu_ned();
-    EXPECT_NEAR((rotate(q, Vec3(1, 0, 0)) - Vec3(0, 1, 0)).norm(), 0.0, 1e-12);  // north
-    EXPECT_NEAR((rotate(q, Vec3(0, 1, 0)) - Vec3(1, 0, 0)).norm(), 0.0, 1e-12);  // east
+    EXPECT_NEAR((rotate(q, Vec3(1, 0, 0)) - Vec3(0, 1, 0)).norm(), 0.0, 1e-12);   // north
+    EXPECT_NEAR((rotate(q, Vec3(0, 1, 0)) - Vec3(1, 0, 0)).norm(), 0.0, 1e-12);   // east
     EXPECT_NEAR((rotate(q, Vec3(0, 0, 1)) - Vec3(0, 0, -1)).norm(), 0.0, 1e-12);  // down
-    EXPECT_NEAR(angle_rad(q * q), 0.0, 1e-12);  // self-inverse
+    EXPECT_NEAR(angle_rad(q * q), 0.0, 1e-12);                                    // self-inverse
 }
 
 TEST(Quaternion, WrapPiAndSkew) {

@@ -19,8 +19,8 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 struct Rmse {
     double total_deg = 0, heading_deg = 0, inclination_deg = 0;
     double roll_deg = 0, pitch_deg = 0, yaw_deg = 0;
-    double worst_deg = 0;          ///< largest total error over the evaluated samples
-    double last_above_10_s = 0;    ///< last time the total error exceeded 10° (any sample)
+    double worst_deg = 0;        ///< largest total error over the evaluated samples
+    double last_above_10_s = 0;  ///< last time the total error exceeded 10° (any sample)
     int samples = 0;
 };
 
@@ -57,8 +57,8 @@ inline Rmse run(OrientationFilter& f, const std::vector<sim::ScenarioRow>& rows,
 }
 
 /// Noiseless constant body rate from q0 at rate_hz for duration_s; dip 60°.
-inline std::vector<sim::ScenarioRow> constant_rate(const Quat& q0, const Vec3& w_rad_s,
-                                                   double rate_hz, double duration_s) {
+inline std::vector<sim::ScenarioRow> constant_rate(const Quat& q0, const Vec3& w_rad_s, double rate_hz,
+                                                   double duration_s) {
     std::vector<sim::ScenarioRow> rows;
     const double dt = 1.0 / rate_hz;
     const Vec3 g(0, 0, 9.81), h = 48.0 * field_direction_enu(60.0 * std::numbers::pi / 180.0);
@@ -83,7 +83,9 @@ inline std::vector<sim::ScenarioRow> constant_rate(const Quat& q0, const Vec3& w
 
 /// The fourati scenario's truth starts at the paper's q(0) = identity in NED, which is
 /// q_enu_ned() here; the paper's far-off initial estimate maps the same way.
-inline Quat fourati_start_truth() { return q_enu_ned(); }
+inline Quat fourati_start_truth() {
+    return q_enu_ned();
+}
 inline Quat fourati_paper_initial_estimate() {
     return q_enu_ned() * Quat(0.2, 0.5, 0.7, 0.3).normalized();
 }

@@ -29,26 +29,23 @@ struct fake_modem {
     bool connected = false;
     std::size_t data_left = 0;
     std::string line;
-    std::deque<std::pair<uint8_t, uint32_t>> to_client; // byte, baud rate it is sent at
+    std::deque<std::pair<uint8_t, uint32_t>> to_client;  // byte, baud rate it is sent at
     std::vector<std::string> commands;
     std::vector<std::vector<uint8_t>> payloads;
-    std::size_t port_capacity = 64; // bytes the UART takes per write call
+    std::size_t port_capacity = 64;  // bytes the UART takes per write call
 
-    void say(const std::string& s)
-    {
+    void say(const std::string& s) {
         for (char c : s) {
             to_client.emplace_back(static_cast<uint8_t>(c), modem_baud);
         }
     }
 
-    void peer_close()
-    {
+    void peer_close() {
         connected = false;
         say("CLOSED\r\n");
     }
 
-    void on_command(const std::string& cmd)
-    {
+    void on_command(const std::string& cmd) {
         commands.push_back(cmd);
         if (silent) {
             return;
@@ -101,10 +98,9 @@ struct fake_modem {
         }
     }
 
-    void from_client(uint8_t c)
-    {
+    void from_client(uint8_t c) {
         if (port_baud != modem_baud) {
-            return; // framing errors: the modem sees nothing sensible
+            return;  // framing errors: the modem sees nothing sensible
         }
         if (data_left > 0) {
             payloads.back().push_back(c);
@@ -124,8 +120,7 @@ struct fake_modem {
         }
     }
 
-    esp_at_serial serial()
-    {
+    esp_at_serial serial() {
         esp_at_serial s{};
         s.user = this;
         s.write = [](void* u, const uint8_t* d, size_t n) {
@@ -142,7 +137,7 @@ struct fake_modem {
             while (n < cap && !m->to_client.empty()) {
                 const auto [byte, baud] = m->to_client.front();
                 m->to_client.pop_front();
-                if (baud == m->port_baud) { // sent at another rate: lost to framing errors
+                if (baud == m->port_baud) {  // sent at another rate: lost to framing errors
                     d[n++] = byte;
                 }
             }
@@ -160,14 +155,12 @@ protected:
     std::unique_ptr<esp_at> at = std::make_unique<esp_at>();
     esp_at_config config{"my,net", "pa\"ss", "10.0.0.2", 7000, 921600};
 
-    void SetUp() override
-    {
+    void SetUp() override {
         const esp_at_serial s = modem.serial();
         ASSERT_EQ(esp_at_init(at.get(), &s, &config), MW_OK);
     }
 
-    sink_uplink_state settle(int polls = 50)
-    {
+    sink_uplink_state settle(int polls = 50) {
         sink_uplink_state st = esp_at_state(at.get());
         for (int i = 0; i < polls; ++i) {
             modem.now_us += 1000;
@@ -177,21 +170,23 @@ protected:
     }
 };
 
-TEST_F(EspAtTest, SetupScriptThenConnect)
-{
+TEST_F(EspAtTest, SetupScriptThenConnect) {
     ASSERT_EQ(esp_at_connect(at.get()), 0);
     EXPECT_EQ(esp_at_state(at.get()) == SINK_UPLINK_UP ? 0 : 1, 1) << "takes more than one call";
     EXPECT_EQ(settle(), SINK_UPLINK_UP);
-    const std::vector<std::string> expected{
-        "AT+RST", "ATE0", "AT+UART_CUR=921600,8,1,0,0", "AT+CWMODE=1",
-        "AT+CWJAP=\"my\\,net\",\"pa\\\"ss\"", "AT+CIPMUX=0", "AT+CIPSTART=\"TCP\",\"10.0.0.2\",7000"};
+    const std::vector<std::string> expected{"AT+RST",
+                                            "ATE0",
+                                            "AT+UART_CUR=921600,8,1,0,0",
+                                            "AT+CWMODE=1",
+                                            "AT+CWJAP=\"my\\,net\",\"pa\\\"ss\"",
+                                            "AT+CIPMUX=0",
+                                            "AT+CIPSTART=\"TCP\",\"10.0.0.2\",7000"};
     EXPECT_EQ(modem.commands, expected);
     EXPECT_EQ(modem.port_baud, 921600u);
     EXPECT_EQ(at->wifi_ready, 1);
 }
 
-TEST_F(EspAtTest, SendsOnePacketAtATimeThroughThePrompt)
-{
+TEST_F(EspAtTest, SendsOnePacketAtATimeThroughThePrompt) {
     esp_at_connect(at.get());
     ASSERT_EQ(settle(), SINK_UPLINK_UP);
     std::vector<uint8_t> packet(300);
@@ -211,8 +206,7 @@ TEST_F(EspAtTest, SendsOnePacketAtATimeThroughThePrompt)
     EXPECT_EQ(esp_at_write(at.get(), packet.data(), ESP_AT_MAX_PAYLOAD + 1), 1) << "too large for one CIPSEND";
 }
 
-TEST_F(EspAtTest, PeerCloseTakesLinkDownAndReconnectSkipsSetup)
-{
+TEST_F(EspAtTest, PeerCloseTakesLinkDownAndReconnectSkipsSetup) {
     esp_at_connect(at.get());
     ASSERT_EQ(settle(), SINK_UPLINK_UP);
     modem.peer_close();
@@ -226,8 +220,7 @@ TEST_F(EspAtTest, PeerCloseTakesLinkDownAndReconnectSkipsSetup)
     EXPECT_EQ(at->counters.resets, 1u);
 }
 
-TEST_F(EspAtTest, ServerDownFailsConnectButKeepsWifi)
-{
+TEST_F(EspAtTest, ServerDownFailsConnectButKeepsWifi) {
     modem.server_up = false;
     esp_at_connect(at.get());
     EXPECT_EQ(settle(), SINK_UPLINK_DOWN);
@@ -235,8 +228,7 @@ TEST_F(EspAtTest, ServerDownFailsConnectButKeepsWifi)
     EXPECT_EQ(at->wifi_ready, 1);
 }
 
-TEST_F(EspAtTest, WrongPasswordFailsAndNextConnectResetsAgain)
-{
+TEST_F(EspAtTest, WrongPasswordFailsAndNextConnectResetsAgain) {
     modem.password = "other";
     esp_at_connect(at.get());
     EXPECT_EQ(settle(), SINK_UPLINK_DOWN);
@@ -247,8 +239,7 @@ TEST_F(EspAtTest, WrongPasswordFailsAndNextConnectResetsAgain)
     EXPECT_EQ(at->counters.resets, 2u);
 }
 
-TEST_F(EspAtTest, SilentModuleTimesOut)
-{
+TEST_F(EspAtTest, SilentModuleTimesOut) {
     modem.silent = true;
     esp_at_connect(at.get());
     EXPECT_EQ(settle(4000), SINK_UPLINK_CONNECTING) << "the reset may take 5 s";
@@ -256,8 +247,7 @@ TEST_F(EspAtTest, SilentModuleTimesOut)
     EXPECT_EQ(at->counters.timeouts, 1u);
 }
 
-TEST_F(EspAtTest, SinkCoreStreamsDecodablePacketsOverTheModem)
-{
+TEST_F(EspAtTest, SinkCoreStreamsDecodablePacketsOverTheModem) {
     struct bus {
         fake_modem* modem;
     } clock{&modem};
@@ -305,8 +295,7 @@ TEST_F(EspAtTest, SinkCoreStreamsDecodablePacketsOverTheModem)
     EXPECT_EQ(packets, sink->counters.packets_out);
 }
 
-TEST(EspAtInit, RejectsMissingPieces)
-{
+TEST(EspAtInit, RejectsMissingPieces) {
     fake_modem modem;
     esp_at at{};
     esp_at_serial s = modem.serial();
@@ -318,5 +307,5 @@ TEST(EspAtInit, RejectsMissingPieces)
     EXPECT_EQ(esp_at_init(&at, &s, &c), MW_ERR_ARGUMENT) << "baud change without set_baud";
 }
 
-} // namespace
-} // namespace mocap::test
+}  // namespace
+}  // namespace mocap::test

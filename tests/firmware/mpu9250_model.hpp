@@ -16,18 +16,18 @@ namespace mocap::test {
 class mpu9250_model {
 public:
     // Knobs.
-    bool present = true;       // false: MISO floats high (every byte reads 0xFF)
-    bool mag_present = true;   // false: the AK8963 NACKs
+    bool present = true;      // false: MISO floats high (every byte reads 0xFF)
+    bool mag_present = true;  // false: the AK8963 NACKs
     std::array<int16_t, 3> accel{};
     std::array<int16_t, 3> gyro{};
     int16_t temperature = 0;
-    std::array<int16_t, 3> mag_raw{};     // AK8963 axes, before sensitivity adjustment
+    std::array<int16_t, 3> mag_raw{};  // AK8963 axes, before sensitivity adjustment
     std::array<uint8_t, 3> mag_asa{128, 128, 128};
     bool mag_overflow = false;
-    bool fail_spi = false;     // the transfer itself reports an error
+    bool fail_spi = false;  // the transfer itself reports an error
 
     // Observations.
-    std::vector<std::pair<uint8_t, uint8_t>> writes; // every MPU register write, in order
+    std::vector<std::pair<uint8_t, uint8_t>> writes;  // every MPU register write, in order
     int resets = 0;
     int transfers = 0;
 
@@ -51,4 +51,4 @@ private:
     std::array<uint8_t, 32> ak_{};
 };
 
-} // namespace mocap::test
+}  // namespace mocap::test

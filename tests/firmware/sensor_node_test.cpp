@@ -21,8 +21,7 @@ struct fake_node_hal {
     std::vector<mw_can_frame> tx;  // frames the controller accepted
     bool tx_busy = false;
 
-    sensor_node_hal hal()
-    {
+    sensor_node_hal hal() {
         sensor_node_hal h{};
         h.user = this;
         h.spi_transfer = [](void* u, const uint8_t* t, uint8_t* r, size_t n) {
@@ -53,31 +52,27 @@ struct fake_node_hal {
         return h;
     }
 
-    void send_sync(uint32_t counter)
-    {
+    void send_sync(uint32_t counter) {
         mw_sync s{counter};
         mw_can_frame f{};
         ASSERT_EQ(mw_sync_encode(&s, &f), MW_OK);
         rx.push_back(f);
     }
 
-    void send_config(const mw_config& config)
-    {
+    void send_config(const mw_config& config) {
         mw_can_frame f{};
         ASSERT_EQ(mw_config_encode(&config, &f), MW_OK);
         rx.push_back(f);
     }
 
-    std::vector<mw_can_frame> take_tx()
-    {
+    std::vector<mw_can_frame> take_tx() {
         std::vector<mw_can_frame> out;
         out.swap(tx);
         return out;
     }
 };
 
-std::vector<mw_status> statuses(const std::vector<mw_can_frame>& frames)
-{
+std::vector<mw_status> statuses(const std::vector<mw_can_frame>& frames) {
     std::vector<mw_status> out;
     for (const auto& f : frames) {
         if (mw_can_id_function(f.id) == MW_FN_STATUS) {
@@ -89,8 +84,7 @@ std::vector<mw_status> statuses(const std::vector<mw_can_frame>& frames)
     return out;
 }
 
-std::vector<mw_can_frame> samples(const std::vector<mw_can_frame>& frames)
-{
+std::vector<mw_can_frame> samples(const std::vector<mw_can_frame>& frames) {
     std::vector<mw_can_frame> out;
     for (const auto& f : frames) {
         if (mw_can_id_function(f.id) != MW_FN_STATUS) {
@@ -105,18 +99,16 @@ protected:
     fake_node_hal fake;
     sensor_node node{};
 
-    void start(uint8_t id = 5)
-    {
+    void start(uint8_t id = 5) {
         const sensor_node_hal h = fake.hal();
         ASSERT_EQ(sensor_node_init(&node, &h, id), MW_OK);
         sensor_node_poll(&node);
     }
 };
 
-TEST_F(SensorNodeTest, InitConfiguresSensorAndMagnetometer)
-{
+TEST_F(SensorNodeTest, InitConfiguresSensorAndMagnetometer) {
     start();
-    EXPECT_EQ(fake.imu.resets, 2); // power-on state + H_RESET
+    EXPECT_EQ(fake.imu.resets, 2);  // power-on state + H_RESET
     EXPECT_EQ(fake.imu.reg(0x1B), 0x18) << "GYRO_CONFIG: +-2000 dps";
     EXPECT_EQ(fake.imu.reg(0x1C), 0x18) << "ACCEL_CONFIG: +-16 g";
     EXPECT_EQ(fake.imu.reg(0x1A), 3) << "DLPF 41 Hz for 100 Hz sampling";
@@ -139,12 +131,11 @@ TEST_F(SensorNodeTest, InitConfiguresSensorAndMagnetometer)
     EXPECT_EQ(st[0].gyro_range, MW_GYRO_2000DPS);
 }
 
-TEST_F(SensorNodeTest, SyncProducesGoldenRawFrames)
-{
+TEST_F(SensorNodeTest, SyncProducesGoldenRawFrames) {
     fake.imu.accel = {1000, -2000, 16384};
     fake.imu.gyro = {-1, 32767, 0x0102};
     fake.imu.mag_raw = {100, -200, 300};
-    fake.imu.mag_asa = {128, 192, 64}; // adjustment x1.0, x1.25, x0.75
+    fake.imu.mag_asa = {128, 192, 64};  // adjustment x1.0, x1.25, x0.75
     start(5);
     fake.take_tx();
 
@@ -155,8 +146,8 @@ TEST_F(SensorNodeTest, SyncProducesGoldenRawFrames)
 
     const std::array<uint16_t, 3> ids{0x085, 0x0C5, 0x105};
     const std::array<std::array<uint8_t, 8>, 3> bytes{{
-        {0xE8, 0x03, 0x30, 0xF8, 0x00, 0x40, 0x78, 0x56}, // accel 1000, -2000, 16384, counter 0x5678
-        {0xFF, 0xFF, 0xFF, 0x7F, 0x02, 0x01, 0x78, 0x56}, // gyro -1, 32767, 258
+        {0xE8, 0x03, 0x30, 0xF8, 0x00, 0x40, 0x78, 0x56},  // accel 1000, -2000, 16384, counter 0x5678
+        {0xFF, 0xFF, 0xFF, 0x7F, 0x02, 0x01, 0x78, 0x56},  // gyro -1, 32767, 258
         // mag in MPU axes: x = adj(hy) = -250, y = adj(hx) = 100, z = -adj(hz) = -225
         {0x06, 0xFF, 0x64, 0x00, 0x1F, 0xFF, 0x78, 0x56},
     }};
@@ -171,8 +162,7 @@ TEST_F(SensorNodeTest, SyncProducesGoldenRawFrames)
     EXPECT_EQ(node.state, MW_NODE_RUNNING);
 }
 
-TEST_F(SensorNodeTest, ConfigChangesRangeRegistersAndIsAcknowledged)
-{
+TEST_F(SensorNodeTest, ConfigChangesRangeRegistersAndIsAcknowledged) {
     start(7);
     fake.take_tx();
     fake.send_config({9, 100, MW_ACCEL_2G, MW_GYRO_250DPS, MW_MODE_RAW, 1});
@@ -195,21 +185,20 @@ TEST_F(SensorNodeTest, ConfigChangesRangeRegistersAndIsAcknowledged)
 
 // Sensor-frame readings for an orientation q_enu_sensor (w, x, y, z): specific force of a
 // node at rest (+1 g up) and an earth field of 20 uT north, 40 uT down, as model counts.
-void set_static_pose(mpu9250_model& imu, const std::array<double, 4>& q)
-{
+void set_static_pose(mpu9250_model& imu, const std::array<double, 4>& q) {
     const double w = q[0], x = q[1], y = q[2], z = q[3];
     const double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
                             {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
                             {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
     const double up[3] = {0, 0, 1};
     const double field_ut[3] = {0, 20, -40};
-    for (int i = 0; i < 3; ++i) { // sensor = R^T earth
+    for (int i = 0; i < 3; ++i) {  // sensor = R^T earth
         double a = 0, m = 0;
         for (int k = 0; k < 3; ++k) {
             a += r[k][i] * up[k];
             m += r[k][i] * field_ut[k];
         }
-        imu.accel[i] = static_cast<int16_t>(std::lround(a * 2048.0)); // +-16 g
+        imu.accel[i] = static_cast<int16_t>(std::lround(a * 2048.0));  // +-16 g
         const auto counts = static_cast<int16_t>(std::lround(m / 0.15));
         // AK8963 axes: x_ak = y, y_ak = x, z_ak = -z (ASA neutral).
         if (i == 0) imu.mag_raw[1] = counts;
@@ -219,14 +208,12 @@ void set_static_pose(mpu9250_model& imu, const std::array<double, 4>& q)
     imu.gyro = {0, 0, 0};
 }
 
-double angle_deg(const float a[4], const std::array<double, 4>& b)
-{
+double angle_deg(const float a[4], const std::array<double, 4>& b) {
     const double dot = std::fabs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]);
     return 2.0 * std::acos(std::min(1.0, dot)) * 180.0 / M_PI;
 }
 
-TEST_F(SensorNodeTest, AttitudeModeSendsTheNodesOrientation)
-{
+TEST_F(SensorNodeTest, AttitudeModeSendsTheNodesOrientation) {
     const double h = std::sqrt(0.5);
     // Level, x axis pointing north: a +90 deg turn about up from the ENU axes.
     const std::array<double, 4> north{h, 0, 0, h};
@@ -256,15 +243,14 @@ TEST_F(SensorNodeTest, AttitudeModeSendsTheNodesOrientation)
     }
 }
 
-TEST_F(SensorNodeTest, AttitudeIntegratesGyroWithoutMagnetometer)
-{
+TEST_F(SensorNodeTest, AttitudeIntegratesGyroWithoutMagnetometer) {
     fake.imu.mag_present = false;
     set_static_pose(fake.imu, {1, 0, 0, 0});
     start(3);
     fake.send_config({0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_RAW_ATTITUDE, 1});
     sensor_node_poll(&node);
     fake.take_tx();
-    fake.imu.gyro = {0, 0, 1475}; // 1475 / 16.384 = 90.03 deg/s about up
+    fake.imu.gyro = {0, 0, 1475};  // 1475 / 16.384 = 90.03 deg/s about up
     float last_q[4] = {0, 0, 0, 0};
     for (uint32_t c = 0; c <= 100; ++c) {
         fake.send_sync(c);
@@ -280,8 +266,7 @@ TEST_F(SensorNodeTest, AttitudeIntegratesGyroWithoutMagnetometer)
     EXPECT_LT(angle_deg(last_q, {std::cos(yaw / 2), 0, 0, std::sin(yaw / 2)}), 0.5);
 }
 
-TEST_F(SensorNodeTest, MissingSensorFaultsThenRecovers)
-{
+TEST_F(SensorNodeTest, MissingSensorFaultsThenRecovers) {
     fake.imu.present = false;
     start(2);
     EXPECT_EQ(node.state, MW_NODE_FAULT);
@@ -306,8 +291,7 @@ TEST_F(SensorNodeTest, MissingSensorFaultsThenRecovers)
     EXPECT_EQ(samples(fake.take_tx()).size(), 3u);
 }
 
-TEST_F(SensorNodeTest, MissingMagnetometerKeepsAccelAndGyro)
-{
+TEST_F(SensorNodeTest, MissingMagnetometerKeepsAccelAndGyro) {
     fake.imu.mag_present = false;
     fake.imu.accel = {1, 2, 3};
     start(4);
@@ -332,8 +316,7 @@ TEST_F(SensorNodeTest, MissingMagnetometerKeepsAccelAndGyro)
     EXPECT_EQ(acc.xyz[2], 3);
 }
 
-TEST_F(SensorNodeTest, MagnetometerOverflowSendsInvalidMarker)
-{
+TEST_F(SensorNodeTest, MagnetometerOverflowSendsInvalidMarker) {
     fake.imu.mag_raw = {5000, 5000, 5000};
     fake.imu.mag_overflow = true;
     start(4);
@@ -352,12 +335,11 @@ TEST_F(SensorNodeTest, MagnetometerOverflowSendsInvalidMarker)
     EXPECT_TRUE(st.back().error_flags & MW_ERRF_MAG);
 }
 
-TEST_F(SensorNodeTest, BusyBusOverflowsQueueCountedAndReported)
-{
+TEST_F(SensorNodeTest, BusyBusOverflowsQueueCountedAndReported) {
     start(6);
     fake.take_tx();
     fake.tx_busy = true;
-    for (uint32_t c = 0; c < 8; ++c) { // 8 samples x 3 frames > 16 queue slots
+    for (uint32_t c = 0; c < 8; ++c) {  // 8 samples x 3 frames > 16 queue slots
         fake.send_sync(c);
         sensor_node_poll(&node);
     }
@@ -381,19 +363,18 @@ TEST_F(SensorNodeTest, BusyBusOverflowsQueueCountedAndReported)
     EXPECT_EQ(st.back().tx_overflows, static_cast<uint8_t>(overflows));
 }
 
-TEST_F(SensorNodeTest, SyncGapsAndTimeoutAreReported)
-{
+TEST_F(SensorNodeTest, SyncGapsAndTimeoutAreReported) {
     start(8);
     fake.take_tx();
     fake.send_sync(100);
     fake.send_sync(101);
-    fake.send_sync(105); // 102..104 missed
+    fake.send_sync(105);  // 102..104 missed
     sensor_node_poll(&node);
     EXPECT_EQ(node.counters.sync_missed, 3u);
     EXPECT_EQ(node.state, MW_NODE_RUNNING);
     fake.take_tx();
 
-    fake.now_us += 31000; // > 3 periods at 100 Hz
+    fake.now_us += 31000;  // > 3 periods at 100 Hz
     sensor_node_poll(&node);
     EXPECT_EQ(node.state, MW_NODE_WAITING);
     const auto st = statuses(fake.take_tx());
@@ -402,8 +383,7 @@ TEST_F(SensorNodeTest, SyncGapsAndTimeoutAreReported)
     EXPECT_EQ(st[0].sync_missed, 3u);
 }
 
-TEST_F(SensorNodeTest, PeriodicStatusFollowsConfiguredPeriod)
-{
+TEST_F(SensorNodeTest, PeriodicStatusFollowsConfiguredPeriod) {
     start(9);
     fake.take_tx();
     int count = 0;
@@ -415,13 +395,12 @@ TEST_F(SensorNodeTest, PeriodicStatusFollowsConfiguredPeriod)
     EXPECT_EQ(count, 3) << "one STATUS per second";
 }
 
-TEST_F(SensorNodeTest, MalformedConfigIsCountedNotApplied)
-{
+TEST_F(SensorNodeTest, MalformedConfigIsCountedNotApplied) {
     start(5);
     fake.take_tx();
     mw_can_frame f{};
     f.id = MW_CAN_ID(MW_FN_CONFIG, 5);
-    f.dlc = 2; // CONFIG needs 5 bytes
+    f.dlc = 2;  // CONFIG needs 5 bytes
     fake.rx.push_back(f);
     sensor_node_poll(&node);
     EXPECT_EQ(node.counters.malformed_frames, 1u);
@@ -429,8 +408,7 @@ TEST_F(SensorNodeTest, MalformedConfigIsCountedNotApplied)
     EXPECT_EQ(fake.imu.reg(0x1C), 0x18);
 }
 
-TEST_F(SensorNodeTest, CanBusErrorIsReported)
-{
+TEST_F(SensorNodeTest, CanBusErrorIsReported) {
     static int bus_error = 0;
     bus_error = 0;
     sensor_node_hal h = fake.hal();
@@ -445,8 +423,7 @@ TEST_F(SensorNodeTest, CanBusErrorIsReported)
     EXPECT_TRUE(st[0].error_flags & MW_ERRF_CAN_BUS);
 }
 
-TEST(SensorNodeInit, RejectsBadArguments)
-{
+TEST(SensorNodeInit, RejectsBadArguments) {
     fake_node_hal fake;
     sensor_node node{};
     sensor_node_hal h = fake.hal();
@@ -456,8 +433,7 @@ TEST(SensorNodeInit, RejectsBadArguments)
     EXPECT_EQ(sensor_node_init(&node, &h, 1), MW_ERR_ARGUMENT);
 }
 
-TEST(Mpu9250Dlpf, StaysUnderNyquist)
-{
+TEST(Mpu9250Dlpf, StaysUnderNyquist) {
     EXPECT_EQ(mpu9250_dlpf_for_rate(1000), 0);
     EXPECT_EQ(mpu9250_dlpf_for_rate(200), 2);
     EXPECT_EQ(mpu9250_dlpf_for_rate(100), 3);
@@ -465,5 +441,5 @@ TEST(Mpu9250Dlpf, StaysUnderNyquist)
     EXPECT_EQ(mpu9250_dlpf_for_rate(5), 6);
 }
 
-} // namespace
-} // namespace mocap::test
+}  // namespace
+}  // namespace mocap::test

@@ -18,9 +18,9 @@ struct fake_sink_hal {
     uint64_t now_us = 5'000'000;
     // CAN
     std::deque<mw_can_frame> rx;
-    std::vector<std::pair<uint64_t, mw_can_frame>> tx; // (time accepted, frame)
+    std::vector<std::pair<uint64_t, mw_can_frame>> tx;  // (time accepted, frame)
     bool can_busy = false;
-    std::set<uint8_t> nodes;                           // simulated nodes answering SYNC
+    std::set<uint8_t> nodes;  // simulated nodes answering SYNC
     // uplink
     bool server_up = true;
     bool connect_completes = true;  // false: stays CONNECTING
@@ -28,10 +28,9 @@ struct fake_sink_hal {
     sink_uplink_state state = SINK_UPLINK_DOWN;
     std::vector<uint64_t> connect_times;
     int closes = 0;
-    std::vector<std::vector<uint8_t>> connections; // bytes written, per connection
+    std::vector<std::vector<uint8_t>> connections;  // bytes written, per connection
 
-    sink_node_hal hal()
-    {
+    sink_node_hal hal() {
         sink_node_hal h{};
         h.user = this;
         h.can_transmit = [](void* u, const mw_can_frame* f) {
@@ -87,15 +86,16 @@ struct fake_sink_hal {
     }
 
     // Every simulated node answers a SYNC with ACCEL, GYRO, MAG tagged with the counter.
-    void answer(const mw_can_frame& f)
-    {
+    void answer(const mw_can_frame& f) {
         mw_sync sync{};
         if (f.id != MW_CAN_ID_SYNC || mw_sync_decode(&f, &sync) != MW_OK) {
             return;
         }
         for (uint8_t node : nodes) {
             for (mw_function kind : {MW_FN_ACCEL, MW_FN_GYRO, MW_FN_MAG}) {
-                mw_raw raw{kind, node, {static_cast<int16_t>(node), static_cast<int16_t>(kind), 7},
+                mw_raw raw{kind,
+                           node,
+                           {static_cast<int16_t>(node), static_cast<int16_t>(kind), 7},
                            static_cast<uint16_t>(sync.counter)};
                 mw_can_frame out{};
                 EXPECT_EQ(mw_raw_encode(&raw, &out), MW_OK);
@@ -104,8 +104,7 @@ struct fake_sink_hal {
         }
     }
 
-    std::vector<uint32_t> sync_counters() const
-    {
+    std::vector<uint32_t> sync_counters() const {
         std::vector<uint32_t> out;
         for (const auto& [t, f] : tx) {
             mw_sync s{};
@@ -117,8 +116,7 @@ struct fake_sink_hal {
     }
 };
 
-std::vector<std::unique_ptr<mw_packet>> decode_all(const std::vector<uint8_t>& bytes)
-{
+std::vector<std::unique_ptr<mw_packet>> decode_all(const std::vector<uint8_t>& bytes) {
     auto decoder = std::make_unique<mw_stream_decoder>();
     mw_stream_decoder_init(decoder.get());
     std::vector<std::unique_ptr<mw_packet>> out;
@@ -149,24 +147,21 @@ protected:
     std::unique_ptr<sink_node> sink = std::make_unique<sink_node>();
     sink_node_config config{};
 
-    SinkNodeTest()
-    {
+    SinkNodeTest() {
         sink_node_default_config(&config);
         config.sink_id = 3;
         config.status_period_s = 0;
         config.config_period_s = 0;
-        config.early_close = 0; // the tests below that want it turn it on
+        config.early_close = 0;  // the tests below that want it turn it on
     }
 
-    void start()
-    {
+    void start() {
         const sink_node_hal h = fake.hal();
         ASSERT_EQ(sink_node_init(sink.get(), &h, &config), MW_OK);
     }
 
     // Polls every step_us for duration_us (the first poll at the current time).
-    void run(uint64_t duration_us, uint64_t step_us = 1000)
-    {
+    void run(uint64_t duration_us, uint64_t step_us = 1000) {
         const uint64_t end = fake.now_us + duration_us;
         while (fake.now_us < end) {
             sink_node_poll(sink.get());
@@ -175,9 +170,8 @@ protected:
     }
 };
 
-TEST_F(SinkNodeTest, SyncScheduleFollowsRateWithoutDrift)
-{
-    config.rate_hz = 120; // 8333.3 us: rounding a period would drift
+TEST_F(SinkNodeTest, SyncScheduleFollowsRateWithoutDrift) {
+    config.rate_hz = 120;  // 8333.3 us: rounding a period would drift
     config.first_counter = 1000;
     start();
     const uint64_t t0 = fake.now_us;
@@ -199,25 +193,23 @@ TEST_F(SinkNodeTest, SyncScheduleFollowsRateWithoutDrift)
     EXPECT_EQ(sink->counters.syncs_skipped, 0u);
 }
 
-TEST_F(SinkNodeTest, StalledLoopSkipsInstantsInsteadOfBursting)
-{
+TEST_F(SinkNodeTest, StalledLoopSkipsInstantsInsteadOfBursting) {
     start();
-    sink_node_poll(sink.get()); // SYNC 0
-    fake.now_us += 35'000;      // instants 1, 2, 3 are due; 1 and 2 are lost
+    sink_node_poll(sink.get());  // SYNC 0
+    fake.now_us += 35'000;       // instants 1, 2, 3 are due; 1 and 2 are lost
     sink_node_poll(sink.get());
     EXPECT_EQ(fake.sync_counters(), (std::vector<uint32_t>{0, 1}));
     EXPECT_EQ(sink->counters.syncs_skipped, 2u);
-    fake.now_us += 5'000; // 40 ms: instant 4
+    fake.now_us += 5'000;  // 40 ms: instant 4
     sink_node_poll(sink.get());
     EXPECT_EQ(fake.sync_counters().size(), 3u);
 }
 
-TEST_F(SinkNodeTest, OnePacketPerSyncInstantWithItsFrames)
-{
+TEST_F(SinkNodeTest, OnePacketPerSyncInstantWithItsFrames) {
     fake.nodes = {1, 2};
     start();
     const uint64_t t0 = fake.now_us;
-    run(50'000); // SYNC 0..4; batches 0..3 closed
+    run(50'000);  // SYNC 0..4; batches 0..3 closed
     ASSERT_EQ(fake.connections.size(), 1u);
     const auto packets = decode_all(fake.connections[0]);
     ASSERT_EQ(packets.size(), 4u);
@@ -251,13 +243,12 @@ TEST_F(SinkNodeTest, OnePacketPerSyncInstantWithItsFrames)
     EXPECT_EQ(sink->counters.packets_out, 4u);
 }
 
-TEST_F(SinkNodeTest, NodeLossLeavesItsFramesOutButPacketsContinue)
-{
+TEST_F(SinkNodeTest, NodeLossLeavesItsFramesOutButPacketsContinue) {
     fake.nodes = {1, 2, 3};
     start();
-    run(20'000); // instants 0, 1 with all nodes
+    run(20'000);  // instants 0, 1 with all nodes
     fake.nodes = {1, 3};
-    run(30'000); // instants 2..4 without node 2
+    run(30'000);  // instants 2..4 without node 2
     const auto packets = decode_all(fake.connections.at(0));
     ASSERT_EQ(packets.size(), 4u);
     EXPECT_EQ(packets[0]->frame_count, 10u);
@@ -270,38 +261,36 @@ TEST_F(SinkNodeTest, NodeLossLeavesItsFramesOutButPacketsContinue)
     }
 }
 
-TEST_F(SinkNodeTest, EarlyCloseSendsThePacketAsSoonAsEveryNodeDelivered)
-{
+TEST_F(SinkNodeTest, EarlyCloseSendsThePacketAsSoonAsEveryNodeDelivered) {
     fake.nodes = {1, 2};
     config.early_close = 1;
     start();
     const uint64_t t0 = fake.now_us;
-    run(11'000); // polls at 0..10 ms: SYNC 0, its frames at 1 ms, SYNC 1 at 10 ms closes instant 0
+    run(11'000);  // polls at 0..10 ms: SYNC 0, its frames at 1 ms, SYNC 1 at 10 ms closes instant 0
     EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 1u) << "nothing learnt yet: closed by SYNC 1";
-    run(1'000); // 11 ms: instant 1's six frames arrive; the count of instant 0 says it is complete
+    run(1'000);  // 11 ms: instant 1's six frames arrive; the count of instant 0 says it is complete
     const auto packets = decode_all(fake.connections.at(0));
     ASSERT_EQ(packets.size(), 2u) << "instant 1 left 1 ms after its SYNC, not at SYNC 2";
     EXPECT_EQ(packets[1]->header.timestamp_us, t0 + 10'000);
     EXPECT_EQ(packets[1]->frame_count, 7u);
     EXPECT_EQ(mw_can_id_function(packets[1]->frames[0].frame.id), MW_FN_SYNC);
     EXPECT_EQ(sink->counters.early_closes, 1u);
-    run(8'000); // up to 19 ms: no SYNC yet, no further packet (no empty continuation)
+    run(8'000);  // up to 19 ms: no SYNC yet, no further packet (no empty continuation)
     EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 2u);
-    run(2'000); // SYNC 2 at 20 ms, its frames at 21 ms
+    run(2'000);  // SYNC 2 at 20 ms, its frames at 21 ms
     EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 3u);
     EXPECT_EQ(sink->counters.early_closes, 2u);
 }
 
-TEST_F(SinkNodeTest, EarlyCloseWithNodeLossDeliversAtTheNextSyncThenLearns)
-{
+TEST_F(SinkNodeTest, EarlyCloseWithNodeLossDeliversAtTheNextSyncThenLearns) {
     fake.nodes = {1, 2, 3};
     config.early_close = 1;
     start();
-    run(20'000);             // instants 0 (closed by SYNC 1) and 1 (early, 9 frames)
-    fake.nodes = {1, 3};     // node 2 falls silent from instant 2 on
-    run(10'000);             // SYNC 2 at 20 ms, 6 frames at 21 ms: short of 9, so it waits
+    run(20'000);          // instants 0 (closed by SYNC 1) and 1 (early, 9 frames)
+    fake.nodes = {1, 3};  // node 2 falls silent from instant 2 on
+    run(10'000);          // SYNC 2 at 20 ms, 6 frames at 21 ms: short of 9, so it waits
     EXPECT_EQ(decode_all(fake.connections.at(0)).size(), 2u);
-    run(2'000);              // 31 ms: SYNC 3 at 30 ms closed instant 2; instant 3 learnt 6
+    run(2'000);  // 31 ms: SYNC 3 at 30 ms closed instant 2; instant 3 learnt 6
     const auto packets = decode_all(fake.connections.at(0));
     ASSERT_EQ(packets.size(), 4u);
     EXPECT_EQ(packets[2]->frame_count, 7u);
@@ -313,15 +302,14 @@ TEST_F(SinkNodeTest, EarlyCloseWithNodeLossDeliversAtTheNextSyncThenLearns)
     EXPECT_EQ(sink->counters.early_closes, 2u);
 }
 
-TEST_F(SinkNodeTest, EarlyCloseReturningNodeGoesIntoAContinuation)
-{
+TEST_F(SinkNodeTest, EarlyCloseReturningNodeGoesIntoAContinuation) {
     fake.nodes = {1, 3};
     config.early_close = 1;
     start();
-    run(20'000);          // instant 0 (SYNC close), instant 1 early with 6 frames
+    run(20'000);  // instant 0 (SYNC close), instant 1 early with 6 frames
     fake.nodes = {1, 2, 3};
-    run(20'000);          // instant 2: closes after 6 frames, node 3's three follow in a
-                          // continuation closed by SYNC 3; instant 3 learnt 9 and closes early
+    run(20'000);  // instant 2: closes after 6 frames, node 3's three follow in a
+                  // continuation closed by SYNC 3; instant 3 learnt 9 and closes early
     const auto packets = decode_all(fake.connections.at(0));
     ASSERT_EQ(packets.size(), 5u);
     EXPECT_EQ(packets[2]->frame_count, 7u);
@@ -333,12 +321,11 @@ TEST_F(SinkNodeTest, EarlyCloseReturningNodeGoesIntoAContinuation)
     EXPECT_EQ(sink->counters.frames_in, 6u + 6u + 9u + 9u);
 }
 
-TEST_F(SinkNodeTest, EarlyCloseIgnoresStatusFrames)
-{
+TEST_F(SinkNodeTest, EarlyCloseIgnoresStatusFrames) {
     fake.nodes = {1};
     config.early_close = 1;
     start();
-    run(20'000); // instants 0 and 1 (early, 3 frames)
+    run(20'000);  // instants 0 and 1 (early, 3 frames)
     mw_status status{};
     status.node_id = 1;
     status.state = MW_NODE_RUNNING;
@@ -347,8 +334,8 @@ TEST_F(SinkNodeTest, EarlyCloseIgnoresStatusFrames)
     status.protocol_version = MW_CAN_PROTOCOL_VERSION;
     mw_can_frame f{};
     ASSERT_EQ(mw_status_encode(&status, &f), MW_OK);
-    fake.rx.push_back(f); // a node STATUS during instant 1's remainder
-    run(12'000);          // instants 2 and 3 still close early: STATUS is not a sample
+    fake.rx.push_back(f);  // a node STATUS during instant 1's remainder
+    run(12'000);           // instants 2 and 3 still close early: STATUS is not a sample
     const auto packets = decode_all(fake.connections.at(0));
     ASSERT_EQ(packets.size(), 5u) << "0, 1, STATUS continuation of 1, 2, 3";
     EXPECT_EQ(packets[2]->frame_count, 1u);
@@ -356,8 +343,7 @@ TEST_F(SinkNodeTest, EarlyCloseIgnoresStatusFrames)
     EXPECT_EQ(sink->counters.early_closes, 3u);
 }
 
-TEST_F(SinkNodeTest, SyncCounterWrapsAt32Bits)
-{
+TEST_F(SinkNodeTest, SyncCounterWrapsAt32Bits) {
     fake.nodes = {4};
     config.first_counter = 0xFFFFFFFEu;
     start();
@@ -377,8 +363,7 @@ TEST_F(SinkNodeTest, SyncCounterWrapsAt32Bits)
     }
 }
 
-TEST_F(SinkNodeTest, UplinkDropBacksOffExponentiallyThenReconnects)
-{
+TEST_F(SinkNodeTest, UplinkDropBacksOffExponentiallyThenReconnects) {
     fake.nodes = {1};
     config.backoff_min_us = 100'000;
     config.backoff_max_us = 800'000;
@@ -391,8 +376,8 @@ TEST_F(SinkNodeTest, UplinkDropBacksOffExponentiallyThenReconnects)
     const uint64_t t_drop = fake.now_us;
     run(3'000'000);
     // Attempts at +100, +300, +700, +1500, +2300 ms (delay doubles, capped at 800 ms).
-    const std::vector<uint64_t> expected{t_drop + 100'000, t_drop + 300'000, t_drop + 700'000,
-                                         t_drop + 1'500'000, t_drop + 2'300'000};
+    const std::vector<uint64_t> expected{t_drop + 100'000, t_drop + 300'000, t_drop + 700'000, t_drop + 1'500'000,
+                                         t_drop + 2'300'000};
     ASSERT_EQ(fake.connect_times.size(), 1u + expected.size());
     for (std::size_t i = 0; i < expected.size(); ++i) {
         EXPECT_EQ(fake.connect_times[i + 1], expected[i]) << "attempt " << i;
@@ -402,7 +387,7 @@ TEST_F(SinkNodeTest, UplinkDropBacksOffExponentiallyThenReconnects)
     EXPECT_EQ(sink->counters.packets_dropped, 300u) << "one per instant while down";
     EXPECT_EQ(sink->counters.frames_dropped, 900u);
 
-    fake.server_up = true; // next attempt at +3100 ms succeeds
+    fake.server_up = true;  // next attempt at +3100 ms succeeds
     run(300'000);
     ASSERT_EQ(fake.connect_times.size(), 7u);
     EXPECT_EQ(fake.connect_times.back(), t_drop + 3'100'000);
@@ -421,8 +406,7 @@ TEST_F(SinkNodeTest, UplinkDropBacksOffExponentiallyThenReconnects)
     EXPECT_EQ(fake.connect_times.back(), t_drop2 + 100'000);
 }
 
-TEST_F(SinkNodeTest, WriteErrorClosesAndRetries)
-{
+TEST_F(SinkNodeTest, WriteErrorClosesAndRetries) {
     start();
     run(30'000);
     fake.connections.back().clear();
@@ -440,8 +424,7 @@ TEST_F(SinkNodeTest, WriteErrorClosesAndRetries)
     EXPECT_EQ(sink->counters.reconnects, 1u);
 }
 
-TEST_F(SinkNodeTest, ConnectAttemptTimesOut)
-{
+TEST_F(SinkNodeTest, ConnectAttemptTimesOut) {
     config.connect_timeout_us = 2'000'000;
     config.backoff_min_us = 500'000;
     fake.connect_completes = false;
@@ -456,8 +439,7 @@ TEST_F(SinkNodeTest, ConnectAttemptTimesOut)
     EXPECT_EQ(sink->counters.connect_failures, 1u);
 }
 
-TEST_F(SinkNodeTest, BusyUplinkDropsPacketAndLeavesSequenceGap)
-{
+TEST_F(SinkNodeTest, BusyUplinkDropsPacketAndLeavesSequenceGap) {
     fake.nodes = {1};
     start();
     run(20'000);
@@ -472,8 +454,7 @@ TEST_F(SinkNodeTest, BusyUplinkDropsPacketAndLeavesSequenceGap)
     EXPECT_EQ(sink->counters.frames_dropped, 3u);
 }
 
-TEST_F(SinkNodeTest, FullBatchIsSplitWithTheSameTimestamp)
-{
+TEST_F(SinkNodeTest, FullBatchIsSplitWithTheSameTimestamp) {
     fake.nodes = {1, 2};
     config.max_batch_frames = 4;
     start();
@@ -492,8 +473,7 @@ TEST_F(SinkNodeTest, FullBatchIsSplitWithTheSameTimestamp)
     EXPECT_EQ(sink->counters.batch_splits, 2u);
 }
 
-TEST_F(SinkNodeTest, ConfigBroadcastAndSinkStatus)
-{
+TEST_F(SinkNodeTest, ConfigBroadcastAndSinkStatus) {
     config.config_period_s = 2;
     config.status_period_s = 1;
     config.node_config.accel_range = MW_ACCEL_8G;
@@ -531,11 +511,10 @@ TEST_F(SinkNodeTest, ConfigBroadcastAndSinkStatus)
     EXPECT_EQ(statuses[3].state, MW_NODE_RUNNING);
 }
 
-TEST_F(SinkNodeTest, LateFrameAtLowRateStartsAPacketWithinOffsetRange)
-{
-    config.rate_hz = 5; // 200 ms between SYNCs
+TEST_F(SinkNodeTest, LateFrameAtLowRateStartsAPacketWithinOffsetRange) {
+    config.rate_hz = 5;  // 200 ms between SYNCs
     start();
-    sink_node_poll(sink.get()); // SYNC 0 at t0
+    sink_node_poll(sink.get());  // SYNC 0 at t0
     const uint64_t t0 = fake.now_us;
     mw_raw raw{MW_FN_ACCEL, 1, {1, 2, 3}, 0};
     mw_can_frame f{};
@@ -543,10 +522,10 @@ TEST_F(SinkNodeTest, LateFrameAtLowRateStartsAPacketWithinOffsetRange)
     fake.now_us = t0 + 40'000;
     fake.rx.push_back(f);
     sink_node_poll(sink.get());
-    fake.now_us = t0 + 120'000; // offset 120 ms does not fit 16 bits of microseconds
+    fake.now_us = t0 + 120'000;  // offset 120 ms does not fit 16 bits of microseconds
     fake.rx.push_back(f);
     sink_node_poll(sink.get());
-    fake.now_us = t0 + 200'000; // SYNC 1 closes the continuation
+    fake.now_us = t0 + 200'000;  // SYNC 1 closes the continuation
     sink_node_poll(sink.get());
     const auto packets = decode_all(fake.connections.at(0));
     ASSERT_EQ(packets.size(), 2u);
@@ -559,8 +538,7 @@ TEST_F(SinkNodeTest, LateFrameAtLowRateStartsAPacketWithinOffsetRange)
     EXPECT_EQ(sink->counters.batch_splits, 1u);
 }
 
-TEST_F(SinkNodeTest, SinkStatusReportsCanFramesLostOnReception)
-{
+TEST_F(SinkNodeTest, SinkStatusReportsCanFramesLostOnReception) {
     config.status_period_s = 1;
     static uint32_t lost = 0;
     lost = 258;
@@ -577,11 +555,10 @@ TEST_F(SinkNodeTest, SinkStatusReportsCanFramesLostOnReception)
     EXPECT_EQ(status.tx_overflows, 2u) << "258 wraps to 2 in the 8-bit field";
 }
 
-TEST_F(SinkNodeTest, BusyCanControllerQueuesSyncAndCountsOverflow)
-{
+TEST_F(SinkNodeTest, BusyCanControllerQueuesSyncAndCountsOverflow) {
     start();
     fake.can_busy = true;
-    run(100'000); // the start-up CONFIG + 10 SYNCs for a queue of 8
+    run(100'000);  // the start-up CONFIG + 10 SYNCs for a queue of 8
     EXPECT_EQ(sink->counters.can_tx_overflows, 3u);
     fake.can_busy = false;
     sink_node_poll(sink.get());
@@ -590,8 +567,7 @@ TEST_F(SinkNodeTest, BusyCanControllerQueuesSyncAndCountsOverflow)
     EXPECT_EQ(fake.sync_counters(), (std::vector<uint32_t>{0, 1, 2, 3, 4, 5, 6}));
 }
 
-TEST(SinkNodeInit, RejectsBadConfig)
-{
+TEST(SinkNodeInit, RejectsBadConfig) {
     fake_sink_hal fake;
     auto sink = std::make_unique<sink_node>();
     sink_node_config c{};
@@ -610,5 +586,5 @@ TEST(SinkNodeInit, RejectsBadConfig)
     EXPECT_EQ(sink_node_init(sink.get(), &h, &c), MW_ERR_ARGUMENT);
 }
 
-} // namespace
-} // namespace mocap::test
+}  // namespace
+}  // namespace mocap::test

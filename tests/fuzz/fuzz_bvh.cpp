@@ -20,8 +20,10 @@ MOCAP_FUZZ_ENTRY(bvh) {
     const std::string_view text(reinterpret_cast<const char*>(data), size);
     std::size_t consumed = 0;
     const sk::BvhParseResult h = sk::parse_bvh_hierarchy(text, {}, &consumed);
-    if (h) MOCAP_FUZZ_CHECK(consumed <= size, "hierarchy consumed past the text");
-    else MOCAP_FUZZ_CHECK(!h.error.empty(), "hierarchy rejected without an error");
+    if (h)
+        MOCAP_FUZZ_CHECK(consumed <= size, "hierarchy consumed past the text");
+    else
+        MOCAP_FUZZ_CHECK(!h.error.empty(), "hierarchy rejected without an error");
 
     const sk::BvhParseResult r = sk::parse_bvh(text);
     if (!r) {
@@ -41,9 +43,9 @@ MOCAP_FUZZ_ENTRY(bvh) {
         MOCAP_FUZZ_CHECK(joint.offset.allFinite(), "offset not finite");
     }
     MOCAP_FUZZ_CHECK(channels == clip.channels_per_frame, "channels_per_frame");
-    MOCAP_FUZZ_CHECK(clip.values.size() == clip.frame_count * clip.channels_per_frame,
-                     "values != frames x channels");
-    for (double v : clip.values) MOCAP_FUZZ_CHECK(std::isfinite(v), "motion value not finite");
+    MOCAP_FUZZ_CHECK(clip.values.size() == clip.frame_count * clip.channels_per_frame, "values != frames x channels");
+    for (double v : clip.values)
+        MOCAP_FUZZ_CHECK(std::isfinite(v), "motion value not finite");
 
     std::vector<sk::Quat> q(clip.joints.size());
     std::vector<sk::Vec3> p(clip.joints.size());
@@ -56,8 +58,7 @@ MOCAP_FUZZ_ENTRY(bvh) {
 
     const sk::BvhParseResult back = sk::parse_bvh(sk::write_bvh(clip));
     MOCAP_FUZZ_CHECK(back, back.error.c_str());
-    MOCAP_FUZZ_CHECK(back.clip->joints.size() == clip.joints.size() &&
-                         back.clip->frame_count == clip.frame_count &&
+    MOCAP_FUZZ_CHECK(back.clip->joints.size() == clip.joints.size() && back.clip->frame_count == clip.frame_count &&
                          back.clip->channels_per_frame == clip.channels_per_frame,
                      "round trip changed the clip's shape");
     return 0;

@@ -50,12 +50,9 @@ struct Harness {
         config.control_token = "fuzz-token";
         config.subscribe_timeout_ms = 60'000;  // the client's EOF closes every session
         config.close_grace_ms = 60'000;
-        handlers.calibrate = [](std::uint32_t, serve::CalibrationPose) {
-            return serve::ControlResult::success();
-        };
+        handlers.calibrate = [](std::uint32_t, serve::CalibrationPose) { return serve::ControlResult::success(); };
         handlers.start_recording = [](const std::string& path) {
-            return path.size() < 64 ? serve::ControlResult::success()
-                                    : serve::ControlResult::failure("path too long");
+            return path.size() < 64 ? serve::ControlResult::success() : serve::ControlResult::failure("path too long");
         };
         handlers.stop_recording = [] { return serve::ControlResult::success(); };
         handlers.reload = [] { return serve::ControlResult::failure("no config file"); };
@@ -68,10 +65,9 @@ struct Harness {
         mocap::v1::ServerMessage m;
         m.mutable_hello()->set_max_client_message_bytes(config.max_client_message_bytes);
         hello = serve::encode_server_message(m);
-        context.reset(new serve::SessionContext{
-            config, handlers, counters, log, broadcaster, [this] { return hello; },
-            [] { return std::int64_t{1'700'000'000'000'000}; },
-            [this](std::size_t, std::uint64_t) { ++closed; }});
+        context.reset(new serve::SessionContext{config, handlers, counters, log, broadcaster, [this] { return hello; },
+                                                [] { return std::int64_t{1'700'000'000'000'000}; },
+                                                [this](std::size_t, std::uint64_t) { ++closed; }});
     }
 };
 
@@ -124,8 +120,7 @@ std::vector<std::string> deframe(const std::uint8_t* data, std::size_t size, std
 MOCAP_FUZZ_ENTRY(client_session) {
     if (size > 0) {
         const auto whole = deframe(data, size, size);
-        MOCAP_FUZZ_CHECK(whole == deframe(data, size, 1 + data[0] % 16),
-                         "framing depends on how the bytes were split");
+        MOCAP_FUZZ_CHECK(whole == deframe(data, size, 1 + data[0] % 16), "framing depends on how the bytes were split");
     }
 
     static Harness* h = new Harness;

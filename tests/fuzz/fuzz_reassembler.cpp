@@ -46,8 +46,8 @@ struct Checker {
 MOCAP_FUZZ_ENTRY(reassembler) {
     mocap::ingest::ReassemblyCounters counters;
     Checker checker;
-    mocap::ingest::FrameReassembler reassembler(
-        7, {}, counters, [&checker](const mocap::SegmentSample& s) { checker.on_sample(s); });
+    mocap::ingest::FrameReassembler reassembler(7, {}, counters,
+                                                [&checker](const mocap::SegmentSample& s) { checker.on_sample(s); });
 
     mocap::fuzz::ByteReader in(data, size);
     std::int64_t t_us = 1'000'000;
@@ -61,17 +61,16 @@ MOCAP_FUZZ_ENTRY(reassembler) {
         mw_can_frame f{};
         f.id = in.u16();
         f.dlc = in.u8();
-        for (auto& b : f.data) b = in.u8();
+        for (auto& b : f.data)
+            b = in.u8();
         t_us += in.u8() * 100;
         const std::int64_t jitter = (op >> 3) * 7;
         reassembler.on_frame(f, t_us, t_us - 500, t_us + jitter);
         ++frames;
     }
     MOCAP_FUZZ_CHECK(counters.frames.value() == frames, "frames counter");
-    MOCAP_FUZZ_CHECK(counters.samples.value() + counters.attitude_samples.value() ==
-                         checker.emitted,
+    MOCAP_FUZZ_CHECK(counters.samples.value() + counters.attitude_samples.value() == checker.emitted,
                      "sample counters != samples emitted");
-    MOCAP_FUZZ_CHECK(counters.samples_no_mag.value() <= counters.samples.value(),
-                     "samples_no_mag > samples");
+    MOCAP_FUZZ_CHECK(counters.samples_no_mag.value() <= counters.samples.value(), "samples_no_mag > samples");
     return 0;
 }

@@ -37,8 +37,7 @@ std::size_t replay(const std::string& target, Entry entry) {
         std::sort(paths.begin(), paths.end());
         for (const fs::path& p : paths) {
             std::ifstream in(p, std::ios::binary);
-            const std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
-                                          std::istreambuf_iterator<char>());
+            const std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
             SCOPED_TRACE(p.string());
             std::fprintf(stderr, "replay %s\n", p.c_str());
             // An exactly sized heap copy, as libFuzzer passes it.
@@ -50,12 +49,20 @@ std::size_t replay(const std::string& target, Entry entry) {
     return files;
 }
 
-TEST(FuzzReplay, WireStream) { EXPECT_GT(replay("wire_stream", mocap_fuzz_wire_stream), 0u); }
-TEST(FuzzReplay, Reassembler) { EXPECT_GT(replay("reassembler", mocap_fuzz_reassembler), 0u); }
+TEST(FuzzReplay, WireStream) {
+    EXPECT_GT(replay("wire_stream", mocap_fuzz_wire_stream), 0u);
+}
+TEST(FuzzReplay, Reassembler) {
+    EXPECT_GT(replay("reassembler", mocap_fuzz_reassembler), 0u);
+}
 TEST(FuzzReplay, ClientSession) {
     EXPECT_GT(replay("client_session", mocap_fuzz_client_session), 0u);
 }
-TEST(FuzzReplay, Config) { EXPECT_GT(replay("config", mocap_fuzz_config), 0u); }
-TEST(FuzzReplay, Bvh) { EXPECT_GT(replay("bvh", mocap_fuzz_bvh), 0u); }
+TEST(FuzzReplay, Config) {
+    EXPECT_GT(replay("config", mocap_fuzz_config), 0u);
+}
+TEST(FuzzReplay, Bvh) {
+    EXPECT_GT(replay("bvh", mocap_fuzz_bvh), 0u);
+}
 
 }  // namespace

@@ -12,21 +12,18 @@
 #include <cstdio>
 #include <cstdlib>
 
-#define MOCAP_FUZZ_CHECK(cond, what)                                                   \
-    do {                                                                              \
-        if (!(cond)) {                                                                \
-            std::fprintf(stderr, "fuzz check failed at %s:%d: %s (%s)\n", __FILE__,   \
-                         __LINE__, #cond, what);                                      \
-            std::abort();                                                             \
-        }                                                                             \
+#define MOCAP_FUZZ_CHECK(cond, what)                                                                        \
+    do {                                                                                                    \
+        if (!(cond)) {                                                                                      \
+            std::fprintf(stderr, "fuzz check failed at %s:%d: %s (%s)\n", __FILE__, __LINE__, #cond, what); \
+            std::abort();                                                                                   \
+        }                                                                                                   \
     } while (0)
 
 #ifdef MOCAP_FUZZ_REPLAY
-#define MOCAP_FUZZ_ENTRY(name) \
-    int mocap_fuzz_##name(const std::uint8_t* data, std::size_t size)
+#define MOCAP_FUZZ_ENTRY(name) int mocap_fuzz_##name(const std::uint8_t* data, std::size_t size)
 #else
-#define MOCAP_FUZZ_ENTRY(name)                                                   \
-    extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size)
+#define MOCAP_FUZZ_ENTRY(name) extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size)
 #endif
 
 namespace mocap::fuzz {

@@ -55,9 +55,8 @@ MOCAP_FUZZ_ENTRY(wire_stream) {
                 }
                 const std::size_t bytes = mw_packet_size(packet->frames, packet->frame_count);
                 packet_bytes += bytes;
-                const std::int32_t written =
-                    mw_packet_encode(&packet->header, packet->frames, packet->frame_count,
-                                     reencoded.data(), reencoded.size());
+                const std::int32_t written = mw_packet_encode(&packet->header, packet->frames, packet->frame_count,
+                                                              reencoded.data(), reencoded.size());
                 MOCAP_FUZZ_CHECK(written > 0 && static_cast<std::size_t>(written) == bytes,
                                  "a decoded packet does not re-encode to its size");
             } else {

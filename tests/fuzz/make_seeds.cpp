@@ -49,7 +49,8 @@ mw_can_frame raw_frame(mw_function kind, std::uint8_t node, std::uint32_t counte
     m.function = kind;
     m.u.raw.kind = kind;
     m.u.raw.node_id = node;
-    for (int i = 0; i < 3; ++i) m.u.raw.xyz[i] = static_cast<std::int16_t>(base + 100 * i);
+    for (int i = 0; i < 3; ++i)
+        m.u.raw.xyz[i] = static_cast<std::int16_t>(base + 100 * i);
     m.u.raw.counter_low = static_cast<std::uint16_t>(counter);
     mw_can_frame f{};
     mw_can_encode(&m, &f);
@@ -150,13 +151,15 @@ void reassembler_seeds(const fs::path& dir) {
     Bytes steady;
     add_frame(steady, status_frame(1, MW_ACCEL_4G));
     for (std::uint32_t c = 100; c < 106; ++c) {
-        for (const auto& f : instant(c, 3)) add_frame(steady, f);
+        for (const auto& f : instant(c, 3))
+            add_frame(steady, f);
     }
     write_file(dir, "raw_three_nodes", steady);
 
     Bytes wrap;
     for (std::uint32_t c = 0xFFFFFFFDu; c != 3u; ++c) {
-        for (const auto& f : instant(c, 2)) add_frame(wrap, f);
+        for (const auto& f : instant(c, 2))
+            add_frame(wrap, f);
     }
     write_file(dir, "counter_wrap", wrap);
 
@@ -169,9 +172,11 @@ void reassembler_seeds(const fs::path& dir) {
     write_file(dir, "attitude", att);
 
     Bytes reconnect;
-    for (const auto& f : instant(900, 2)) add_frame(reconnect, f);
+    for (const auto& f : instant(900, 2))
+        add_frame(reconnect, f);
     reconnect.push_back(7);  // reset_stream
-    for (const auto& f : instant(3, 2)) add_frame(reconnect, f);
+    for (const auto& f : instant(3, 2))
+        add_frame(reconnect, f);
     // Out of order and duplicated parts.
     const auto late = instant(4, 1);
     add_frame(reconnect, late[3]);
@@ -243,7 +248,8 @@ void session_seeds(const fs::path& dir) {
     save("oversized_prefix", std::string("\xff\xff\xff\x0f", 4));
     save("bad_prefix", std::string("\xff\xff\xff\xff\xff\xff", 6));
     std::string flood;
-    for (int i = 0; i < 50; ++i) add_message(flood, ping);
+    for (int i = 0; i < 50; ++i)
+        add_message(flood, ping);
     save("ping_flood", flood);
 }
 

@@ -17,8 +17,8 @@ mw_can_frame sync_frame(std::uint32_t counter) {
     return f;
 }
 
-mw_can_frame raw_frame(mw_function kind, std::uint8_t node, std::int16_t x, std::int16_t y,
-                       std::int16_t z, std::uint32_t counter) {
+mw_can_frame raw_frame(mw_function kind, std::uint8_t node, std::int16_t x, std::int16_t y, std::int16_t z,
+                       std::uint32_t counter) {
     mw_raw r{};
     r.kind = kind;
     r.node_id = node;
@@ -33,8 +33,7 @@ mw_can_frame raw_frame(mw_function kind, std::uint8_t node, std::int16_t x, std:
 
 class Reassembler : public ::testing::Test {
 protected:
-    Reassembler()
-        : r_(7, {}, counters_, [this](const SegmentSample& s) { out_.push_back(s); }) {}
+    Reassembler() : r_(7, {}, counters_, [this](const SegmentSample& s) { out_.push_back(s); }) {}
 
     void feed(const mw_can_frame& f, std::int64_t t_us = 1000) { r_.on_frame(f, t_us, 900, 5000); }
     void node_sample(std::uint8_t node, std::uint32_t counter) {

@@ -97,7 +97,8 @@ protected:
 TEST_F(SinkListenerTest, PacketsBecomeSamplesWithStamps) {
     start({});
     auto s = connect();
-    for (std::uint32_t c = 0; c < 10; ++c) asio::write(s, asio::buffer(make_packet(3, c, c, 15)));
+    for (std::uint32_t c = 0; c < 10; ++c)
+        asio::write(s, asio::buffer(make_packet(3, c, c, 15)));
     ASSERT_TRUE(wait_until([&] { return count() == 150; }));
     std::lock_guard lock(mu_);
     EXPECT_EQ(samples_[0].subject_id, 3u);
@@ -119,7 +120,8 @@ TEST_F(SinkListenerTest, GarbageBetweenPacketsIsCountedAndSkipped) {
     auto p3 = make_packet(1, 2, 2, 2);
     stream.insert(stream.end(), p3.begin(), p3.end());
     // Byte by byte, the worst case for an incremental decoder.
-    for (std::uint8_t b : stream) asio::write(s, asio::buffer(&b, 1));
+    for (std::uint8_t b : stream)
+        asio::write(s, asio::buffer(&b, 1));
     ASSERT_TRUE(wait_until([&] { return count() == 4; }));
     EXPECT_TRUE(wait_until([&] { return counter("malformed_packets") >= 2; }));
     EXPECT_GE(counter("crc_failures"), 1u);

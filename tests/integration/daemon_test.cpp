@@ -41,7 +41,8 @@ std::map<TruthKey, Quat> read_truth(const std::string& path) {
     while (std::getline(in, line)) {
         std::vector<std::string> f;
         std::stringstream ls(line);
-        for (std::string x; std::getline(ls, x, ',');) f.push_back(x);
+        for (std::string x; std::getline(ls, x, ',');)
+            f.push_back(x);
         if (f.size() < 9) continue;
         out[{static_cast<std::uint32_t>(std::stoul(f[1])), static_cast<std::uint32_t>(std::stoul(f[4])), f[2]}] =
             Quat(std::stod(f[5]), std::stod(f[6]), std::stod(f[7]), std::stod(f[8]));
@@ -66,7 +67,8 @@ protected:
             << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\nheading = \"earth\"\n"
             << "facing = \"given\"\nfacing_heading_deg = 0.0\n"
             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 16\n"
-            << "[control]\ntoken = \"" << kToken << "\"\n"
+            << "[control]\ntoken = \"" << kToken
+            << "\"\n"
             // Every listening port is a free one: ctest runs daemons in parallel.
             << "[outputs]\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n"
             << "[http]\nlisten = \"127.0.0.1:" << free_port() << "\"\n";
@@ -85,8 +87,9 @@ protected:
     }
 
     std::unique_ptr<Process> sim(std::vector<std::string> extra, const std::string& log = "sim.log") {
-        std::vector<std::string> argv{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(sink_port_),
-                                      "--rate", std::to_string(kRateHz)};
+        std::vector<std::string> argv{MOCAP_SIM_BIN, "stream",
+                                      "--connect",   "127.0.0.1:" + std::to_string(sink_port_),
+                                      "--rate",      std::to_string(kRateHz)};
         argv.insert(argv.end(), extra.begin(), extra.end());
         return std::make_unique<Process>(argv, dir_.file(log));
     }
@@ -148,7 +151,9 @@ protected:
     std::unique_ptr<Process> daemon_;
 };
 
-std::uint32_t counter_of(const v1::SkeletonFrame& f) { return static_cast<std::uint32_t>(f.sync() & 0xFFFFFFFFu); }
+std::uint32_t counter_of(const v1::SkeletonFrame& f) {
+    return static_cast<std::uint32_t>(f.sync() & 0xFFFFFFFFu);
+}
 
 Quat segment_q(const v1::SkeletonFrame& f, int i) {
     return Quat(f.q_world_segment_wxyz(4 * i), f.q_world_segment_wxyz(4 * i + 1), f.q_world_segment_wxyz(4 * i + 2),
@@ -160,7 +165,8 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
     auto c = connect_client({1});
     const std::vector<std::string> names = [&] {
         std::vector<std::string> n;
-        for (const auto& s : c.hello().skeleton().segments()) n.push_back(s.name());
+        for (const auto& s : c.hello().skeleton().segments())
+            n.push_back(s.name());
         return n;
     }();
     ASSERT_EQ(names.size(), 15u);
@@ -212,8 +218,8 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
     std::sort(err_deg.begin(), err_deg.end());
     const double median = err_deg[err_deg.size() / 2];
     const double p95 = err_deg[err_deg.size() * 95 / 100];
-    std::cout << "[ metrics  ] segment orientation error vs truth after calibration: median " << median
-              << " deg, p95 " << p95 << " deg over " << err_deg.size() << " segment-frames\n";
+    std::cout << "[ metrics  ] segment orientation error vs truth after calibration: median " << median << " deg, p95 "
+              << p95 << " deg over " << err_deg.size() << " segment-frames\n";
     EXPECT_LT(median, 3.0);
     EXPECT_LT(p95, 8.0);
     EXPECT_EQ(stale, 0u) << "no node was cut, nothing may be stale";
@@ -269,7 +275,8 @@ TEST_F(Daemon, SinkReconnectResumesTheSubject) {
     auto after = collect(c, 15s, [&](const auto&) { return !second->running(); });
     ASSERT_EQ(second->wait(5s).value_or(-1), 0) << second->log();
     ASSERT_GT(after.size(), 100u) << "frames resume after the sink reconnects";
-    for (const auto& r : after) EXPECT_EQ(r.frame.subject_id(), 2u);
+    for (const auto& r : after)
+        EXPECT_EQ(r.frame.subject_id(), 2u);
     EXPECT_GT(after.front().frame.sync(), before.back().frame.sync()) << "sync stays monotonic across reconnects";
     // Two connections per run (sinks 1 and 2) plus the harness's readiness probe.
     EXPECT_EQ(stat(c, "ingest_tcp.connections_accepted"), 5u);
@@ -285,11 +292,13 @@ TEST_F(Daemon, SlowClientDoesNotSlowTheOthers) {
     frames.insert(frames.end(), tail.begin(), tail.end());
     ASSERT_EQ(s->wait(5s).value_or(-1), 0) << s->log();
     std::map<std::uint32_t, std::vector<std::uint64_t>> syncs;
-    for (const auto& r : frames) syncs[r.frame.subject_id()].push_back(r.frame.sync());
+    for (const auto& r : frames)
+        syncs[r.frame.subject_id()].push_back(r.frame.sync());
     ASSERT_EQ(syncs.size(), 3u);
     for (auto& [subject, v] : syncs) {
         std::uint64_t gaps = 0;
-        for (std::size_t i = 1; i < v.size(); ++i) gaps += v[i] - v[i - 1] - 1;
+        for (std::size_t i = 1; i < v.size(); ++i)
+            gaps += v[i] - v[i - 1] - 1;
         EXPECT_EQ(gaps, 0u) << "subject " << subject << ": the fast client must see every frame";
         EXPECT_GE(v.size(), 7u * kRateHz);
     }

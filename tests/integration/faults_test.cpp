@@ -39,7 +39,9 @@ using Bytes = std::vector<std::uint8_t>;
 constexpr const char* kToken = "faults-t0ken";
 constexpr int kRateHz = 100;
 
-std::int64_t realtime_us() { return client::wall_clock_us(); }
+std::int64_t realtime_us() {
+    return client::wall_clock_us();
+}
 
 // ------------------------------------------------------------------ raw sockets
 
@@ -73,8 +75,12 @@ bool send_all(int fd, const void* data, std::size_t n) {
     }
     return true;
 }
-bool send_all(int fd, const Bytes& b) { return send_all(fd, b.data(), b.size()); }
-bool send_all(int fd, const std::string& s) { return send_all(fd, s.data(), s.size()); }
+bool send_all(int fd, const Bytes& b) {
+    return send_all(fd, b.data(), b.size());
+}
+bool send_all(int fd, const std::string& s) {
+    return send_all(fd, s.data(), s.size());
+}
 
 /// True once the peer has closed the connection (EOF or reset), reading and discarding
 /// whatever it sends, within `limit`.
@@ -91,7 +97,8 @@ bool closed_by_peer(int fd, std::chrono::milliseconds limit) {
 
 Bytes random_bytes(std::mt19937& rng, std::size_t n) {
     Bytes b(n);
-    for (auto& x : b) x = static_cast<std::uint8_t>(rng());
+    for (auto& x : b)
+        x = static_cast<std::uint8_t>(rng());
     return b;
 }
 
@@ -102,12 +109,15 @@ std::string delimited(const v1::ClientMessage& m) {
 }
 
 /// The sink's own 32-bit SYNC counter inside the daemon's 64-bit sync line.
-std::uint32_t low32(std::uint64_t sync) { return static_cast<std::uint32_t>(sync & 0xFFFFFFFFu); }
+std::uint32_t low32(std::uint64_t sync) {
+    return static_cast<std::uint32_t>(sync & 0xFFFFFFFFu);
+}
 
 std::size_t count_lines(const std::string& text, const std::string& needle) {
     std::size_t n = 0;
     std::istringstream in(text);
-    for (std::string line; std::getline(in, line);) n += line.find(needle) != std::string::npos ? 1 : 0;
+    for (std::string line; std::getline(in, line);)
+        n += line.find(needle) != std::string::npos ? 1 : 0;
     return n;
 }
 
@@ -115,8 +125,7 @@ std::size_t count_lines(const std::string& text, const std::string& needle) {
 
 std::size_t open_fds(pid_t pid) {
     std::size_t n = 0;
-    for ([[maybe_unused]] const auto& e :
-         std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) {
+    for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) {
         ++n;
     }
     return n;
@@ -272,7 +281,8 @@ private:
 /// Missing frames between consecutive syncs (0 = gap-free); a step back counts as a gap too.
 std::uint64_t gaps(const std::vector<std::uint64_t>& s) {
     std::uint64_t g = 0;
-    for (std::size_t i = 1; i < s.size(); ++i) g += s[i] > s[i - 1] ? s[i] - s[i - 1] - 1 : 1;
+    for (std::size_t i = 1; i < s.size(); ++i)
+        g += s[i] > s[i - 1] ? s[i] - s[i - 1] - 1 : 1;
     return g;
 }
 
@@ -330,8 +340,11 @@ protected:
     }
 
     std::unique_ptr<Process> sim(std::vector<std::string> extra, const std::string& log = "sim.log") {
-        std::vector<std::string> argv{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(sink_port_),
-                                      "--rate", std::to_string(kRateHz), "--nodes", "15", "--mode", "quat",
+        std::vector<std::string> argv{MOCAP_SIM_BIN,      "stream",
+                                      "--connect",        "127.0.0.1:" + std::to_string(sink_port_),
+                                      "--rate",           std::to_string(kRateHz),
+                                      "--nodes",          "15",
+                                      "--mode",           "quat",
                                       "--sink-rate-stats"};
         argv.insert(argv.end(), extra.begin(), extra.end());
         return std::make_unique<Process>(argv, dir_.file(log));
@@ -347,7 +360,8 @@ protected:
             ADD_FAILURE() << "stats: " << err;
             return out;
         }
-        for (const auto& kv : s.counters()) out[kv.name()] = kv.value();
+        for (const auto& kv : s.counters())
+            out[kv.name()] = kv.value();
         if (full) *full = s;
         return out;
     }
@@ -384,7 +398,8 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
     // ---- sink port (7000) ----
     // 1000 chunks of random bytes on one connection: discarded, the decoder resynchronises.
     const int junk = tcp_connect(sink_port_);
-    for (int i = 0; i < kRepeats; ++i) ASSERT_TRUE(send_all(junk, random_bytes(rng, 100)));
+    for (int i = 0; i < kRepeats; ++i)
+        ASSERT_TRUE(send_all(junk, random_bytes(rng, 100)));
     // A valid header whose payload_length claims far more than a packet can hold, 1000 times.
     WireSink liar(3);
     ASSERT_TRUE(liar.connect(sink_port_));
@@ -393,7 +408,8 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
     huge[7] = 0xFF;
     huge[8] = 0xFF;  // payload_length
     huge[9] = 0xFF;
-    for (int i = 0; i < kRepeats; ++i) ASSERT_TRUE(liar.send(huge));
+    for (int i = 0; i < kRepeats; ++i)
+        ASSERT_TRUE(liar.send(huge));
     // A valid packet with a bad CRC, 1000 times.
     WireSink crc(3);
     ASSERT_TRUE(crc.connect(sink_port_));
@@ -453,7 +469,8 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
 
     // ---- live BVH port (7002) ----
     const int bvh_bad = tcp_connect(bvh_port_);
-    for (int i = 0; i < kRepeats; ++i) send_all(bvh_bad, std::string("no such command\n"));
+    for (int i = 0; i < kRepeats; ++i)
+        send_all(bvh_bad, std::string("no such command\n"));
     const int bvh_long = tcp_connect(bvh_port_);
     send_all(bvh_long, std::string(200, 'A') + "\n");
     EXPECT_TRUE(closed_by_peer(bvh_long, 3s)) << "a line over 64 bytes closes the BVH client";
@@ -479,7 +496,8 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
                                  "Connection: close\r\n\r\n"));
         std::string reply;
         std::array<char, 2048> buf{};
-        for (ssize_t r; (r = ::recv(fd, buf.data(), buf.size(), 0)) > 0;) reply.append(buf.data(), static_cast<std::size_t>(r));
+        for (ssize_t r; (r = ::recv(fd, buf.data(), buf.size(), 0)) > 0;)
+            reply.append(buf.data(), static_cast<std::size_t>(r));
         http_refused += reply.rfind("HTTP/1.1 4", 0) == 0 ? 1 : 0;
         ::close(fd);
     }
@@ -489,7 +507,8 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
     std::this_thread::sleep_for(500ms);
     ref.stop();
     const auto c = counters();
-    for (int fd : {junk, flood, mute_sink, big_prefix, too_long, truncated, silent, deaf, bvh_bad, bvh_long, bvh_deaf}) {
+    for (int fd :
+         {junk, flood, mute_sink, big_prefix, too_long, truncated, silent, deaf, bvh_bad, bvh_long, bvh_deaf}) {
         ::close(fd);
     }
 
@@ -501,7 +520,8 @@ TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
     EXPECT_FALSE(ref.closed());
     if (HasFailure()) {
         for (std::size_t i = 1; i < syncs.size(); ++i) {
-            if (syncs[i] != syncs[i - 1] + 1) std::cerr << "gap after " << low32(syncs[i - 1]) << " to " << low32(syncs[i]) << "\n";
+            if (syncs[i] != syncs[i - 1] + 1)
+                std::cerr << "gap after " << low32(syncs[i - 1]) << " to " << low32(syncs[i]) << "\n";
         }
         for (const auto& [k, v] : c) {
             if (v != 0) std::cerr << k << "=" << v << "\n";
@@ -654,7 +674,8 @@ TEST_F(Faults, SinkClockStepsOfTenSecondsDoNotStopTheSubject) {
     // 0–2 s true time, 2–4 s the clock 10 s ahead, 4–6 s 10 s behind, 6–7 s true again.
     paced(700, [&](int i) {
         const std::int64_t step_us = i < 200 ? 0 : i < 400 ? 10'000'000 : i < 600 ? -10'000'000 : 0;
-        ASSERT_TRUE(sink.send(sink.encode(WireSink::instant(static_cast<std::uint32_t>(i + 1)), realtime_us() + step_us)));
+        ASSERT_TRUE(
+            sink.send(sink.encode(WireSink::instant(static_cast<std::uint32_t>(i + 1)), realtime_us() + step_us)));
     });
     std::this_thread::sleep_for(300ms);
     ref.stop();
@@ -754,8 +775,7 @@ TEST_F(Faults, SigtermUnderLoadDrainsWithinFiveSeconds) {
     daemon_->signal(SIGTERM);
     const auto rc = daemon_->wait(10s);
     const double drain_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    std::cout << "[ metrics  ] SIGTERM under load (4 subjects x 15 nodes, 3 clients): exit after " << drain_s
-              << " s\n";
+    std::cout << "[ metrics  ] SIGTERM under load (4 subjects x 15 nodes, 3 clients): exit after " << drain_s << " s\n";
     ASSERT_TRUE(rc.has_value()) << "mocapd did not exit within 10 s (systemd TimeoutStopSec)";
     EXPECT_EQ(*rc, 0);
     EXPECT_LT(drain_s, 5.0);
@@ -763,7 +783,8 @@ TEST_F(Faults, SigtermUnderLoadDrainsWithinFiveSeconds) {
     ::close(bvh);
     ref.stop();
     std::uint64_t all_gaps = 0;
-    for (std::uint32_t subject = 1; subject <= 4; ++subject) all_gaps += gaps(ref.syncs(subject));
+    for (std::uint32_t subject = 1; subject <= 4; ++subject)
+        all_gaps += gaps(ref.syncs(subject));
     EXPECT_LE(all_gaps, sim_skipped(*s)) << "the drain delivers every frame up to the end";
     EXPECT_NE(daemon_->log().find("mocapd stopped"), std::string::npos);
 }
@@ -864,7 +885,8 @@ TEST_F(Faults, ClientLimitRateLimitAndLoopbackOnlyControl) {
         ASSERT_TRUE(greedy.connect("127.0.0.1", pose_port_, 5s, err)) << err;
         v1::ClientMessage ping;
         ping.mutable_ping()->set_nonce(1);
-        for (int i = 0; i < 30; ++i) greedy.send(ping, err);
+        for (int i = 0; i < 30; ++i)
+            greedy.send(ping, err);
         v1::ServerMessage m;
         for (int i = 0; i < 60 && greedy.next(m, 200ms) != client::ReadStatus::kClosed; ++i) {
         }
@@ -905,7 +927,8 @@ TEST_F(Faults, ClientLimitRateLimitAndLoopbackOnlyControl) {
     // Client limit: max_clients = 4; the fifth gets Goodbye(SERVER_FULL).
     std::this_thread::sleep_for(300ms);  // the clients above are gone
     std::vector<client::PoseClient> held(4);
-    for (auto& c : held) ASSERT_TRUE(c.connect("127.0.0.1", pose_port_, 5s, err)) << err;
+    for (auto& c : held)
+        ASSERT_TRUE(c.connect("127.0.0.1", pose_port_, 5s, err)) << err;
     {
         client::PoseClient fifth;
         EXPECT_FALSE(fifth.connect("127.0.0.1", pose_port_, 5s, err));

@@ -41,7 +41,8 @@ Process::Process(std::vector<std::string> argv, const std::string& log_path, con
     posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
     if (!cwd.empty()) posix_spawn_file_actions_addchdir_np(&fa, cwd.c_str());
     std::vector<char*> args;
-    for (auto& a : argv) args.push_back(a.data());
+    for (auto& a : argv)
+        args.push_back(a.data());
     args.push_back(nullptr);
     const int rc = posix_spawn(&pid_, args[0], &fa, nullptr, args.data(), environ);
     posix_spawn_file_actions_destroy(&fa);
@@ -83,7 +84,9 @@ int Process::stop(std::chrono::milliseconds grace) {
     return wait(std::chrono::seconds(5)).value_or(-SIGKILL);
 }
 
-std::string Process::log() const { return read_file(log_path_); }
+std::string Process::log() const {
+    return read_file(log_path_);
+}
 
 std::uint16_t free_port() {
     const int fd = ::socket(AF_INET, SOCK_STREAM, 0);

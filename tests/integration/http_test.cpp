@@ -23,8 +23,8 @@ using mocap::testing::http_request;
 constexpr const char* kToken = "web-s3cret";
 
 struct Scrape {
-    std::map<std::string, std::string> types;   // family -> counter|gauge|histogram
-    std::map<std::string, double> samples;      // full series (name + labels) -> value
+    std::map<std::string, std::string> types;  // family -> counter|gauge|histogram
+    std::map<std::string, double> samples;     // full series (name + labels) -> value
     std::vector<std::string> problems;
 };
 
@@ -53,7 +53,8 @@ Scrape scrape(std::uint16_t port) {
             if (!helps.count(name)) s.problems.push_back("no HELP before TYPE: " + name);
             if (!std::regex_match(name, name_re)) s.problems.push_back("bad name: " + name);
             if (type == "counter" && !name.ends_with("_total")) s.problems.push_back("counter without _total: " + name);
-            if (type != "counter" && name.ends_with("_total")) s.problems.push_back("_total on a " + type + ": " + name);
+            if (type != "counter" && name.ends_with("_total"))
+                s.problems.push_back("_total on a " + type + ": " + name);
             // Units as suffixes, in base units: no µs/ms, seconds and bytes last.
             for (const char* bad : {"_us_", "_ms_", "_us", "_ms"}) {
                 if (name.ends_with(bad) || name.find(std::string(bad) + "_") != std::string::npos) {
@@ -137,23 +138,24 @@ TEST_F(WebEndpoint, MetricsFollowPrometheusConventionsAndMoveUnderLoad) {
     EXPECT_TRUE(b.problems.empty()) << ::testing::PrintToString(b.problems);
 
     // Every counter the daemon keeps is there (components of the whole pipeline).
-    for (const char* family : {"mocapd_route_samples_routed_total", "mocapd_ingest_tcp_packets_total",
-                               "mocapd_serve_frames_published_total", "mocapd_serve_sent_bytes_total",
-                               "mocapd_http_requests_total", "mocapd_stage_latency_seconds", "mocapd_pose_clients",
-                               "mocapd_subjects_active", "mocapd_sinks_connected"}) {
+    for (const char* family :
+         {"mocapd_route_samples_routed_total", "mocapd_ingest_tcp_packets_total", "mocapd_serve_frames_published_total",
+          "mocapd_serve_sent_bytes_total", "mocapd_http_requests_total", "mocapd_stage_latency_seconds",
+          "mocapd_pose_clients", "mocapd_subjects_active", "mocapd_sinks_connected"}) {
         EXPECT_TRUE(b.types.count(family)) << family;
     }
     // Under load, counters and latency counts increase between two scrapes.
-    for (const char* series : {"mocapd_route_samples_routed_total", "mocapd_ingest_tcp_packets_total",
-                               "mocapd_serve_frames_published_total",
-                               "mocapd_stage_latency_seconds_count{stage=\"filter\"}",
-                               "mocapd_stage_latency_seconds_count{stage=\"assembly\"}",
-                               "mocapd_stage_latency_seconds_count{stage=\"ingest\"}"}) {
+    for (const char* series :
+         {"mocapd_route_samples_routed_total", "mocapd_ingest_tcp_packets_total", "mocapd_serve_frames_published_total",
+          "mocapd_stage_latency_seconds_count{stage=\"filter\"}",
+          "mocapd_stage_latency_seconds_count{stage=\"assembly\"}",
+          "mocapd_stage_latency_seconds_count{stage=\"ingest\"}"}) {
         ASSERT_TRUE(a.samples.count(series) && b.samples.count(series)) << series;
         EXPECT_GT(b.samples.at(series), a.samples.at(series)) << series;
     }
     EXPECT_GT(b.samples.at("mocapd_route_samples_routed_total") - a.samples.at("mocapd_route_samples_routed_total"),
-              15 * 100 * 1.0) << "15 nodes at 100 Hz for 1.5 s";
+              15 * 100 * 1.0)
+        << "15 nodes at 100 Hz for 1.5 s";
     EXPECT_EQ(b.samples.at("mocapd_subjects_active"), 1.0);
     EXPECT_EQ(b.samples.at("mocapd_sinks_connected"), 1.0);
     EXPECT_GE(b.samples.at("mocapd_http_metrics_scrapes_total"), 3.0);

@@ -39,7 +39,8 @@ std::vector<std::string> split(const std::string& line) {
     std::vector<std::string> out;
     std::stringstream ss(line);
     std::string cell;
-    while (std::getline(ss, cell, ',')) out.push_back(cell);
+    while (std::getline(ss, cell, ','))
+        out.push_back(cell);
     return out;
 }
 
@@ -48,7 +49,9 @@ struct TruthSample {
     Quat q;
 };
 
-double angle_deg(const Quat& q) { return 2.0 * std::acos(std::min(1.0, std::abs(q.w()))) * kRadToDeg; }
+double angle_deg(const Quat& q) {
+    return 2.0 * std::acos(std::min(1.0, std::abs(q.w()))) * kRadToDeg;
+}
 
 }  // namespace
 
@@ -59,13 +62,20 @@ int main(int argc, char** argv) {
     std::vector<std::string> excluded;
     for (int i = 1; i + 1 < argc; i += 2) {
         const std::string k = argv[i], v = argv[i + 1];
-        if (k == "--truth") truth_path = v;
-        else if (k == "--bvh") bvh_path = v;
-        else if (k == "--angles") angles_path = v;
-        else if (k == "--subject") subject = static_cast<unsigned>(std::stoul(v));
-        else if (k == "--skip-s") skip_s = std::stod(v);
-        else if (k == "--max-rms-deg") max_rms_deg = std::stod(v);
-        else if (k == "--exclude") excluded.push_back(v);
+        if (k == "--truth")
+            truth_path = v;
+        else if (k == "--bvh")
+            bvh_path = v;
+        else if (k == "--angles")
+            angles_path = v;
+        else if (k == "--subject")
+            subject = static_cast<unsigned>(std::stoul(v));
+        else if (k == "--skip-s")
+            skip_s = std::stod(v);
+        else if (k == "--max-rms-deg")
+            max_rms_deg = std::stod(v);
+        else if (k == "--exclude")
+            excluded.push_back(v);
         else {
             std::cerr << "unknown option " << k << "\n";
             return 2;
@@ -93,9 +103,9 @@ int main(int argc, char** argv) {
             if (c.size() < head.size() || std::stoul(c[cs]) != subject) continue;
             const std::int64_t t = std::stoll(c[ct]);
             if (first) truth_t0 = t, first = false;
-            truth[c[cg]].push_back({t, Quat(std::stod(c[cw]), std::stod(c[cw + 1]), std::stod(c[cw + 2]),
-                                            std::stod(c[cw + 3]))
-                                           .normalized()});
+            truth[c[cg]].push_back(
+                {t, Quat(std::stod(c[cw]), std::stod(c[cw + 1]), std::stod(c[cw + 2]), std::stod(c[cw + 3]))
+                        .normalized()});
         }
     }
     // Frame instants from the angles CSV (same order as the BVH lines of this subject).
@@ -158,7 +168,8 @@ int main(int argc, char** argv) {
         return 1;
     }
     std::vector<Quat> offsets;
-    for (const auto& p : pairs) offsets.push_back(p.q_bvh * p.q_truth.conjugate());
+    for (const auto& p : pairs)
+        offsets.push_back(p.q_bvh * p.q_truth.conjugate());
     const Quat mean = mocap::filter::average_quaternions(offsets);
     const Quat yaw = Quat(mean.w(), 0, 0, mean.z()).normalized();
     std::vector<double> err_all, err_nofit, err_kept;
@@ -175,18 +186,20 @@ int main(int argc, char** argv) {
     }
     auto rms = [](const std::vector<double>& v) {
         double s = 0;
-        for (double x : v) s += x * x;
+        for (double x : v)
+            s += x * x;
         return std::sqrt(s / static_cast<double>(v.size()));
     };
     std::vector<double> sorted = err_all;
     std::sort(sorted.begin(), sorted.end());
     const double overall = rms(err_all);
     const double kept = err_kept.empty() ? 0.0 : rms(err_kept);
-    std::printf("{\"frames\":%zu,\"pairs\":%zu,\"heading_offset_deg\":%.2f,\"rms_deg\":%.2f,\"median_deg\":%.2f,"
-                "\"p95_deg\":%.2f,\"max_deg\":%.2f,\"rms_without_heading_fit_deg\":%.2f,"
-                "\"rms_without_excluded_deg\":%.2f,\"segments\":{",
-                frames_used, pairs.size(), 2.0 * std::atan2(yaw.z(), yaw.w()) * kRadToDeg, overall,
-                sorted[sorted.size() / 2], sorted[sorted.size() * 95 / 100], sorted.back(), rms(err_nofit), kept);
+    std::printf(
+        "{\"frames\":%zu,\"pairs\":%zu,\"heading_offset_deg\":%.2f,\"rms_deg\":%.2f,\"median_deg\":%.2f,"
+        "\"p95_deg\":%.2f,\"max_deg\":%.2f,\"rms_without_heading_fit_deg\":%.2f,"
+        "\"rms_without_excluded_deg\":%.2f,\"segments\":{",
+        frames_used, pairs.size(), 2.0 * std::atan2(yaw.z(), yaw.w()) * kRadToDeg, overall, sorted[sorted.size() / 2],
+        sorted[sorted.size() * 95 / 100], sorted.back(), rms(err_nofit), kept);
     bool first = true;
     for (const auto& [j, acc] : per_joint) {
         std::printf("%s\"%s\":%.2f", first ? "" : ",", clip.joints[j].name.c_str(),

@@ -14,7 +14,9 @@
 
 namespace mocap::serve::test {
 
-inline BvhFrameEncoder default_encoder() { return BvhFrameEncoder(skeleton::default_body_model(), {}); }
+inline BvhFrameEncoder default_encoder() {
+    return BvhFrameEncoder(skeleton::default_body_model(), {});
+}
 
 /// Frame k of a subject: every segment turned k degrees about z, root 1 m up.
 inline void make_pose(std::uint32_t subject, std::uint64_t k, std::uint16_t segments, SubjectFrame& f,
@@ -27,7 +29,8 @@ inline void make_pose(std::uint32_t subject, std::uint64_t k, std::uint16_t segm
     p = SkeletonPose{};
     p.segment_count = segments;
     const double half = 0.5 * static_cast<double>(k) * 3.14159265358979323846 / 180.0;
-    for (std::size_t i = 0; i < segments; ++i) p.q_world_segment_wxyz[i] = {std::cos(half), 0.0, 0.0, std::sin(half)};
+    for (std::size_t i = 0; i < segments; ++i)
+        p.q_world_segment_wxyz[i] = {std::cos(half), 0.0, 0.0, std::sin(half)};
     p.position_m[0] = {0.0, 0.0, 1.0};
 }
 

@@ -49,7 +49,7 @@ TEST(BvhRecorder, WritesACompleteFileOfOneSubject) {
     std::string err, path;
     ASSERT_TRUE(rec.start("", &err, &path)) << err;
     EXPECT_EQ(path, dir.file("mocap-1.bvh"));
-    EXPECT_FALSE(rec.start("", &err));  // one at a time
+    EXPECT_FALSE(rec.start("", &err));       // one at a time
     publish_frames(rec, encoder, 4, 0, 10);  // first subject with frames: 4
     publish_frames(rec, encoder, 2, 0, 5);   // not recorded
     publish_frames(rec, encoder, 4, 10, 15);
@@ -190,7 +190,8 @@ void expect_same(const SegmentSample& a, const SegmentSample& b) {
 
 std::vector<std::string> raw_files(const fs::path& dir) {
     std::vector<std::string> out;
-    for (const auto& e : fs::directory_iterator(dir)) out.push_back(e.path().string());
+    for (const auto& e : fs::directory_iterator(dir))
+        out.push_back(e.path().string());
     std::sort(out.begin(), out.end());
     return out;
 }
@@ -205,7 +206,8 @@ TEST(RawRecorder, EverySampleComesBackExactly) {
     std::string err;
     ASSERT_TRUE(rec.start(&err)) << err;
     for (std::uint64_t k = 0; k < 3000; ++k) {
-        while (!rec.push(sample(k, k % 7 == 0))) std::this_thread::sleep_for(1ms);  // test only: wait for room
+        while (!rec.push(sample(k, k % 7 == 0)))
+            std::this_thread::sleep_for(1ms);  // test only: wait for room
     }
     rec.stop();
     const auto files = raw_files(dir.path);
@@ -234,7 +236,8 @@ TEST(RawRecorder, RotatesBySizeAndACutFileReadsUpToItsLastRecord) {
     std::string err;
     ASSERT_TRUE(rec.start(&err)) << err;
     for (std::uint64_t k = 0; k < 2000; ++k) {
-        while (!rec.push(sample(k, false))) std::this_thread::sleep_for(1ms);
+        while (!rec.push(sample(k, false)))
+            std::this_thread::sleep_for(1ms);
         if (k % 100 == 0) std::this_thread::sleep_for(10ms);  // let the writer see the size
     }
     rec.stop();
@@ -245,7 +248,8 @@ TEST(RawRecorder, RotatesBySizeAndACutFileReadsUpToItsLastRecord) {
     for (const auto& f : files) {
         RawRecordingReader reader;
         ASSERT_TRUE(reader.open(f, &err)) << err;
-        while (reader.next(got, &err) == 1) expect_same(sample(k++, false), got);
+        while (reader.next(got, &err) == 1)
+            expect_same(sample(k++, false), got);
     }
     EXPECT_EQ(k, 2000u);
     // Cut the last file in the middle of a record: everything before it still reads.
@@ -254,7 +258,8 @@ TEST(RawRecorder, RotatesBySizeAndACutFileReadsUpToItsLastRecord) {
     RawRecordingReader reader;
     ASSERT_TRUE(reader.open(files.back(), &err));
     int n = 0;
-    while (reader.next(got, &err) == 1) ++n;
+    while (reader.next(got, &err) == 1)
+        ++n;
     EXPECT_TRUE(reader.truncated());
     EXPECT_GT(n, 0);
     // Not a recording at all.
@@ -271,7 +276,8 @@ TEST(RawRecorder, AFullRingDropsAndCountsInsteadOfBlocking) {
     c.ring_capacity = 16;
     RawRecorder rec(c, clock);  // not started: nothing drains the ring
     std::uint64_t accepted = 0;
-    for (std::uint64_t k = 0; k < 100; ++k) accepted += rec.push(sample(k, false)) ? 1 : 0;
+    for (std::uint64_t k = 0; k < 100; ++k)
+        accepted += rec.push(sample(k, false)) ? 1 : 0;
     EXPECT_EQ(accepted, 16u);
     EXPECT_EQ(rec.counters().snapshot()[1].value, 84u);  // samples_dropped
 }

@@ -11,8 +11,8 @@
 #include <thread>
 
 #include "bvh_outputs_fixture.hpp"
-#include "wait_until.hpp"
 #include "skeleton/bvh.hpp"
+#include "wait_until.hpp"
 
 namespace mocap::serve {
 namespace {
@@ -36,7 +36,9 @@ public:
     ~Conn() { ::close(fd_); }
     [[nodiscard]] bool ok() const { return ok_; }
     void half_close() { ::shutdown(fd_, SHUT_WR); }
-    void send_text(const std::string& s) { ASSERT_EQ(::send(fd_, s.data(), s.size(), 0), static_cast<ssize_t>(s.size())); }
+    void send_text(const std::string& s) {
+        ASSERT_EQ(::send(fd_, s.data(), s.size(), 0), static_cast<ssize_t>(s.size()));
+    }
     /// Reads until `text` holds `lines` complete lines after the greeting (or timeout).
     std::string read_until_lines(std::size_t greeting_lines, std::size_t lines) {
         std::string text;
@@ -200,7 +202,8 @@ TEST(BvhServer, LaggingClientLosesOldestLinesNotThePipeline) {
         test::make_pose(1, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
         server.publish(f, p);
     }
-    for (int i = 0; i < 400 && server.counters().frames_dropped.load() + server.counters().backlog_dropped.load() == 0; ++i) {
+    for (int i = 0; i < 400 && server.counters().frames_dropped.load() + server.counters().backlog_dropped.load() == 0;
+         ++i) {
         std::this_thread::sleep_for(5ms);
     }
     EXPECT_GT(server.counters().frames_dropped.load() + server.counters().backlog_dropped.load(), 0u);

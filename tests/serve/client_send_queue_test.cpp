@@ -15,15 +15,19 @@ namespace {
 using Texts = std::vector<std::string>;
 
 // The frame's text is its number.
-ClientSendQueue::Bytes frame(int i) { return std::make_shared<const std::string>(std::to_string(i)); }
+ClientSendQueue::Bytes frame(int i) {
+    return std::make_shared<const std::string>(std::to_string(i));
+}
 
 void push_range(ClientSendQueue& q, int first, int end) {
-    for (int i = first; i < end; ++i) q.push(frame(i));
+    for (int i = first; i < end; ++i)
+        q.push(frame(i));
 }
 
 Texts drain(ClientSendQueue& q) {
     Texts out;
-    while (!q.empty()) out.push_back(*q.pop());
+    while (!q.empty())
+        out.push_back(*q.pop());
     return out;
 }
 

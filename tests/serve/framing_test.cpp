@@ -104,7 +104,8 @@ TEST(Framing, OversizedLengthIsReportedBeforeThePayloadArrives) {
 TEST(Framing, OverlongPrefixIsGarbage) {
     DelimitedReader reader(1 << 20);
     auto area = reader.write_area();
-    for (int i = 0; i < 6; ++i) area[static_cast<std::size_t>(i)] = 0xFF;
+    for (int i = 0; i < 6; ++i)
+        area[static_cast<std::size_t>(i)] = 0xFF;
     reader.commit(6);
     EXPECT_EQ(reader.next().status, FrameStatus::kBadPrefix);
 }

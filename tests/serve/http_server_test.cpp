@@ -110,8 +110,9 @@ TEST(HttpServer, ControlNeedsTheToken) {
     Fixture f("s3cret");
     const std::map<std::string, std::string> good{{"X-Mocap-Token", "s3cret"}};
     EXPECT_EQ(http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::post).status, 401u);
-    EXPECT_EQ(http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::post, {{"X-Mocap-Token", "s3cre"}}).status,
-              401u);
+    EXPECT_EQ(
+        http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::post, {{"X-Mocap-Token", "s3cre"}}).status,
+        401u);
     EXPECT_EQ(http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::get, good).status, 405u);
     EXPECT_EQ(f.calibrations.load(), 0);
     const auto ok = http_request(f.port(), "/api/calibrate?subject=2&pose=t", verb::post, good);

@@ -46,7 +46,8 @@ inline HttpReply http_request(std::uint16_t port, const std::string& target,
         socket_deadline(stream.socket(), std::chrono::seconds(10));
         http::request<http::string_body> req{method, target, 11};
         req.set(http::field::host, "127.0.0.1");
-        for (const auto& [k, v] : headers) req.set(k, v);
+        for (const auto& [k, v] : headers)
+            req.set(k, v);
         req.prepare_payload();
         http::write(stream, req);
         boost::beast::flat_buffer buffer;

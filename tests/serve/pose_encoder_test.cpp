@@ -21,8 +21,7 @@ Sample make_sample(std::uint16_t segments) {
     s.frame.subject_id = 42;
     s.frame.sync = (1ull << 33) + 17;  // beyond 32 bits: extended SYNC counter
     s.frame.sample_us = 1'700'000'000'123'456;
-    s.frame.times = {1'700'000'000'100'000, 1'700'000'000'100'050, 1'700'000'000'100'070,
-                     1'700'000'000'100'090, 0};
+    s.frame.times = {1'700'000'000'100'000, 1'700'000'000'100'050, 1'700'000'000'100'070, 1'700'000'000'100'090, 0};
     s.frame.segment_count = segments;
     s.pose.segment_count = segments;
     for (std::uint16_t i = 0; i < segments; ++i) {
@@ -34,7 +33,8 @@ Sample make_sample(std::uint16_t segments) {
         s.pose.extra_flags[i] = kSegmentCalibrated;
     }
     s.pose.joint_angle_count = 5;
-    for (std::uint16_t j = 0; j < 5; ++j) s.pose.joint_angles_rad[j] = -0.5 + 0.25 * j;
+    for (std::uint16_t j = 0; j < 5; ++j)
+        s.pose.joint_angles_rad[j] = -0.5 + 0.25 * j;
     return s;
 }
 
@@ -83,13 +83,11 @@ TEST(PoseEncoder, RoundTripAllFields) {
                             static_cast<float>(s.frame.segments[u].q_earth_sensor_wxyz[std::size_t(c)]));
         }
         for (int c = 0; c < 3; ++c) {
-            EXPECT_FLOAT_EQ(f.position_m(3 * i + c),
-                            static_cast<float>(s.pose.position_m[u][std::size_t(c)]));
+            EXPECT_FLOAT_EQ(f.position_m(3 * i + c), static_cast<float>(s.pose.position_m[u][std::size_t(c)]));
         }
     }
     for (int j = 0; j < 5; ++j) {
-        EXPECT_FLOAT_EQ(f.joint_angles_rad(j),
-                        static_cast<float>(s.pose.joint_angles_rad[std::size_t(j)]));
+        EXPECT_FLOAT_EQ(f.joint_angles_rad(j), static_cast<float>(s.pose.joint_angles_rad[std::size_t(j)]));
     }
 }
 
@@ -98,8 +96,7 @@ TEST(PoseEncoder, FieldSelectionLeavesOtherArraysEmpty) {
     PoseEncoder encoder;
     // Encode a full frame first so the reused message has filled arrays to clear.
     (void)encoder.encode_frame(s.frame, s.pose, kFieldAll, 1);
-    const v1::SkeletonFrame f =
-        parse(encoder.encode_frame(s.frame, s.pose, kFieldOrientations, 2)).frame();
+    const v1::SkeletonFrame f = parse(encoder.encode_frame(s.frame, s.pose, kFieldOrientations, 2)).frame();
     EXPECT_EQ(f.q_world_segment_wxyz_size(), 16);
     EXPECT_EQ(f.position_m_size(), 0);
     EXPECT_EQ(f.joint_angles_rad_size(), 0);

@@ -4,8 +4,8 @@
 // Every wait is bounded by a deadline; polls sleep 1 ms at most.
 #include "serve/pose_server.hpp"
 
-#include <gtest/gtest.h>
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <ifaddrs.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -38,8 +38,7 @@ ServeConfig test_config() {
 
 ServeDescription test_description() {
     ServeDescription d;
-    d.segments = {{"pelvis", -1, {0, 0, 0}, 1}, {"lumbar", 0, {0, 0, 0.1}, 2},
-                  {"head", 1, {0, 0, 0.4}, 3}};
+    d.segments = {{"pelvis", -1, {0, 0, 0}, 1}, {"lumbar", 0, {0, 0, 0.1}, 2}, {"head", 1, {0, 0, 0.4}, 3}};
     d.joint_angle_names = {"neck_flexion"};
     d.subjects = {{1, "alice"}, {2, "bob"}};
     return d;
@@ -160,7 +159,8 @@ TEST(PoseServer, FastClientsReceiveEveryFrameOfTheirSubjectsWithDecimation) {
         EXPECT_EQ(fa[i].second, i + 1);
     }
     std::vector<std::uint64_t> b_syncs[3];
-    for (const auto& [subject, sync] : rb.frames()) b_syncs[subject].push_back(sync);
+    for (const auto& [subject, sync] : rb.frames())
+        b_syncs[subject].push_back(sync);
     for (std::uint32_t subject : {1u, 2u}) {
         ASSERT_EQ(b_syncs[subject].size(), kFrames / 3);
         for (std::size_t i = 0; i < b_syncs[subject].size(); ++i) {
@@ -198,7 +198,8 @@ TEST(PoseServer, ClientThatNeverReadsDropsOldestWhileFastClientGetsEverything) {
     fast.stop();
     const auto got = fast.frames();
     ASSERT_EQ(got.size(), kFrames);
-    for (std::uint64_t i = 0; i < kFrames; ++i) ASSERT_EQ(got[i].second, i + 1);
+    for (std::uint64_t i = 0; i < kFrames; ++i)
+        ASSERT_EQ(got[i].second, i + 1);
     EXPECT_EQ(fast.client().drops_announced(), 0u);
 
     const std::uint64_t dropped = s.server.counters().frames_dropped.load();
@@ -242,8 +243,7 @@ TEST(PoseServer, ClientLimitRejectsWithReasonAndFreesSlotsOnClose) {
 // Sends raw bytes and expects Goodbye(reason) then the close.
 void expect_closed_after(Started& s, const std::string& bytes, v1::GoodbyeReason reason) {
     PoseClient c = s.connect();
-    ASSERT_EQ(::send(c.fd(), bytes.data(), bytes.size(), MSG_NOSIGNAL),
-              static_cast<ssize_t>(bytes.size()));
+    ASSERT_EQ(::send(c.fd(), bytes.data(), bytes.size(), MSG_NOSIGNAL), static_cast<ssize_t>(bytes.size()));
     v1::ServerMessage m;
     ReadStatus st;
     while ((st = c.next(m, 2s)) == ReadStatus::kMessage) {
@@ -318,13 +318,14 @@ TEST(PoseServer, RequestFloodIsRateLimited) {
     v1::ClientMessage ping;
     ping.mutable_ping()->set_nonce(1);
     std::string flood;  // ten requests in one write: the server sees them at once
-    for (int i = 0; i < 10; ++i) ASSERT_TRUE(append_delimited(ping, flood));
-    ASSERT_EQ(::send(c.fd(), flood.data(), flood.size(), MSG_NOSIGNAL),
-              static_cast<ssize_t>(flood.size()));
+    for (int i = 0; i < 10; ++i)
+        ASSERT_TRUE(append_delimited(ping, flood));
+    ASSERT_EQ(::send(c.fd(), flood.data(), flood.size(), MSG_NOSIGNAL), static_cast<ssize_t>(flood.size()));
     v1::ServerMessage m;
     int pongs = 0;
     ReadStatus st;
-    while ((st = c.next(m, 2s)) == ReadStatus::kMessage) pongs += m.has_pong() ? 1 : 0;
+    while ((st = c.next(m, 2s)) == ReadStatus::kMessage)
+        pongs += m.has_pong() ? 1 : 0;
     EXPECT_EQ(st, ReadStatus::kClosed);
     EXPECT_EQ(pongs, 5);
     ASSERT_TRUE(c.goodbye().has_value());
@@ -499,7 +500,8 @@ TEST(PoseServer, SeveralServeThreadsShareTheClients) {
     for (std::uint64_t sync = 1; sync <= 200; ++sync) {
         publish(s.server, 1, sync);
         if (sync % 16 == 0) {
-            for (auto& r : readers) ASSERT_TRUE(wait_until([&] { return r->count() == sync; }));
+            for (auto& r : readers)
+                ASSERT_TRUE(wait_until([&] { return r->count() == sync; }));
         }
     }
     for (auto& r : readers) {

@@ -33,13 +33,17 @@ TEST(PrometheusText, CounterNamesFollowConventions) {
 
 TEST(PrometheusText, FamiliesHaveHelpTypeAndValidNames) {
     MetricsSnapshot m;
-    m.counters = {{"serve.frames_sent", 7}, {"route.samples_routed", 9}, {"worker.stall_us", 2'500'000},
-                  {"ingest_tcp.sink1.packets", 2}, {"ingest_tcp.sink1.packets", 3}};
+    m.counters = {{"serve.frames_sent", 7},
+                  {"route.samples_routed", 9},
+                  {"worker.stall_us", 2'500'000},
+                  {"ingest_tcp.sink1.packets", 2},
+                  {"ingest_tcp.sink1.packets", 3}};
     m.gauges = {{"http_ws_clients", "open WebSockets", 2}};
     StageLatency l;
     l.stage = "filter";
     LatencyHistogram h;
-    for (int v : {3, 40, 100, 900, 4'000, 2'000'000}) h.record(v);
+    for (int v : {3, 40, 100, 900, 4'000, 2'000'000})
+        h.record(v);
     h.record(-5);
     l.snapshot = h.snapshot();
     m.latencies.push_back(l);

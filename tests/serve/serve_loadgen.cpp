@@ -43,7 +43,8 @@ int main(int argc, char** argv) {
     for (std::uint16_t i = 0; i < segments; ++i) {
         description.segments.push_back({"segment" + std::to_string(i), i - 1, {0, 0, 0.1}, i});
     }
-    for (std::uint32_t s = 1; s <= subjects; ++s) description.subjects.push_back({s, ""});
+    for (std::uint32_t s = 1; s <= subjects; ++s)
+        description.subjects.push_back({s, ""});
     server.set_description(description);
     std::string error;
     if (!server.start(error)) {
@@ -59,8 +60,8 @@ int main(int argc, char** argv) {
     frame.segment_count = pose.segment_count = segments;
     double publish_s = 0;
     for (std::uint64_t tick = 1;; ++tick) {
-        const auto due = start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                     period * static_cast<double>(tick));
+        const auto due =
+            start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(period * static_cast<double>(tick));
         if (due > end) break;
         std::this_thread::sleep_until(due);
         const auto t0 = std::chrono::steady_clock::now();

@@ -36,7 +36,8 @@ TEST(BodyModel, DefaultIsValidWithTheSeedHierarchy) {
         EXPECT_EQ(parent_name(side + "_calf"), side + "_thigh");
         EXPECT_EQ(parent_name(side + "_foot"), side + "_calf");
     }
-    for (std::size_t i = 0; i < m.size(); ++i) EXPECT_EQ(m.segments[i].node_id, static_cast<int>(i) + 1);
+    for (std::size_t i = 0; i < m.size(); ++i)
+        EXPECT_EQ(m.segments[i].node_id, static_cast<int>(i) + 1);
 }
 
 TEST(BodyModel, DefaultDimensionsFollowWinterRatios) {

@@ -52,7 +52,9 @@ Counts count_independently(const std::string& text) {
     return c;
 }
 
-double deg(double rad) { return rad * 180.0 / M_PI; }
+double deg(double rad) {
+    return rad * 180.0 / M_PI;
+}
 
 Quat random_quat(std::mt19937& rng) {
     std::normal_distribution<double> n;
@@ -82,7 +84,8 @@ TEST(Bvh, CmuClipsParseWithTheCountsInTheFile) {
         const int elbow = clip.index_of("LeftElbow");
         ASSERT_GE(elbow, 0);
         EXPECT_EQ(clip.joints[static_cast<std::size_t>(elbow)].channels[1], BvhChannel::kXrotation);
-        EXPECT_EQ(clip.joints[static_cast<std::size_t>(clip.index_of("LeftElbow"))].parent, clip.index_of("LeftShoulder"));
+        EXPECT_EQ(clip.joints[static_cast<std::size_t>(clip.index_of("LeftElbow"))].parent,
+                  clip.index_of("LeftShoulder"));
     }
 }
 
@@ -104,7 +107,8 @@ TEST(Bvh, WriteThenReadReproducesTheClip) {
     }
     ASSERT_EQ(ca.values.size(), cb.values.size());
     double worst = 0;
-    for (std::size_t i = 0; i < ca.values.size(); ++i) worst = std::max(worst, std::abs(ca.values[i] - cb.values[i]));
+    for (std::size_t i = 0; i < ca.values.size(); ++i)
+        worst = std::max(worst, std::abs(ca.values[i] - cb.values[i]));
     EXPECT_LT(worst, 5e-7);
     EXPECT_EQ(ca.frame_time_s, cb.frame_time_s);
 }
@@ -114,7 +118,8 @@ TEST(Bvh, YUpMapsToEnuZUp) {
     // BVH +X (the left) ends up along ENU +y before the turn, -x after it.
     const std::string text =
         "HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Yrotation Xrotation Zrotation\n"
-        " JOINT c\n {\n  OFFSET 1 0 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  }\n"
+        " JOINT c\n {\n  OFFSET 1 0 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  "
+        "}\n"
         " }\n}\nMOTION\nFrames: 2\nFrame Time: 0.01\n1 2 3 0 0 0 0 0 0\n1 2 3 90 0 0 0 0 0\n";
     const auto r = parse_bvh(text);
     ASSERT_TRUE(r) << r.error;
@@ -142,7 +147,7 @@ TEST(Bvh, CmuRestPoseIsUprightFacingEnuX) {
     auto pos = [&](const char* n) { return p[static_cast<std::size_t>(clip.index_of(n))]; };
     EXPECT_GT(pos("Head").z(), pos("Hips").z() + 0.4);
     EXPECT_LT(pos("LeftAnkle").z(), pos("Hips").z() - 0.7);
-    EXPECT_GT(pos("LeftHip").y(), 0.05);   // left is +y
+    EXPECT_GT(pos("LeftHip").y(), 0.05);  // left is +y
     EXPECT_LT(pos("RightHip").y(), -0.05);
     EXPECT_GT(pos("LeftToe").x(), pos("LeftAnkle").x());  // toes point forward, +x
 }
@@ -162,7 +167,8 @@ TEST(Bvh, ModelWriterRoundTripsOrientationsInEveryOrder) {
         std::vector<std::array<Quat, kMaxSegments>> truth(frames);
         std::vector<Vec3> roots;
         for (int f = 0; f < frames; ++f) {
-            for (std::size_t i = 0; i < model.size(); ++i) truth[static_cast<std::size_t>(f)][i] = random_quat(rng);
+            for (std::size_t i = 0; i < model.size(); ++i)
+                truth[static_cast<std::size_t>(f)][i] = random_quat(rng);
             roots.emplace_back(0.1 * f, -0.2, 0.9);
             append_bvh_motion_line(model, opt, truth[static_cast<std::size_t>(f)], roots.back(), text);
         }
@@ -171,7 +177,8 @@ TEST(Bvh, ModelWriterRoundTripsOrientationsInEveryOrder) {
         const BvhClip& clip = *r.clip;
         ASSERT_EQ(clip.joints.size(), model.size());
         EXPECT_EQ(clip.channels_per_frame, bvh_values_per_frame(model));
-        for (std::size_t i = 0; i < model.size(); ++i) EXPECT_EQ(clip.joints[i].name, model.segments[i].name);
+        for (std::size_t i = 0; i < model.size(); ++i)
+            EXPECT_EQ(clip.joints[i].name, model.segments[i].name);
         std::vector<Quat> q(model.size());
         std::vector<Vec3> p(model.size());
         for (int f = 0; f < frames; ++f) {
@@ -180,7 +187,8 @@ TEST(Bvh, ModelWriterRoundTripsOrientationsInEveryOrder) {
                 EXPECT_LT(deg(q[i].angularDistance(truth[static_cast<std::size_t>(f)][i])), 1e-3) << order << " " << i;
                 if (model.segments[i].parent >= 0) {
                     const auto par = static_cast<std::size_t>(model.segments[i].parent);
-                    const Vec3 expect = p[par] + truth[static_cast<std::size_t>(f)][par]._transformVector(model.segments[i].offset_m);
+                    const Vec3 expect =
+                        p[par] + truth[static_cast<std::size_t>(f)][par]._transformVector(model.segments[i].offset_m);
                     EXPECT_LT((p[i] - expect).norm(), 1e-6);
                 }
             }
@@ -194,11 +202,13 @@ TEST(Bvh, ModelHierarchyHasEndSitesAtLeavesOnly) {
     const auto r = parse_bvh_hierarchy(bvh_hierarchy_text(model));
     ASSERT_TRUE(r) << r.error;
     int ends = 0;
-    for (const BvhJoint& j : r.clip->joints) ends += j.has_end_site ? 1 : 0;
+    for (const BvhJoint& j : r.clip->joints)
+        ends += j.has_end_site ? 1 : 0;
     EXPECT_EQ(ends, 5);  // head, two hands, two feet
     // Offsets in centimetres, BVH axes: the left thigh hangs off the pelvis at +X.
     const BvhJoint& thigh = r.clip->joints[static_cast<std::size_t>(r.clip->index_of("left_thigh"))];
-    EXPECT_NEAR(thigh.offset.x(), 100.0 * model.segments[static_cast<std::size_t>(model.index_of("left_thigh"))].offset_m.y(), 1e-6);
+    EXPECT_NEAR(thigh.offset.x(),
+                100.0 * model.segments[static_cast<std::size_t>(model.index_of("left_thigh"))].offset_m.y(), 1e-6);
     EXPECT_NEAR(r.clip->joints[0].offset.y(), 100.0 * model.root_height_m, 1e-6);
 }
 
@@ -236,13 +246,21 @@ TEST(Bvh, CmuMappingFollowsTheBones) {
     const BodyModel& model = mc.model;
     const auto& m = mc.m;
     expect_mapped(clip, model, *m.mapping,
-                  {{"pelvis", "Hips"}, {"trunk", "Chest2"}, {"head", "Head"}, {"left_upper_arm", "LeftShoulder"},
-                   {"right_forearm", "RightElbow"}, {"left_hand", "lhand"}, {"right_thigh", "RightHip"},
-                   {"left_calf", "LeftKnee"}, {"right_foot", "RightAnkle"}});
+                  {{"pelvis", "Hips"},
+                   {"trunk", "Chest2"},
+                   {"head", "Head"},
+                   {"left_upper_arm", "LeftShoulder"},
+                   {"right_forearm", "RightElbow"},
+                   {"left_hand", "lhand"},
+                   {"right_thigh", "RightHip"},
+                   {"left_calf", "LeftKnee"},
+                   {"right_foot", "RightAnkle"}});
 
-    const std::vector<std::pair<std::string, std::string>> bones{
-        {"left_upper_arm", "LeftElbow"}, {"right_forearm", "RightWrist"}, {"left_thigh", "LeftKnee"},
-        {"right_calf", "RightAnkle"},    {"left_foot", "LeftToe"}};
+    const std::vector<std::pair<std::string, std::string>> bones{{"left_upper_arm", "LeftElbow"},
+                                                                 {"right_forearm", "RightWrist"},
+                                                                 {"left_thigh", "LeftKnee"},
+                                                                 {"right_calf", "RightAnkle"},
+                                                                 {"left_foot", "LeftToe"}};
     std::vector<Quat> qj(clip.joints.size());
     std::vector<Vec3> pj(clip.joints.size());
     std::array<Quat, kMaxSegments> qs;
@@ -292,7 +310,8 @@ TEST(Bvh, CmuRoundTripThroughTheModelWriter) {
     double worst = 0;
     for (std::size_t f = 0; f < clip.frame_count; ++f) {
         bvh_global_pose(*back.clip, back.clip->frame(f), 0.01, q2, p2);
-        for (std::size_t i = 0; i < model.size(); ++i) worst = std::max(worst, deg(q2[i].angularDistance(truth[f][i])));
+        for (std::size_t i = 0; i < model.size(); ++i)
+            worst = std::max(worst, deg(q2[i].angularDistance(truth[f][i])));
     }
     EXPECT_LT(worst, 0.01);  // 4 decimals of a degree per angle
 }
@@ -344,8 +363,9 @@ TEST(BvhMalformed, GoodBaseParses) {
 TEST(BvhMalformed, ValueCounts) {
     EXPECT_NE(error_of(kHead + "MOTION\nFrames: 1\nFrame Time: 0.01\n1 2 3 4 5 6 7 8 9 10\n").find("too many values"),
               std::string::npos);
-    EXPECT_NE(error_of(kHead + "MOTION\nFrames: 1\nFrame Time: 0.01\n1 2 3 4 5 6 7 8\n").find("expected 9 values, found 8"),
-              std::string::npos);
+    EXPECT_NE(
+        error_of(kHead + "MOTION\nFrames: 1\nFrame Time: 0.01\n1 2 3 4 5 6 7 8\n").find("expected 9 values, found 8"),
+        std::string::npos);
     EXPECT_NE(error_of(kHead + "MOTION\nFrames: 2\nFrame Time: 0.01\n1 2 3 4 5 6 7 8 9\n").find("but 1 motion rows"),
               std::string::npos);
     EXPECT_NE(error_of(kHead + "MOTION\nFrames: 1\nFrame Time: 0.01\n1 2 3 4 5 6 7 8 9\n1 2 3 4 5 6 7 8 9\n")
@@ -385,12 +405,14 @@ TEST(BvhMalformed, Structure) {
               std::string::npos);
     EXPECT_NE(error_of(kHead).find("expected 'MOTION', found end of file"), std::string::npos);
     EXPECT_NE(error_of(kHead + kHead.substr(10)).find("only one ROOT"), std::string::npos);
-    EXPECT_NE(error_of("HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n CHANNELS 0\n JOINT r\n {\n OFFSET 0 0 0\n CHANNELS 0\n }\n}\n")
-                  .find("duplicate joint name"),
-              std::string::npos);
-    EXPECT_NE(error_of("HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n CHANNELS 0\n End Site\n {\n OFFSET 0 0 0\n CHANNELS 0\n }\n}\n")
-                  .find("CHANNELS inside an End Site"),
-              std::string::npos);
+    EXPECT_NE(
+        error_of("HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n CHANNELS 0\n JOINT r\n {\n OFFSET 0 0 0\n CHANNELS 0\n }\n}\n")
+            .find("duplicate joint name"),
+        std::string::npos);
+    EXPECT_NE(
+        error_of("HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n CHANNELS 0\n End Site\n {\n OFFSET 0 0 0\n CHANNELS 0\n }\n}\n")
+            .find("CHANNELS inside an End Site"),
+        std::string::npos);
     EXPECT_NE(error_of("HIERARCHY\nROOT r\n{\n CHANNELS 0\n}\n").find("has no OFFSET"), std::string::npos);
     EXPECT_NE(error_of("HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n JOINT a\n").find("needs OFFSET and CHANNELS"),
               std::string::npos);
@@ -404,11 +426,13 @@ TEST(BvhMalformed, BoundsHoldAgainstHostileSizes) {
     lim.max_joints = 10;
     // Nesting deeper than the limit.
     std::string deep = "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
-    for (int i = 1; i < 20; ++i) deep += "JOINT j" + std::to_string(i) + "\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
+    for (int i = 1; i < 20; ++i)
+        deep += "JOINT j" + std::to_string(i) + "\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
     EXPECT_NE(error_of(deep, lim).find("deeper than 8"), std::string::npos);
     // More joints than the limit (flat).
     std::string wide = "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
-    for (int i = 1; i < 20; ++i) wide += "JOINT j" + std::to_string(i) + "\n{\nOFFSET 0 0 0\nCHANNELS 0\n}\n";
+    for (int i = 1; i < 20; ++i)
+        wide += "JOINT j" + std::to_string(i) + "\n{\nOFFSET 0 0 0\nCHANNELS 0\n}\n";
     EXPECT_NE(error_of(wide, lim).find("more than 10 joints"), std::string::npos);
     // A huge declared frame count with no rows is an error, not an allocation.
     EXPECT_NE(error_of(kHead + "MOTION\nFrames: 999999999999\nFrame Time: 0.01\n").find("frames"), std::string::npos);
@@ -438,8 +462,9 @@ namespace {
 // Random edits of a valid file: the parser must return (clip or error) without crashing,
 // and every clip it accepts must be internally consistent and evaluate to finite poses.
 TEST(BvhMalformed, RandomMutationsAreRejectedOrConsistent) {
-    const std::string base = kHead + "MOTION\nFrames: 3\nFrame Time: 0.01\n1 2 3 4 5 6 7 8 9\n"
-                                     "-1 -2 -3 -4 -5 -6 -7 -8 -9\n0.5 0.5 0.5 90 90 90 0 0 0\n";
+    const std::string base = kHead +
+                             "MOTION\nFrames: 3\nFrame Time: 0.01\n1 2 3 4 5 6 7 8 9\n"
+                             "-1 -2 -3 -4 -5 -6 -7 -8 -9\n0.5 0.5 0.5 90 90 90 0 0 0\n";
     const std::string alphabet = "0123456789-.e+ \t\n{}XYZrotainpsJOINTEnd SiteFrames:Time";
     std::mt19937 rng(11);
     std::size_t accepted = 0;
@@ -449,10 +474,18 @@ TEST(BvhMalformed, RandomMutationsAreRejectedOrConsistent) {
         for (int e = 0; e < edits && !t.empty(); ++e) {
             const std::size_t at = rng() % t.size();
             switch (rng() % 4) {
-                case 0: t[at] = alphabet[rng() % alphabet.size()]; break;
-                case 1: t.erase(at, 1 + rng() % 8); break;
-                case 2: t.insert(at, t.substr(rng() % t.size(), 1 + rng() % 16)); break;
-                default: t.resize(at); break;
+                case 0:
+                    t[at] = alphabet[rng() % alphabet.size()];
+                    break;
+                case 1:
+                    t.erase(at, 1 + rng() % 8);
+                    break;
+                case 2:
+                    t.insert(at, t.substr(rng() % t.size(), 1 + rng() % 16));
+                    break;
+                default:
+                    t.resize(at);
+                    break;
             }
         }
         const auto r = parse_bvh(t);
@@ -497,16 +530,30 @@ TEST(Bvh, SecondCmuNamingMapsToTheRightJoints) {
         double x, y, z;
     };
     const std::vector<J> joints{
-        {"Hips", "", 0, 0, 0},          {"LowerBack", "Hips", 0, 0.1, 0},   {"Spine", "LowerBack", 0, 0.1, 0},
-        {"Spine1", "Spine", 0, 0.1, 0}, {"Neck", "Spine1", 0, 0.1, 0},      {"Head", "Neck", 0, 0.1, 0},
-        {"LeftShoulder", "Spine1", 0.05, 0.05, 0}, {"LeftArm", "LeftShoulder", 0.15, 0, 0},
-        {"LeftForeArm", "LeftArm", 0, -0.3, 0},    {"LeftHand", "LeftForeArm", 0, -0.25, 0},
-        {"RightShoulder", "Spine1", -0.05, 0.05, 0}, {"RightArm", "RightShoulder", -0.15, 0, 0},
-        {"RightForeArm", "RightArm", 0, -0.3, 0},    {"RightHand", "RightForeArm", 0, -0.25, 0},
-        {"LHipJoint", "Hips", 0.1, 0, 0},  {"LeftUpLeg", "LHipJoint", 0, -0.05, 0},  {"LeftLeg", "LeftUpLeg", 0, -0.4, 0},
-        {"LeftFoot", "LeftLeg", 0, -0.4, 0}, {"LeftToeBase", "LeftFoot", 0, -0.05, 0.12},
-        {"RHipJoint", "Hips", -0.1, 0, 0}, {"RightUpLeg", "RHipJoint", 0, -0.05, 0}, {"RightLeg", "RightUpLeg", 0, -0.4, 0},
-        {"RightFoot", "RightLeg", 0, -0.4, 0}, {"RightToeBase", "RightFoot", 0, -0.05, 0.12},
+        {"Hips", "", 0, 0, 0},
+        {"LowerBack", "Hips", 0, 0.1, 0},
+        {"Spine", "LowerBack", 0, 0.1, 0},
+        {"Spine1", "Spine", 0, 0.1, 0},
+        {"Neck", "Spine1", 0, 0.1, 0},
+        {"Head", "Neck", 0, 0.1, 0},
+        {"LeftShoulder", "Spine1", 0.05, 0.05, 0},
+        {"LeftArm", "LeftShoulder", 0.15, 0, 0},
+        {"LeftForeArm", "LeftArm", 0, -0.3, 0},
+        {"LeftHand", "LeftForeArm", 0, -0.25, 0},
+        {"RightShoulder", "Spine1", -0.05, 0.05, 0},
+        {"RightArm", "RightShoulder", -0.15, 0, 0},
+        {"RightForeArm", "RightArm", 0, -0.3, 0},
+        {"RightHand", "RightForeArm", 0, -0.25, 0},
+        {"LHipJoint", "Hips", 0.1, 0, 0},
+        {"LeftUpLeg", "LHipJoint", 0, -0.05, 0},
+        {"LeftLeg", "LeftUpLeg", 0, -0.4, 0},
+        {"LeftFoot", "LeftLeg", 0, -0.4, 0},
+        {"LeftToeBase", "LeftFoot", 0, -0.05, 0.12},
+        {"RHipJoint", "Hips", -0.1, 0, 0},
+        {"RightUpLeg", "RHipJoint", 0, -0.05, 0},
+        {"RightLeg", "RightUpLeg", 0, -0.4, 0},
+        {"RightFoot", "RightLeg", 0, -0.4, 0},
+        {"RightToeBase", "RightFoot", 0, -0.05, 0.12},
     };
     BvhClip clip;
     for (const J& j : joints) {
@@ -524,8 +571,12 @@ TEST(Bvh, SecondCmuNamingMapsToTheRightJoints) {
     const auto m = map_bvh_to_model(clip, model, sources);
     ASSERT_TRUE(m) << m.error;
     expect_mapped(clip, model, *m.mapping,
-                  {{"trunk", "Spine1"}, {"left_upper_arm", "LeftArm"}, {"right_forearm", "RightForeArm"},
-                   {"left_hand", "LeftHand"}, {"right_thigh", "RightUpLeg"}, {"left_calf", "LeftLeg"},
+                  {{"trunk", "Spine1"},
+                   {"left_upper_arm", "LeftArm"},
+                   {"right_forearm", "RightForeArm"},
+                   {"left_hand", "LeftHand"},
+                   {"right_thigh", "RightUpLeg"},
+                   {"left_calf", "LeftLeg"},
                    {"right_foot", "RightFoot"}});
 }
 
@@ -546,10 +597,10 @@ TEST(Bvh, ModelFromClipReproducesLimbPositions) {
     EXPECT_TRUE(validate(model).empty());
     EXPECT_NEAR(model.segments[static_cast<std::size_t>(model.index_of("left_calf"))].offset_m.norm(), 0.411471, 1e-5);
     const std::vector<std::pair<std::string, std::string>> legs{
-        {"left_thigh", "LeftHip"}, {"left_calf", "LeftKnee"}, {"left_foot", "LeftAnkle"},
+        {"left_thigh", "LeftHip"},   {"left_calf", "LeftKnee"},   {"left_foot", "LeftAnkle"},
         {"right_thigh", "RightHip"}, {"right_calf", "RightKnee"}, {"right_foot", "RightAnkle"}};
     const std::vector<std::pair<std::string, std::string>> arm_bones{
-        {"left_upper_arm", "LeftShoulder"}, {"left_forearm", "LeftElbow"}, {"left_hand", "LeftWrist"},
+        {"left_upper_arm", "LeftShoulder"},   {"left_forearm", "LeftElbow"},   {"left_hand", "LeftWrist"},
         {"right_upper_arm", "RightShoulder"}, {"right_forearm", "RightElbow"}, {"right_hand", "RightWrist"}};
     std::vector<Quat> qj(mc.clip.joints.size());
     std::vector<Vec3> pj(mc.clip.joints.size());
@@ -558,13 +609,18 @@ TEST(Bvh, ModelFromClipReproducesLimbPositions) {
     SkeletonPose pose;
     double worst_leg_m = 0;
     double worst_arm_m = 0;
-    const auto at = [&](std::string_view seg) { return pose.joint_position_m[static_cast<std::size_t>(model.index_of(seg))]; };
-    const auto clip_at = [&](const std::string& joint) { return pj[static_cast<std::size_t>(mc.clip.index_of(joint))]; };
+    const auto at = [&](std::string_view seg) {
+        return pose.joint_position_m[static_cast<std::size_t>(model.index_of(seg))];
+    };
+    const auto clip_at = [&](const std::string& joint) {
+        return pj[static_cast<std::size_t>(mc.clip.index_of(joint))];
+    };
     for (std::size_t f = 0; f < mc.clip.frame_count; f += 5) {
         bvh_global_pose(mc.clip, mc.clip.frame(f), 1.0, qj, pj);
         bvh_segment_pose(*mc.m.mapping, qj, pj, qs, ps);
         forward_kinematics(model, qs, ps[0], pose);
-        for (const auto& [seg, joint] : legs) worst_leg_m = std::max(worst_leg_m, (at(seg) - clip_at(joint)).norm());
+        for (const auto& [seg, joint] : legs)
+            worst_leg_m = std::max(worst_leg_m, (at(seg) - clip_at(joint)).norm());
         for (std::size_t k = 0; k + 1 < arm_bones.size(); ++k) {
             if (k == 2) continue;  // the hand's end is not a listed joint
             const Vec3 ours = at(arm_bones[k + 1].first) - at(arm_bones[k].first);

@@ -7,8 +7,12 @@
 namespace mocap::skeleton {
 namespace {
 
-double deg(double rad) { return rad * 180.0 / M_PI; }
-double rad(double d) { return d * M_PI / 180.0; }
+double deg(double rad) {
+    return rad * 180.0 / M_PI;
+}
+double rad(double d) {
+    return d * M_PI / 180.0;
+}
 
 Quat random_quat(std::mt19937& rng) {
     std::normal_distribution<double> n;
@@ -21,14 +25,17 @@ Quat noise(std::mt19937& rng, double sigma_rad) {
     return filter::quat_from_rotvec(Vec3(n(rng), n(rng), n(rng)));
 }
 
-Quat rz(double a) { return Quat(Eigen::AngleAxisd(a, Vec3::UnitZ())); }
+Quat rz(double a) {
+    return Quat(Eigen::AngleAxisd(a, Vec3::UnitZ()));
+}
 
 struct Rig {
     BodyModel model = default_body_model();
     std::array<Quat, kMaxSegments> q_sensor_segment_true = identity_quats();
     std::mt19937 rng{42};
     Rig() {
-        for (std::size_t i = 0; i < model.size(); ++i) q_sensor_segment_true[i] = random_quat(rng);
+        for (std::size_t i = 0; i < model.size(); ++i)
+            q_sensor_segment_true[i] = random_quat(rng);
     }
     /// What the sensor's filter reports for a true segment orientation, with noise.
     Quat sensor(std::size_t i, const Quat& q_earth_segment, double sigma_rad) {
@@ -124,7 +131,8 @@ TEST(Calibration, RejectsMovementAndMissingData) {
     CalibrationOptions opt;
     CalibrationCollector c = rig.still(CalibrationPose::kTPose, 0.0);
     // The left forearm swings 20° during the "still" period.
-    for (int k = 0; k < 200; ++k) c.add(4, rig.sensor(4, Quat(Eigen::AngleAxisd(rad(20.0), Vec3::UnitZ())), 0.0));
+    for (int k = 0; k < 200; ++k)
+        c.add(4, rig.sensor(4, Quat(Eigen::AngleAxisd(rad(20.0), Vec3::UnitZ())), 0.0));
     auto r = calibrate(rig.model, c, opt);
     ASSERT_FALSE(r);
     EXPECT_NE(r.error.find("'left_forearm' moved"), std::string::npos) << r.error;
@@ -140,14 +148,16 @@ TEST(Calibration, RejectsMovementAndMissingData) {
     CalibrationCollector c2;
     for (std::size_t i = 0; i < m.size(); ++i) {
         if (i == 5) continue;
-        for (int k = 0; k < 20; ++k) c2.add(i, rig.sensor(i, Quat::Identity(), 0.0));
+        for (int k = 0; k < 20; ++k)
+            c2.add(i, rig.sensor(i, Quat::Identity(), 0.0));
     }
     r = calibrate(m, c2, opt);
     ASSERT_TRUE(r) << r.error;
     EXPECT_FALSE(r.calibration->calibrated[5]);
     std::array<Quat, kMaxSegments> sensors = identity_quats(), out = identity_quats();
     const Quat forearm = Quat(Eigen::AngleAxisd(0.5, Vec3::UnitZ()));
-    for (std::size_t i = 0; i < m.size(); ++i) sensors[i] = rig.sensor(i, i == 4 ? forearm : Quat::Identity(), 0.0);
+    for (std::size_t i = 0; i < m.size(); ++i)
+        sensors[i] = rig.sensor(i, i == 4 ? forearm : Quat::Identity(), 0.0);
     apply_calibration(m, *r.calibration, sensors, out);
     EXPECT_LT(out[5].angularDistance(forearm), 1e-9);
 }
@@ -155,7 +165,8 @@ TEST(Calibration, RejectsMovementAndMissingData) {
 TEST(Calibration, SpreadMeasuresTheScatter) {
     std::mt19937 rng(1);
     CalibrationCollector c;
-    for (int k = 0; k < 5000; ++k) c.add(0, noise(rng, rad(1.0)));
+    for (int k = 0; k < 5000; ++k)
+        c.add(0, noise(rng, rad(1.0)));
     // RMS angle of a 3-D Gaussian rotation vector with 1° per axis is √3 °.
     EXPECT_NEAR(deg(c.spread_rad(0)), std::sqrt(3.0), 0.1);
     EXPECT_LT(deg(c.mean(0).angularDistance(Quat::Identity())), 0.1);
@@ -205,7 +216,8 @@ TEST(Calibration, ParseErrorsNameTheLine) {
     EXPECT_NE(err(head + "garbage\n").find("expected key = value"), std::string::npos);
     EXPECT_NE(err(head + "[other]\n").find("unknown table"), std::string::npos);
     // Comments, blank lines and CRLF are fine.
-    EXPECT_TRUE(parse_calibration(m, "# saved\r\n" + head + "\r\n[q_sensor_segment] # all\r\npelvis = [1, 0, 0, 0]\r\n"));
+    EXPECT_TRUE(
+        parse_calibration(m, "# saved\r\n" + head + "\r\n[q_sensor_segment] # all\r\npelvis = [1, 0, 0, 0]\r\n"));
 }
 
 TEST(Stillness, DetectsAStillWindowFromTimestamps) {
@@ -214,8 +226,10 @@ TEST(Stillness, DetectsAStillWindowFromTimestamps) {
     StillnessDetector d(p);
     std::int64_t t = 0;
     const Quat q0 = Quat::Identity();
-    for (int k = 0; k < 40; ++k, t += 10'000) EXPECT_FALSE(d.update(t, q0, 0.01));
-    for (int k = 0; k < 20; ++k, t += 10'000) d.update(t, q0, 0.01);
+    for (int k = 0; k < 40; ++k, t += 10'000)
+        EXPECT_FALSE(d.update(t, q0, 0.01));
+    for (int k = 0; k < 20; ++k, t += 10'000)
+        d.update(t, q0, 0.01);
     EXPECT_TRUE(d.still());
     // A 5° turn restarts the period; small jitter does not.
     EXPECT_FALSE(d.update(t, Quat(Eigen::AngleAxisd(rad(5.0), Vec3::UnitX()))));
@@ -227,7 +241,8 @@ TEST(Stillness, DetectsAStillWindowFromTimestamps) {
     // Gyro above threshold restarts.
     EXPECT_FALSE(d.update(t, Quat(Eigen::AngleAxisd(rad(5.0), Vec3::UnitX())), 1.0));
     // Time going backwards restarts.
-    for (int k = 0; k < 60; ++k, t += 10'000) d.update(t, q0);
+    for (int k = 0; k < 60; ++k, t += 10'000)
+        d.update(t, q0);
     EXPECT_TRUE(d.still());
     EXPECT_FALSE(d.update(t - 1'000'000, q0));
 }

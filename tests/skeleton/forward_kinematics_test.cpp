@@ -5,7 +5,9 @@
 namespace mocap::skeleton {
 namespace {
 
-std::size_t idx(const BodyModel& m, std::string_view n) { return static_cast<std::size_t>(m.index_of(n)); }
+std::size_t idx(const BodyModel& m, std::string_view n) {
+    return static_cast<std::size_t>(m.index_of(n));
+}
 
 TEST(ForwardKinematics, TPoseGeometry) {
     const BodyModel m = default_body_model(1.75);
@@ -19,8 +21,10 @@ TEST(ForwardKinematics, TPoseGeometry) {
                           seg::kRightForearm, seg::kRightHand}) {
         span += std::abs(m.segments[idx(m, n)].offset_m.y());
     }
-    span += std::abs(m.segments[idx(m, seg::kLeftHand)].end_m.y()) + std::abs(m.segments[idx(m, seg::kRightHand)].end_m.y());
-    const double measured = pose.end_position_m[idx(m, seg::kLeftHand)].y() - pose.end_position_m[idx(m, seg::kRightHand)].y();
+    span += std::abs(m.segments[idx(m, seg::kLeftHand)].end_m.y()) +
+            std::abs(m.segments[idx(m, seg::kRightHand)].end_m.y());
+    const double measured =
+        pose.end_position_m[idx(m, seg::kLeftHand)].y() - pose.end_position_m[idx(m, seg::kRightHand)].y();
     EXPECT_NEAR(measured, span, 1e-12);
     EXPECT_NEAR(measured, (0.259 + 2 * (0.186 + 0.146 + 0.108)) * 1.75, 1e-12);  // Winter ratios
     // Feet on the floor, head top at full height, hands at shoulder height.
@@ -50,7 +54,8 @@ TEST(ForwardKinematics, RotationsMoveTheChain) {
     // Turning the whole body 90° about up turns every position about the root.
     auto turned = identity_quats();
     const Quat yaw = Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()));
-    for (std::size_t i = 0; i < m.size(); ++i) turned[i] = yaw;
+    for (std::size_t i = 0; i < m.size(); ++i)
+        turned[i] = yaw;
     SkeletonPose a, b;
     forward_kinematics(m, identity_quats(), root, a);
     forward_kinematics(m, turned, root, b);

@@ -9,9 +9,15 @@
 namespace mocap::skeleton {
 namespace {
 
-double deg(double r) { return r * 180.0 / M_PI; }
-double rad(double d) { return d * M_PI / 180.0; }
-Quat about(const Vec3& axis, double deg_) { return Quat(Eigen::AngleAxisd(rad(deg_), axis.normalized())); }
+double deg(double r) {
+    return r * 180.0 / M_PI;
+}
+double rad(double d) {
+    return d * M_PI / 180.0;
+}
+Quat about(const Vec3& axis, double deg_) {
+    return Quat(Eigen::AngleAxisd(rad(deg_), axis.normalized()));
+}
 
 constexpr double kTol = 1e-9;  // degrees; constructed poses are exact
 
@@ -54,7 +60,8 @@ TEST(JointAngles, ShoulderAndElbow) {
     const auto tpose = identity_quats();
     const auto npose = pose_orientations(m, CalibrationPose::kNPose);
     for (const Side side : {Side::kLeft, Side::kRight}) {
-        const auto ua = static_cast<std::size_t>(m.index_of(side == Side::kLeft ? seg::kLeftUpperArm : seg::kRightUpperArm));
+        const auto ua =
+            static_cast<std::size_t>(m.index_of(side == Side::kLeft ? seg::kLeftUpperArm : seg::kRightUpperArm));
         // T-pose: arms abducted 90°; N-pose: anatomical neutral.
         expect_angles(joint_angles(JointKind::kShoulder, side, trunk, trunk * tpose[ua]), 0, 90, 0, "T-pose");
         expect_angles(joint_angles(JointKind::kShoulder, side, trunk, trunk * npose[ua]), 0, 0, 0, "N-pose");
@@ -65,7 +72,8 @@ TEST(JointAngles, ShoulderAndElbow) {
         // Elbow: from the T-pose the forearm swings forward 90° (palms down).
         const double s = side == Side::kLeft ? -1.0 : 1.0;
         const Quat forearm = trunk * about(Vec3::UnitZ(), s * 90);
-        const auto fa = static_cast<std::size_t>(m.index_of(side == Side::kLeft ? seg::kLeftForearm : seg::kRightForearm));
+        const auto fa =
+            static_cast<std::size_t>(m.index_of(side == Side::kLeft ? seg::kLeftForearm : seg::kRightForearm));
         EXPECT_NEAR((trunk.conjugate() * forearm)._transformVector(m.segments[fa].end_m).normalized().x(), 1.0, 1e-12);
         expect_angles(joint_angles(JointKind::kElbow, side, trunk, forearm), 90, 0, 0, "elbow flexion");
     }
@@ -75,7 +83,8 @@ TEST(JointAngles, RoundTripAndMirrorSymmetry) {
     std::mt19937 rng(5);
     std::uniform_real_distribution<double> u(-1.2, 1.2);
     std::normal_distribution<double> n;
-    for (const JointKind k : {JointKind::kHip, JointKind::kKnee, JointKind::kAnkle, JointKind::kShoulder, JointKind::kElbow}) {
+    for (const JointKind k :
+         {JointKind::kHip, JointKind::kKnee, JointKind::kAnkle, JointKind::kShoulder, JointKind::kElbow}) {
         for (int i = 0; i < 200; ++i) {
             const JointAngles a{u(rng), u(rng), u(rng)};
             const Quat parent = Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
@@ -108,8 +117,8 @@ TEST(JointAngles, DefaultSpecsCoverTenJoints) {
     q[static_cast<std::size_t>(m.index_of("left_foot"))] = about(Vec3::UnitY(), 30);
     std::array<JointAngles, 10> out;
     compute_joint_angles(specs, q, out);
-    EXPECT_NEAR(deg(out[2].flexion_rad), 30, kTol);  // knee flexed
-    EXPECT_NEAR(deg(out[4].flexion_rad), 0, kTol);   // ankle unchanged relative to the calf
+    EXPECT_NEAR(deg(out[2].flexion_rad), 30, kTol);    // knee flexed
+    EXPECT_NEAR(deg(out[4].flexion_rad), 0, kTol);     // ankle unchanged relative to the calf
     EXPECT_NEAR(deg(out[6].abduction_rad), 90, kTol);  // T-pose shoulder
 }
 
@@ -126,7 +135,8 @@ TEST(JointAngles, ShortFrameLeavesMissingJointsAtZero) {
     std::array<JointAngles, 10> out;
     out.fill(JointAngles{1, 1, 1});
     compute_joint_angles(specs, std::span<const Quat>(q.data(), 3), out);  // pelvis, trunk, head only
-    for (const JointAngles& a : out) EXPECT_EQ(a.flexion_rad + a.abduction_rad + a.rotation_rad, 0.0);
+    for (const JointAngles& a : out)
+        EXPECT_EQ(a.flexion_rad + a.abduction_rad + a.rotation_rad, 0.0);
 }
 
 }  // namespace

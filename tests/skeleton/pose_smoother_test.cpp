@@ -7,7 +7,9 @@
 namespace mocap::skeleton {
 namespace {
 
-double deg(double r) { return r * 180.0 / M_PI; }
+double deg(double r) {
+    return r * 180.0 / M_PI;
+}
 
 TEST(PoseSmoother, AlphaOneIsIdentity) {
     PoseSmoother s(PoseSmootherParams{1.0, 0.0, 500'000});
@@ -15,10 +17,12 @@ TEST(PoseSmoother, AlphaOneIsIdentity) {
     std::normal_distribution<double> n;
     for (int f = 0; f < 50; ++f) {
         std::array<Quat, 15> q, in;
-        for (auto& x : q) x = Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
+        for (auto& x : q)
+            x = Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
         in = q;
         s.apply(f * 10'000, q);
-        for (std::size_t i = 0; i < q.size(); ++i) EXPECT_EQ(q[i].coeffs(), in[i].coeffs());
+        for (std::size_t i = 0; i < q.size(); ++i)
+            EXPECT_EQ(q[i].coeffs(), in[i].coeffs());
     }
 }
 

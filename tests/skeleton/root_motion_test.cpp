@@ -15,7 +15,8 @@ TEST(RootMotion, StandingStillStaysPutOnTheFloor) {
     FootContactRootTracker t(m);
     SkeletonPose pose;
     const auto q = identity_quats();
-    for (int f = 0; f < 100; ++f) t.update(m, q, pose);
+    for (int f = 0; f < 100; ++f)
+        t.update(m, q, pose);
     EXPECT_LT((pose.joint_position_m[0] - root_position(m)).norm(), 1e-12);
     EXPECT_NEAR(pose.end_position_m[static_cast<std::size_t>(m.index_of(seg::kLeftFoot))].z(), 0.0, 1e-12);
 }
@@ -27,7 +28,8 @@ TEST(RootMotion, KneeBendLowersThePelvis) {
     auto q = identity_quats();
     // Squat-like: thighs forward 40°, calves upright, feet flat: the pelvis drops.
     const Quat thigh(Eigen::AngleAxisd(-40 * M_PI / 180, Vec3::UnitY()));
-    for (const auto n : {seg::kLeftThigh, seg::kRightThigh}) q[static_cast<std::size_t>(m.index_of(n))] = thigh;
+    for (const auto n : {seg::kLeftThigh, seg::kRightThigh})
+        q[static_cast<std::size_t>(m.index_of(n))] = thigh;
     const Vec3 root = t.update(m, q, pose);
     const double thigh_len = 0.245 * 1.75;
     EXPECT_NEAR(root.z(), m.root_height_m - thigh_len * (1 - std::cos(40 * M_PI / 180)), 1e-9);
@@ -47,8 +49,8 @@ std::pair<Vec3, Vec3> cmu_walk_travel(bool clip_dimensions) {
     const auto map = map_bvh_to_model(clip, default_body_model(), sources);
     EXPECT_TRUE(map);
     if (!map) return {};
-    const BodyModel m = clip_dimensions ? body_model_from_bvh(clip, *map.mapping, default_body_model(), 1.0)
-                                        : default_body_model();
+    const BodyModel m =
+        clip_dimensions ? body_model_from_bvh(clip, *map.mapping, default_body_model(), 1.0) : default_body_model();
     std::vector<Quat> qj(clip.joints.size());
     std::vector<Vec3> pj(clip.joints.size());
     auto qs = identity_quats();

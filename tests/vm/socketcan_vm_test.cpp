@@ -106,9 +106,11 @@ int main(int argc, char** argv) {
     std::uint64_t sent = 0;
     const std::int64_t t0 = clock.now_us();
     for (std::uint32_t i = 0; i < kInstants; ++i) {
-        for (const auto& f : instant(0xFFFFFFA0u + i, kNodes)) sent += send_classic(tx, f) ? 1 : 0;
+        for (const auto& f : instant(0xFFFFFFA0u + i, kNodes))
+            sent += send_classic(tx, f) ? 1 : 0;
         const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-        while (value("frames_read") < sent && std::chrono::steady_clock::now() < until) io.run_one_for(std::chrono::milliseconds(50));
+        while (value("frames_read") < sent && std::chrono::steady_clock::now() < until)
+            io.run_one_for(std::chrono::milliseconds(50));
     }
     const std::int64_t t1 = clock.now_us();
     check(sent == kInstants * (1 + 3 * kNodes), "every frame written to vcan");
@@ -147,7 +149,8 @@ int main(int argc, char** argv) {
     send_classic(tx, reserved);
     const std::uint64_t expect = before + (fd_ok ? 4 : 3);
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-    while (value("frames_read") < expect && std::chrono::steady_clock::now() < until) io.run_one_for(std::chrono::milliseconds(50));
+    while (value("frames_read") < expect && std::chrono::steady_clock::now() < until)
+        io.run_one_for(std::chrono::milliseconds(50));
     check(fd_ok, "CAN FD frame accepted by the FD-capable interface (mtu 72)");
     check(value("fd_frames") == 1 && value("foreign_frames") == 2, "FD payload and 29-bit ID counted as foreign");
     check(value("rtr_frames") == 1, "RTR frame counted");
@@ -156,13 +159,16 @@ int main(int argc, char** argv) {
     // Phase 3: the reader does not run while a burst arrives: the kernel's receive queue
     // overflows and SO_RXQ_OVFL reports the drops on the next frame read.
     for (std::uint32_t i = 0; i < 200; ++i) {
-        for (const auto& f : instant(i, kNodes)) send_classic(tx, f);
+        for (const auto& f : instant(i, kNodes))
+            send_classic(tx, f);
     }
-    for (int k = 0; k < 20; ++k) io.run_one_for(std::chrono::milliseconds(20));
+    for (int k = 0; k < 20; ++k)
+        io.run_one_for(std::chrono::milliseconds(20));
     // The kernel stamps each queued frame with the socket's drop total at queue time, so
     // the drops show on the first frame queued after the overflow.
     send_classic(tx, instant(1000, 0)[0]);
-    for (int k = 0; k < 20; ++k) io.run_one_for(std::chrono::milliseconds(20));
+    for (int k = 0; k < 20; ++k)
+        io.run_one_for(std::chrono::milliseconds(20));
     std::printf("  kernel_drops = %llu\n", static_cast<unsigned long long>(value("kernel_drops")));
     check(value("kernel_drops") > 0, "kernel queue overflow surfaced as kernel_drops (SO_RXQ_OVFL)");
 

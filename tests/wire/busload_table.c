@@ -8,8 +8,7 @@
 #include "mocap_wire/mw_busload.h"
 
 static void cell(const mw_busload* b) {
-    printf(" %u.%u %% %s |", b->load_permille / 10u, b->load_permille % 10u,
-           b->fits ? "fits" : "**no**");
+    printf(" %u.%u %% %s |", b->load_permille / 10u, b->load_permille % 10u, b->fits ? "fits" : "**no**");
 }
 
 int main(void) {
@@ -27,9 +26,8 @@ int main(void) {
                 if (mw_busload_compute(&p, &slow) != MW_OK) return 1;
                 p.bitrate_bps = 1000000u;
                 if (mw_busload_compute(&p, &fast) != MW_OK) return 1;
-                printf("| %u | %u | %s | %u | %u |", nodes[n], rates[r],
-                       modes[m] == MW_MODE_RAW ? "raw" : "attitude", fast.frames_per_s,
-                       fast.bits_per_s);
+                printf("| %u | %u | %s | %u | %u |", nodes[n], rates[r], modes[m] == MW_MODE_RAW ? "raw" : "attitude",
+                       fast.frames_per_s, fast.bits_per_s);
                 cell(&slow);
                 cell(&fast);
                 printf("\n");

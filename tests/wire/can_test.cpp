@@ -104,10 +104,9 @@ TEST(WireCan, RawRoundTripsRandomValues) {
     for (int i = 0; i < 3000; ++i) {
         const mw_function kind = static_cast<mw_function>(MW_FN_ACCEL + i % 3);
         auto& dist = kind == MW_FN_MAG ? mag : value;
-        const mw_raw in =
-            raw_of(kind, static_cast<uint8_t>(node(rng)), static_cast<int16_t>(dist(rng)),
-                   static_cast<int16_t>(dist(rng)), static_cast<int16_t>(dist(rng)),
-                   static_cast<uint16_t>(counter(rng)));
+        const mw_raw in = raw_of(kind, static_cast<uint8_t>(node(rng)), static_cast<int16_t>(dist(rng)),
+                                 static_cast<int16_t>(dist(rng)), static_cast<int16_t>(dist(rng)),
+                                 static_cast<uint16_t>(counter(rng)));
         mw_can_frame f{};
         ASSERT_EQ(mw_raw_encode(&in, &f), MW_OK);
         mw_message m{};
@@ -121,8 +120,7 @@ TEST(WireCan, ConfigAndStatusRoundTripEveryEnumValue) {
     for (unsigned mode = 0; mode < MW_MODE_COUNT; ++mode) {
         for (unsigned a = 0; a <= MW_ACCEL_16G; ++a) {
             for (unsigned g = 0; g <= MW_GYRO_2000DPS; ++g) {
-                mw_config c =
-                    config_of(static_cast<uint8_t>(a * 4 + g), 1000, static_cast<mw_mode>(mode));
+                mw_config c = config_of(static_cast<uint8_t>(a * 4 + g), 1000, static_cast<mw_mode>(mode));
                 c.accel_range = static_cast<mw_accel_range>(a);
                 c.gyro_range = static_cast<mw_gyro_range>(g);
                 mw_can_frame f{};
@@ -267,9 +265,8 @@ TEST(WireCan, EveryWrongDlcIsRejected) {
         uint16_t id;
         uint8_t dlc;
     };
-    const Case cases[] = {{0x000, MW_DLC_SYNC},  {0x041, MW_DLC_CONFIG}, {0x081, MW_DLC_RAW},
-                          {0x0C1, MW_DLC_RAW},   {0x101, MW_DLC_RAW},    {0x141, MW_DLC_ATTITUDE},
-                          {0x181, MW_DLC_STATUS}};
+    const Case cases[] = {{0x000, MW_DLC_SYNC}, {0x041, MW_DLC_CONFIG},   {0x081, MW_DLC_RAW},   {0x0C1, MW_DLC_RAW},
+                          {0x101, MW_DLC_RAW},  {0x141, MW_DLC_ATTITUDE}, {0x181, MW_DLC_STATUS}};
     for (const Case& c : cases) {
         for (unsigned dlc = 0; dlc < 16; ++dlc) {
             if (dlc == c.dlc) continue;

@@ -35,11 +35,9 @@ static size_t build_stream(unsigned* packets) {
         }
         for (uint8_t node = 1; node <= 17; ++node) {
             for (unsigned k = 0; k < 3; ++k) {
-                const mw_raw r = {
-                    (mw_function)(MW_FN_ACCEL + k), node, {1, -2, 2048}, (uint16_t)*packets};
+                const mw_raw r = {(mw_function)(MW_FN_ACCEL + k), node, {1, -2, 2048}, (uint16_t)*packets};
                 f.offset_us = (uint16_t)(node * 50u);
-                if (mw_raw_encode(&r, &f.frame) != MW_OK || mw_packet_builder_add(&b, &f) != MW_OK)
-                    return 0;
+                if (mw_raw_encode(&r, &f.frame) != MW_OK || mw_packet_builder_add(&b, &f) != MW_OK) return 0;
             }
         }
         const int32_t n = mw_packet_builder_finish(&b);
@@ -65,8 +63,7 @@ int main(void) {
             pos += left;
             for (;;) {
                 size_t used = 0;
-                const mw_stream_result res =
-                    mw_stream_decoder_feed(&decoder, p, left, &used, &packet);
+                const mw_stream_result res = mw_stream_decoder_feed(&decoder, p, left, &used, &packet);
                 p += used;
                 left -= used;
                 if (res == MW_STREAM_NEED_MORE) break;
@@ -79,8 +76,8 @@ int main(void) {
     }
     const double dt = now_s() - t0;
     const double bytes = (double)len * reps;
-    printf("{\"bytes\": %.0f, \"packets\": %u, \"frames\": %lu, \"seconds\": %.3f, ", bytes,
-           packets * reps, frames, dt);
+    printf("{\"bytes\": %.0f, \"packets\": %u, \"frames\": %lu, \"seconds\": %.3f, ", bytes, packets * reps, frames,
+           dt);
     printf("\"mb_per_s\": %.1f, \"mframes_per_s\": %.2f, \"malformed\": %llu}\n", bytes / dt / 1e6,
            (double)frames / dt / 1e6, (unsigned long long)decoder.counters.malformed_packets);
     const unsigned long expected = (unsigned long)packets * 52ul * reps;

@@ -90,8 +90,7 @@ TEST(WireGolden, PacketsEncodeAndDecodeExactly) {
 
         mw_stream_decoder_init(dec.get());
         size_t used = 0;
-        ASSERT_EQ(mw_stream_decoder_feed(dec.get(), g.bytes, g.size, &used, pkt.get()),
-                  MW_STREAM_PACKET);
+        ASSERT_EQ(mw_stream_decoder_feed(dec.get(), g.bytes, g.size, &used, pkt.get()), MW_STREAM_PACKET);
         EXPECT_EQ(used, g.size);
         EXPECT_EQ(pkt->header.sink_id, g.header.sink_id);
         EXPECT_EQ(pkt->header.sequence, g.header.sequence);

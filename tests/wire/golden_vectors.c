@@ -22,12 +22,10 @@ const golden_can golden_can_vectors[] = {
      {.function = MW_FN_SYNC, .u = {.sync = {0xFFFFFFFFu}}},
      CAN(0x000, 4, 0xFF, 0xFF, 0xFF, 0xFF)},
     {"config all nodes 100 Hz 16 g 2000 dps raw status 1 s",
-     {.function = MW_FN_CONFIG,
-      .u = {.config = {0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_RAW, 1}}},
+     {.function = MW_FN_CONFIG, .u = {.config = {0, 100, MW_ACCEL_16G, MW_GYRO_2000DPS, MW_MODE_RAW, 1}}},
      CAN(0x040, 5, 0x64, 0x00, 0x0F, 0x00, 0x01)},
     {"config node 5 200 Hz 8 g 1000 dps attitude status off",
-     {.function = MW_FN_CONFIG,
-      .u = {.config = {5, 200, MW_ACCEL_8G, MW_GYRO_1000DPS, MW_MODE_ATTITUDE, 0}}},
+     {.function = MW_FN_CONFIG, .u = {.config = {5, 200, MW_ACCEL_8G, MW_GYRO_1000DPS, MW_MODE_ATTITUDE, 0}}},
      CAN(0x045, 5, 0xC8, 0x00, 0x0A, 0x01, 0x00)},
     {"accel node 3 xyz=100,-200,2048 counter=0xBEEF",
      {.function = MW_FN_ACCEL, .u = {.raw = {MW_FN_ACCEL, 3, {100, -200, 2048}, 0xBEEFu}}},
@@ -39,8 +37,7 @@ const golden_can golden_can_vectors[] = {
      {.function = MW_FN_MAG, .u = {.raw = {MW_FN_MAG, 1, {300, -32760, 32760}, 0x1234u}}},
      CAN(0x101, 8, 0x2C, 0x01, 0x08, 0x80, 0xF8, 0x7F, 0x34, 0x12)},
     {"mag node 63 invalid counter=0xFFFF",
-     {.function = MW_FN_MAG,
-      .u = {.raw = {MW_FN_MAG, 63, {MW_MAG_INVALID, MW_MAG_INVALID, MW_MAG_INVALID}, 0xFFFFu}}},
+     {.function = MW_FN_MAG, .u = {.raw = {MW_FN_MAG, 63, {MW_MAG_INVALID, MW_MAG_INVALID, MW_MAG_INVALID}, 0xFFFFu}}},
      CAN(0x13F, 8, 0x00, 0x80, 0x00, 0x80, 0x00, 0x80, 0xFF, 0xFF)},
     {"attitude node 2 q=1,0,0,0 counter=0x3FFF",
      {.function = MW_FN_ATTITUDE, .u = {.attitude = {2, {1.0f, 0.0f, 0.0f, 0.0f}, 0x3FFFu}}},
@@ -57,13 +54,12 @@ const golden_can golden_can_vectors[] = {
     {"status node 9 running raw mag 16 g 2000 dps flags=0x84 uptime=258 tx_overflows=7 "
      "sync_missed=255",
      {.function = MW_FN_STATUS,
-      .u = {.status = {9, MW_NODE_RUNNING, MW_MODE_RAW, true, MW_ACCEL_16G, MW_GYRO_2000DPS, 0x84u,
-                       1u, 258u, 7u, 255u}}},
+      .u = {.status = {9, MW_NODE_RUNNING, MW_MODE_RAW, true, MW_ACCEL_16G, MW_GYRO_2000DPS, 0x84u, 1u, 258u, 7u,
+                       255u}}},
      CAN(0x189, 8, 0x42, 0x0F, 0x84, 0x01, 0x02, 0x01, 0x07, 0xFF)},
     {"status sink running uptime=65535 rx_overflows=3",
      {.function = MW_FN_STATUS,
-      .u = {.status = {0, MW_NODE_RUNNING, MW_MODE_RAW, false, MW_ACCEL_2G, MW_GYRO_250DPS, 0u, 1u,
-                       65535u, 3u, 0u}}},
+      .u = {.status = {0, MW_NODE_RUNNING, MW_MODE_RAW, false, MW_ACCEL_2G, MW_GYRO_250DPS, 0u, 1u, 65535u, 3u, 0u}}},
      CAN(0x180, 8, 0x02, 0x00, 0x00, 0x01, 0xFF, 0xFF, 0x03, 0x00)},
 };
 const size_t golden_can_count = sizeof golden_can_vectors / sizeof golden_can_vectors[0];
@@ -120,9 +116,7 @@ size_t golden_format_hex(const uint8_t* bytes, size_t n, char* out, size_t capac
 }
 
 size_t golden_format_can(const char* name, const mw_can_frame* frame, char* out, size_t capacity) {
-    int len = snprintf(out, capacity, "%s: id=0x%03X dlc=%u data=", name, (unsigned)frame->id,
-                       (unsigned)frame->dlc);
+    int len = snprintf(out, capacity, "%s: id=0x%03X dlc=%u data=", name, (unsigned)frame->id, (unsigned)frame->dlc);
     if (len < 0 || (size_t)len >= capacity) return 0u;
-    return (size_t)len +
-           golden_format_hex(frame->data, frame->dlc, out + len, capacity - (size_t)len);
+    return (size_t)len + golden_format_hex(frame->data, frame->dlc, out + len, capacity - (size_t)len);
 }

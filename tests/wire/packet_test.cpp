@@ -64,7 +64,7 @@ struct Event {
 
 // Feeds `data` in chunks of the given sizes (cycled) and records every event.
 class Feeder {
-  public:
+public:
     Feeder() : dec_(std::make_unique<mw_stream_decoder>()), pkt_(std::make_unique<mw_packet>()) {
         mw_stream_decoder_init(dec_.get());
     }
@@ -82,8 +82,7 @@ class Feeder {
             size_t left = n;
             for (;;) {
                 size_t used = 0;
-                const mw_stream_result r =
-                    mw_stream_decoder_feed(dec_.get(), p, left, &used, pkt_.get());
+                const mw_stream_result r = mw_stream_decoder_feed(dec_.get(), p, left, &used, pkt_.get());
                 EXPECT_LE(used, left);
                 p += used;
                 left -= used;
@@ -105,7 +104,7 @@ class Feeder {
 
     const mw_stream_decoder& decoder() const { return *dec_; }
 
-  private:
+private:
     std::unique_ptr<mw_stream_decoder> dec_;
     std::unique_ptr<mw_packet> pkt_;
 };
@@ -113,8 +112,7 @@ class Feeder {
 bool same_frames(const std::vector<mw_stamped_frame>& a, const std::vector<mw_stamped_frame>& b) {
     if (a.size() != b.size()) return false;
     for (size_t i = 0; i < a.size(); ++i) {
-        if (a[i].offset_us != b[i].offset_us || a[i].frame.id != b[i].frame.id ||
-            a[i].frame.dlc != b[i].frame.dlc ||
+        if (a[i].offset_us != b[i].offset_us || a[i].frame.id != b[i].frame.id || a[i].frame.dlc != b[i].frame.dlc ||
             std::memcmp(a[i].frame.data, b[i].frame.data, a[i].frame.dlc) != 0) {
             return false;
         }
@@ -139,8 +137,7 @@ size_t malformed(const std::vector<Event>& events) {
 
 void expect_accounting(const Feeder& f, uint64_t good_packet_bytes) {
     const mw_stream_counters& c = f.decoder().counters;
-    EXPECT_EQ(c.bytes_in,
-              good_packet_bytes + c.bytes_discarded + mw_stream_decoder_buffered(&f.decoder()));
+    EXPECT_EQ(c.bytes_in, good_packet_bytes + c.bytes_discarded + mw_stream_decoder_buffered(&f.decoder()));
 }
 
 // Edits one byte of a packet, re-seals its CRC and expects the decoder to reject it with `error`.
@@ -201,8 +198,7 @@ TEST(WirePacket, HeaderFieldsRoundTripIncludingWrap) {
     auto pkt = std::make_unique<mw_packet>();
     mw_stream_decoder_init(dec.get());
     size_t used = 0;
-    ASSERT_EQ(mw_stream_decoder_feed(dec.get(), p.data(), p.size(), &used, pkt.get()),
-              MW_STREAM_PACKET);
+    ASSERT_EQ(mw_stream_decoder_feed(dec.get(), p.data(), p.size(), &used, pkt.get()), MW_STREAM_PACKET);
     EXPECT_EQ(pkt->header.sink_id, 255u);
     EXPECT_EQ(pkt->header.timestamp_us, 0xFEDCBA9876543210ull);
     EXPECT_EQ(pkt->frames[0].offset_us, 65535u);
@@ -385,12 +381,10 @@ TEST(WirePacket, RandomGarbageWithPacketsIsRobust) {
     Feeder whole;
     Feeder chunked;
     EXPECT_EQ(packet_sequences(whole.feed(s)), expected);
-    EXPECT_EQ(packet_sequences(chunked.feed(s, {1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 144})),
-              expected);
+    EXPECT_EQ(packet_sequences(chunked.feed(s, {1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 144})), expected);
     expect_accounting(whole, good_bytes);
     EXPECT_EQ(whole.decoder().counters.bytes_discarded, s.size() - good_bytes);
-    EXPECT_EQ(whole.decoder().counters.malformed_packets,
-              chunked.decoder().counters.malformed_packets);
+    EXPECT_EQ(whole.decoder().counters.malformed_packets, chunked.decoder().counters.malformed_packets);
 
     // Pure noise: never a packet, never stuck, everything accounted for.
     Bytes noise(1 << 20);
@@ -443,8 +437,7 @@ TEST(WirePacket, EncoderRejectsBadInput) {
     const mw_packet_header h{1, 2, 3};
     std::vector<mw_stamped_frame> frames(MW_PACKET_MAX_FRAMES + 1, stamped(0x081, 0, 0, 0));
     std::vector<uint8_t> out(MW_PACKET_MAX_SIZE * 2);
-    EXPECT_EQ(mw_packet_encode(&h, frames.data(), frames.size(), out.data(), out.size()),
-              MW_ERR_LENGTH);
+    EXPECT_EQ(mw_packet_encode(&h, frames.data(), frames.size(), out.data(), out.size()), MW_ERR_LENGTH);
     frames.resize(2);
     frames[1].frame.dlc = 12;
     EXPECT_EQ(mw_packet_encode(&h, frames.data(), 2, out.data(), out.size()), MW_ERR_RECORD);

@@ -11,8 +11,7 @@
 #define DEFAULT_KP 1.0f
 #define DEFAULT_KI 0.05f
 
-void attitude_reset(attitude_filter *f)
-{
+void attitude_reset(attitude_filter* f) {
     f->kp = DEFAULT_KP;
     f->ki = DEFAULT_KI;
     f->q[0] = 1.0f;
@@ -21,10 +20,11 @@ void attitude_reset(attitude_filter *f)
     f->initialized = 0;
 }
 
-static float norm3(const float v[3]) { return sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
+static float norm3(const float v[3]) {
+    return sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+}
 
-static int normalize3(const float in[3], float out[3])
-{
+static int normalize3(const float in[3], float out[3]) {
     const float n = norm3(in);
     if (!(n > 1e-6f)) {
         return 0;
@@ -35,16 +35,14 @@ static int normalize3(const float in[3], float out[3])
     return 1;
 }
 
-static void cross3(const float a[3], const float b[3], float out[3])
-{
+static void cross3(const float a[3], const float b[3], float out[3]) {
     out[0] = a[1] * b[2] - a[2] * b[1];
     out[1] = a[2] * b[0] - a[0] * b[2];
     out[2] = a[0] * b[1] - a[1] * b[0];
 }
 
 /* Rows of R (earth <- sensor) are the earth axes expressed in the sensor frame. */
-static void quat_from_rows(const float e[3], const float n[3], const float u[3], float q[4])
-{
+static void quat_from_rows(const float e[3], const float n[3], const float u[3], float q[4]) {
     const float r00 = e[0], r01 = e[1], r02 = e[2];
     const float r10 = n[0], r11 = n[1], r12 = n[2];
     const float r20 = u[0], r21 = u[1], r22 = u[2];
@@ -83,8 +81,7 @@ static void quat_from_rows(const float e[3], const float n[3], const float u[3],
 }
 
 /* v_sensor = R^T v_earth for q = q_earth_sensor. */
-static void earth_to_sensor(const float q[4], const float v[3], float out[3])
-{
+static void earth_to_sensor(const float q[4], const float v[3], float out[3]) {
     const float w = q[0], x = q[1], y = q[2], z = q[3];
     out[0] = (1.0f - 2.0f * (y * y + z * z)) * v[0] + 2.0f * (x * y + w * z) * v[1] + 2.0f * (x * z - w * y) * v[2];
     out[1] = 2.0f * (x * y - w * z) * v[0] + (1.0f - 2.0f * (x * x + z * z)) * v[1] + 2.0f * (y * z + w * x) * v[2];
@@ -92,14 +89,12 @@ static void earth_to_sensor(const float q[4], const float v[3], float out[3])
 }
 
 /* v_earth = R v_sensor. */
-static void sensor_to_earth(const float q[4], const float v[3], float out[3])
-{
+static void sensor_to_earth(const float q[4], const float v[3], float out[3]) {
     const float conj[4] = {q[0], -q[1], -q[2], -q[3]};
     earth_to_sensor(conj, v, out);
 }
 
-static int initialise(attitude_filter *f, const float up[3], const float *mag)
-{
+static int initialise(attitude_filter* f, const float up[3], const float* mag) {
     float m[3] = {0.0f, 0.0f, 0.0f};
     float east[3] = {0.0f, 0.0f, 0.0f};
     float east_n[3] = {0.0f, 0.0f, 0.0f};
@@ -127,8 +122,8 @@ static int initialise(attitude_filter *f, const float up[3], const float *mag)
     return 1;
 }
 
-void attitude_update(attitude_filter *f, const float gyro_rad_s[3], const float accel[3], const float *mag, float dt_s)
-{
+void attitude_update(attitude_filter* f, const float gyro_rad_s[3], const float accel[3], const float* mag,
+                     float dt_s) {
     float up[3];
     const int have_accel = normalize3(accel, up);
     if (!f->initialized) {

@@ -16,22 +16,19 @@
 #define MAG_BURST_BYTES 8u /* ST1, HXL..HZH, ST2 */
 #define SLV0_EVERY_NTH_SAMPLE 10u
 
-static void wait_us(const mpu9250 *dev, uint32_t us)
-{
+static void wait_us(const mpu9250* dev, uint32_t us) {
     const uint64_t start = dev->bus.time_us(dev->bus.user);
     while (dev->bus.time_us(dev->bus.user) - start < us) {
     }
 }
 
-int mpu9250_write_reg(mpu9250 *dev, uint8_t reg, uint8_t value)
-{
+int mpu9250_write_reg(mpu9250* dev, uint8_t reg, uint8_t value) {
     const uint8_t tx[2] = {(uint8_t)(reg & 0x7Fu), value};
     uint8_t rx[2];
     return dev->bus.spi_transfer(dev->bus.user, tx, rx, sizeof tx) == 0 ? MPU9250_OK : MPU9250_ERR_SPI;
 }
 
-int mpu9250_read_regs(mpu9250 *dev, uint8_t reg, uint8_t *out, size_t len)
-{
+int mpu9250_read_regs(mpu9250* dev, uint8_t reg, uint8_t* out, size_t len) {
     uint8_t tx[32] = {0};
     uint8_t rx[32];
     if (len + 1u > sizeof tx) {
@@ -48,10 +45,9 @@ int mpu9250_read_regs(mpu9250 *dev, uint8_t reg, uint8_t *out, size_t len)
 }
 
 /* One auxiliary-bus transaction through slave 4; reads return the byte in *value. */
-static int slv4_transfer(mpu9250 *dev, uint8_t ak_reg, int read, uint8_t *value)
-{
-    int rc = mpu9250_write_reg(dev, MPU9250_I2C_SLV4_ADDR,
-                               (uint8_t)(AK8963_I2C_ADDR | (read ? MPU9250_I2C_SLV_READ : 0u)));
+static int slv4_transfer(mpu9250* dev, uint8_t ak_reg, int read, uint8_t* value) {
+    int rc =
+        mpu9250_write_reg(dev, MPU9250_I2C_SLV4_ADDR, (uint8_t)(AK8963_I2C_ADDR | (read ? MPU9250_I2C_SLV_READ : 0u)));
     if (rc == MPU9250_OK) {
         rc = mpu9250_write_reg(dev, MPU9250_I2C_SLV4_REG, ak_reg);
     }
@@ -84,18 +80,15 @@ static int slv4_transfer(mpu9250 *dev, uint8_t ak_reg, int read, uint8_t *value)
     return read ? mpu9250_read_regs(dev, MPU9250_I2C_SLV4_DI, value, 1u) : MPU9250_OK;
 }
 
-static int ak8963_write(mpu9250 *dev, uint8_t reg, uint8_t value)
-{
+static int ak8963_write(mpu9250* dev, uint8_t reg, uint8_t value) {
     return slv4_transfer(dev, reg, 0, &value);
 }
 
-static int ak8963_read(mpu9250 *dev, uint8_t reg, uint8_t *value)
-{
+static int ak8963_read(mpu9250* dev, uint8_t reg, uint8_t* value) {
     return slv4_transfer(dev, reg, 1, value);
 }
 
-static int ak8963_init(mpu9250 *dev)
-{
+static int ak8963_init(mpu9250* dev) {
     uint8_t wia = 0;
     int rc = ak8963_write(dev, AK8963_CNTL2, AK8963_CNTL2_SRST);
     if (rc != MPU9250_OK) {
@@ -143,9 +136,8 @@ static int ak8963_init(mpu9250 *dev)
     return rc;
 }
 
-int mpu9250_init(mpu9250 *dev, const mpu9250_bus *bus, mw_accel_range accel_fs,
-                 mw_gyro_range gyro_fs, uint8_t dlpf_cfg)
-{
+int mpu9250_init(mpu9250* dev, const mpu9250_bus* bus, mw_accel_range accel_fs, mw_gyro_range gyro_fs,
+                 uint8_t dlpf_cfg) {
     if (dev == NULL || bus == NULL || bus->spi_transfer == NULL || bus->time_us == NULL) {
         return MPU9250_ERR_ARG;
     }
@@ -195,8 +187,7 @@ int mpu9250_init(mpu9250 *dev, const mpu9250_bus *bus, mw_accel_range accel_fs,
     return rc;
 }
 
-int mpu9250_set_ranges(mpu9250 *dev, mw_accel_range accel_fs, mw_gyro_range gyro_fs)
-{
+int mpu9250_set_ranges(mpu9250* dev, mw_accel_range accel_fs, mw_gyro_range gyro_fs) {
     if ((unsigned)accel_fs > 3u || (unsigned)gyro_fs > 3u) {
         return MPU9250_ERR_ARG;
     }
@@ -212,8 +203,7 @@ int mpu9250_set_ranges(mpu9250 *dev, mw_accel_range accel_fs, mw_gyro_range gyro
     return rc;
 }
 
-int mpu9250_set_dlpf(mpu9250 *dev, uint8_t dlpf_cfg)
-{
+int mpu9250_set_dlpf(mpu9250* dev, uint8_t dlpf_cfg) {
     if (dlpf_cfg > 6u) {
         return MPU9250_ERR_ARG;
     }
@@ -227,8 +217,7 @@ int mpu9250_set_dlpf(mpu9250 *dev, uint8_t dlpf_cfg)
     return rc;
 }
 
-uint8_t mpu9250_dlpf_for_rate(uint16_t sample_rate_hz)
-{
+uint8_t mpu9250_dlpf_for_rate(uint16_t sample_rate_hz) {
     /* Larger of the gyro and accel -3 dB bandwidths per setting, Hz (register map table). */
     static const uint16_t bandwidth_hz[7] = {250, 219, 99, 45, 22, 11, 6};
     for (uint8_t cfg = 0; cfg < 7u; ++cfg) {
@@ -239,11 +228,14 @@ uint8_t mpu9250_dlpf_for_rate(uint16_t sample_rate_hz)
     return 6u;
 }
 
-static int16_t be16(const uint8_t *p) { return (int16_t)(uint16_t)(((uint16_t)p[0] << 8) | p[1]); }
-static int16_t le16(const uint8_t *p) { return (int16_t)(uint16_t)(((uint16_t)p[1] << 8) | p[0]); }
+static int16_t be16(const uint8_t* p) {
+    return (int16_t)(uint16_t)(((uint16_t)p[0] << 8) | p[1]);
+}
+static int16_t le16(const uint8_t* p) {
+    return (int16_t)(uint16_t)(((uint16_t)p[1] << 8) | p[0]);
+}
 
-int mpu9250_read(mpu9250 *dev, mpu9250_sample *out)
-{
+int mpu9250_read(mpu9250* dev, mpu9250_sample* out) {
     uint8_t raw[14u + MAG_BURST_BYTES];
     int rc = mpu9250_read_regs(dev, MPU9250_ACCEL_XOUT_H, raw, sizeof raw);
     if (rc != MPU9250_OK) {
@@ -256,7 +248,7 @@ int mpu9250_read(mpu9250 *dev, mpu9250_sample *out)
     out->temperature = be16(&raw[6]);
     out->mag_overflow = 0;
     if (dev->mag_present) {
-        const uint8_t *m = &raw[14]; /* ST1, HXL, HXH, HYL, HYH, HZL, HZH, ST2 */
+        const uint8_t* m = &raw[14]; /* ST1, HXL, HXH, HYL, HYH, HZL, HZH, ST2 */
         const int16_t ak_raw[3] = {le16(&m[1]), le16(&m[3]), le16(&m[5])};
         out->mag_overflow = (m[7] & AK8963_ST2_HOFL) ? 1u : 0u;
         if (!out->mag_overflow && mw_mag_from_ak8963(ak_raw, dev->mag_asa, out->mag) == MW_OK) {

@@ -10,10 +10,11 @@
 
 #define US_PER_S 1000000u
 
-static uint64_t now_us(const sensor_node *node) { return node->hal.time_us(node->hal.user); }
+static uint64_t now_us(const sensor_node* node) {
+    return node->hal.time_us(node->hal.user);
+}
 
-static uint8_t persistent_flags(const sensor_node *node)
-{
+static uint8_t persistent_flags(const sensor_node* node) {
     uint8_t flags = 0;
     if (node->state == MW_NODE_FAULT) {
         flags |= MW_ERRF_IMU;
@@ -27,8 +28,7 @@ static uint8_t persistent_flags(const sensor_node *node)
     return flags;
 }
 
-int sensor_node_queue_frame(sensor_node *node, const mw_can_frame *frame)
-{
+int sensor_node_queue_frame(sensor_node* node, const mw_can_frame* frame) {
     if (node->tx_count >= SENSOR_NODE_TX_QUEUE_LEN) {
         ++node->counters.tx_overflows;
         node->event_flags |= MW_ERRF_CAN_TX_OVERFLOW;
@@ -40,8 +40,7 @@ int sensor_node_queue_frame(sensor_node *node, const mw_can_frame *frame)
     return MW_OK;
 }
 
-static void flush_tx(sensor_node *node)
-{
+static void flush_tx(sensor_node* node) {
     while (node->tx_count > 0u) {
         if (node->hal.can_transmit(node->hal.user, &node->tx_queue[node->tx_head]) != 0) {
             return; /* mailboxes full; try again next poll */
@@ -52,8 +51,7 @@ static void flush_tx(sensor_node *node)
     }
 }
 
-void sensor_node_status(const sensor_node *node, mw_status *out)
-{
+void sensor_node_status(const sensor_node* node, mw_status* out) {
     out->node_id = node->config.node_id;
     out->state = node->state;
     out->mode = node->config.mode;
@@ -67,8 +65,7 @@ void sensor_node_status(const sensor_node *node, mw_status *out)
     out->sync_missed = (uint8_t)node->counters.sync_missed;
 }
 
-static void send_status(sensor_node *node)
-{
+static void send_status(sensor_node* node) {
     mw_status status;
     mw_can_frame frame;
     if (node->tx_count >= SENSOR_NODE_TX_QUEUE_LEN) {
@@ -90,8 +87,7 @@ static void send_status(sensor_node *node)
     }
 }
 
-static int init_imu(sensor_node *node)
-{
+static int init_imu(sensor_node* node) {
     const mpu9250_bus bus = {node->hal.user, node->hal.spi_transfer, node->hal.time_us};
     const int rc = mpu9250_init(&node->imu, &bus, node->config.accel_range, node->config.gyro_range,
                                 mpu9250_dlpf_for_rate(node->config.rate_hz));
@@ -108,11 +104,9 @@ static int init_imu(sensor_node *node)
     return 0;
 }
 
-int sensor_node_init(sensor_node *node, const sensor_node_hal *hal, uint8_t node_id)
-{
+int sensor_node_init(sensor_node* node, const sensor_node_hal* hal, uint8_t node_id) {
     if (node == NULL || hal == NULL || hal->spi_transfer == NULL || hal->can_transmit == NULL ||
-        hal->can_receive == NULL || hal->time_us == NULL || node_id < MW_NODE_ID_MIN ||
-        node_id > MW_NODE_ID_MAX) {
+        hal->can_receive == NULL || hal->time_us == NULL || node_id < MW_NODE_ID_MIN || node_id > MW_NODE_ID_MAX) {
         return MW_ERR_ARGUMENT;
     }
     const sensor_node zero = {0};
@@ -133,8 +127,7 @@ int sensor_node_init(sensor_node *node, const sensor_node_hal *hal, uint8_t node
     return MW_OK;
 }
 
-static int saturated(const int16_t v[3])
-{
+static int saturated(const int16_t v[3]) {
     for (int i = 0; i < 3; ++i) {
         if (v[i] == INT16_MAX || v[i] == INT16_MIN) {
             return 1;
@@ -143,8 +136,7 @@ static int saturated(const int16_t v[3])
     return 0;
 }
 
-static void queue_raw(sensor_node *node, mw_function kind, const int16_t xyz[3], uint16_t counter_low)
-{
+static void queue_raw(sensor_node* node, mw_function kind, const int16_t xyz[3], uint16_t counter_low) {
     mw_raw raw;
     mw_can_frame frame;
     raw.kind = kind;
@@ -160,8 +152,7 @@ static void queue_raw(sensor_node *node, mw_function kind, const int16_t xyz[3],
 
 /* Feeds the filter with the sample (instants = SYNC periods since the previous sample) and
  * queues the ATT frame. */
-static void update_attitude(sensor_node *node, const mpu9250_sample *sample, uint32_t instants, uint16_t counter_low)
-{
+static void update_attitude(sensor_node* node, const mpu9250_sample* sample, uint32_t instants, uint16_t counter_low) {
     float gyro[3], accel[3], mag[3];
     if (mw_gyro_to_rad_s(sample->gyro, node->config.gyro_range, gyro) != MW_OK ||
         mw_accel_to_m_s2(sample->accel, node->config.accel_range, accel) != MW_OK) {
@@ -185,8 +176,7 @@ static void update_attitude(sensor_node *node, const mpu9250_sample *sample, uin
     }
 }
 
-static void on_sync(sensor_node *node, const mw_sync *sync)
-{
+static void on_sync(sensor_node* node, const mw_sync* sync) {
     ++node->counters.syncs;
     uint32_t instants = 1;
     if (node->have_sync && sync->counter - node->last_sync_counter > 1u) {
@@ -224,8 +214,7 @@ static void on_sync(sensor_node *node, const mw_sync *sync)
     }
 }
 
-static void on_config(sensor_node *node, const mw_config *config)
-{
+static void on_config(sensor_node* node, const mw_config* config) {
     if (config->node_id != MW_NODE_ID_BROADCAST && config->node_id != node->config.node_id) {
         return;
     }
@@ -246,8 +235,7 @@ static void on_config(sensor_node *node, const mw_config *config)
     node->status_due = 1; /* acknowledges the new ranges */
 }
 
-static void handle_frame(sensor_node *node, const mw_can_frame *frame)
-{
+static void handle_frame(sensor_node* node, const mw_can_frame* frame) {
     const mw_function fn = mw_can_id_function(frame->id);
     mw_sync sync;
     mw_config config;
@@ -276,8 +264,7 @@ static void handle_frame(sensor_node *node, const mw_can_frame *frame)
     /* Everything else is other nodes' traffic. */
 }
 
-void sensor_node_poll(sensor_node *node)
-{
+void sensor_node_poll(sensor_node* node) {
     mw_can_frame frame;
     while (node->hal.can_receive(node->hal.user, &frame) == 1) {
         handle_frame(node, &frame);

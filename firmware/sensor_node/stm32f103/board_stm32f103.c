@@ -15,10 +15,11 @@
 
 static volatile uint64_t g_ms;
 
-void systick_handler(void) { ++g_ms; }
+void systick_handler(void) {
+    ++g_ms;
+}
 
-static uint64_t hal_time_us(void *user)
-{
+static uint64_t hal_time_us(void* user) {
     (void)user;
     const uint32_t primask = irq_save();
     uint64_t ms = g_ms;
@@ -31,8 +32,7 @@ static uint64_t hal_time_us(void *user)
     return ms * 1000u + (SYSTICK_RELOAD - val) / (CORE_HZ / 1000000u);
 }
 
-static void spi_set_divider(uint32_t br)
-{
+static void spi_set_divider(uint32_t br) {
     if (((F1_SPI1->CR1 & SPI_CR1_BR_MASK) >> 3) == br) {
         return;
     }
@@ -41,8 +41,7 @@ static void spi_set_divider(uint32_t br)
     F1_SPI1->CR1 |= SPI_CR1_SPE;
 }
 
-static int hal_spi_transfer(void *user, const uint8_t *tx, uint8_t *rx, size_t len)
-{
+static int hal_spi_transfer(void* user, const uint8_t* tx, uint8_t* rx, size_t len) {
     (void)user;
     if (len == 0u) {
         return 0;
@@ -66,14 +65,12 @@ static int hal_spi_transfer(void *user, const uint8_t *tx, uint8_t *rx, size_t l
     return 0;
 }
 
-static int hal_can_transmit(void *user, const mw_can_frame *frame)
-{
+static int hal_can_transmit(void* user, const mw_can_frame* frame) {
     (void)user;
     return bxcan_transmit(frame);
 }
 
-static int hal_can_receive(void *user, mw_can_frame *frame)
-{
+static int hal_can_receive(void* user, mw_can_frame* frame) {
     (void)user;
     for (;;) {
         const int rc = bxcan_receive_fifo0(frame);
@@ -83,21 +80,17 @@ static int hal_can_receive(void *user, mw_can_frame *frame)
     }
 }
 
-static int hal_can_bus_error(void *user)
-{
+static int hal_can_bus_error(void* user) {
     (void)user;
     return bxcan_bus_error();
 }
 
-sensor_node_hal board_hal(void)
-{
-    sensor_node_hal hal = {NULL, hal_spi_transfer, hal_can_transmit, hal_can_receive, hal_time_us,
-                           hal_can_bus_error};
+sensor_node_hal board_hal(void) {
+    sensor_node_hal hal = {NULL, hal_spi_transfer, hal_can_transmit, hal_can_receive, hal_time_us, hal_can_bus_error};
     return hal;
 }
 
-void board_led(int on)
-{
+void board_led(int on) {
     if (on) {
         F1_GPIOC->BRR = 1u << LED_PIN;
     } else {
@@ -105,10 +98,9 @@ void board_led(int on)
     }
 }
 
-int board_init(void)
-{
-    F1_RCC->APB2ENR |= F1_RCC_APB2ENR_AFIOEN | F1_RCC_APB2ENR_IOPAEN | F1_RCC_APB2ENR_IOPBEN |
-                       F1_RCC_APB2ENR_IOPCEN | F1_RCC_APB2ENR_SPI1EN;
+int board_init(void) {
+    F1_RCC->APB2ENR |= F1_RCC_APB2ENR_AFIOEN | F1_RCC_APB2ENR_IOPAEN | F1_RCC_APB2ENR_IOPBEN | F1_RCC_APB2ENR_IOPCEN |
+                       F1_RCC_APB2ENR_SPI1EN;
     F1_RCC->APB1ENR |= F1_RCC_APB1ENR_CANEN;
 
     SYSTICK->LOAD = SYSTICK_RELOAD;
@@ -125,8 +117,8 @@ int board_init(void)
     f1_gpio_config(F1_GPIOA, 7u, F1_GPIO_AF_PP_50MHZ);
 
     /* SPI mode 3, master, 8 bit, MSB first, software slave select. */
-    F1_SPI1->CR1 = SPI_CR1_MSTR | SPI_CR1_SSM | SPI_CR1_SSI | SPI_CR1_CPOL | SPI_CR1_CPHA |
-                   SPI_CR1_BR(SPI_BR_SLOW) | SPI_CR1_SPE;
+    F1_SPI1->CR1 =
+        SPI_CR1_MSTR | SPI_CR1_SSM | SPI_CR1_SSI | SPI_CR1_CPOL | SPI_CR1_CPHA | SPI_CR1_BR(SPI_BR_SLOW) | SPI_CR1_SPE;
 
     F1_AFIO->MAPR = (F1_AFIO->MAPR & ~F1_AFIO_MAPR_CAN_MASK) | F1_AFIO_MAPR_CAN_PB8_PB9;
     F1_GPIOB->BSRR = 1u << 8; /* pull-up on RX */

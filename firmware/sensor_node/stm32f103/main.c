@@ -7,8 +7,7 @@
 
 static sensor_node g_node;
 
-int main(void)
-{
+int main(void) {
     (void)board_init(); /* a bus not joined yet shows as MW_ERRF_CAN_BUS through the HAL */
     const sensor_node_hal hal = board_hal();
     (void)sensor_node_init(&g_node, &hal, (uint8_t)MOCAP_NODE_ID);

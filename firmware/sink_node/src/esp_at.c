@@ -27,33 +27,31 @@ enum {
     STEP_SEND_DATA
 };
 
-static uint64_t now_us(const esp_at *at) { return at->serial.time_us(at->serial.user); }
+static uint64_t now_us(const esp_at* at) {
+    return at->serial.time_us(at->serial.user);
+}
 
 /* ---- output --------------------------------------------------------------------------------- */
 
-static void out_reset(esp_at *at)
-{
+static void out_reset(esp_at* at) {
     at->out_len = 0;
     at->out_sent = 0;
 }
 
-static void out_bytes(esp_at *at, const uint8_t *data, size_t len)
-{
+static void out_bytes(esp_at* at, const uint8_t* data, size_t len) {
     for (size_t i = 0; i < len && at->out_len < sizeof at->out; ++i) {
         at->out[at->out_len++] = data[i];
     }
 }
 
-static void out_str(esp_at *at, const char *s)
-{
+static void out_str(esp_at* at, const char* s) {
     while (*s != '\0' && at->out_len < sizeof at->out) {
         at->out[at->out_len++] = (uint8_t)*s++;
     }
 }
 
 /* A quoted AT string argument: '"', ',' and '\' are escaped with a backslash. */
-static void out_quoted(esp_at *at, const char *s)
-{
+static void out_quoted(esp_at* at, const char* s) {
     out_str(at, "\"");
     for (; *s != '\0'; ++s) {
         if (*s == '"' || *s == ',' || *s == '\\') {
@@ -65,8 +63,7 @@ static void out_quoted(esp_at *at, const char *s)
     out_str(at, "\"");
 }
 
-static void out_u32(esp_at *at, uint32_t v)
-{
+static void out_u32(esp_at* at, uint32_t v) {
     char digits[10];
     unsigned n = 0;
     do {
@@ -79,8 +76,7 @@ static void out_u32(esp_at *at, uint32_t v)
     }
 }
 
-static void pump_out(esp_at *at)
-{
+static void pump_out(esp_at* at) {
     if (at->out_sent < at->out_len) {
         at->out_sent += at->serial.write(at->serial.user, at->out + at->out_sent, at->out_len - at->out_sent);
     }
@@ -95,57 +91,55 @@ static void pump_out(esp_at *at)
 
 /* ---- script --------------------------------------------------------------------------------- */
 
-static void begin_step(esp_at *at, uint8_t step, uint32_t timeout_us)
-{
+static void begin_step(esp_at* at, uint8_t step, uint32_t timeout_us) {
     at->step = step;
     at->deadline_us = now_us(at) + timeout_us;
     switch (step) {
-    case STEP_RESET:
-        out_str(at, "AT+RST\r\n");
-        break;
-    case STEP_ECHO_OFF:
-        out_str(at, "ATE0\r\n");
-        break;
-    case STEP_BAUD:
-        out_str(at, "AT+UART_CUR=");
-        out_u32(at, at->config.baud);
-        out_str(at, ",8,1,0,0\r\n");
-        break;
-    case STEP_MODE:
-        out_str(at, "AT+CWMODE=1\r\n");
-        break;
-    case STEP_JOIN:
-        out_str(at, "AT+CWJAP=");
-        out_quoted(at, at->config.ssid);
-        out_str(at, ",");
-        out_quoted(at, at->config.password);
-        out_str(at, "\r\n");
-        break;
-    case STEP_MUX:
-        out_str(at, "AT+CIPMUX=0\r\n");
-        break;
-    case STEP_START:
-        out_str(at, "AT+CIPSTART=\"TCP\",");
-        out_quoted(at, at->config.host);
-        out_str(at, ",");
-        out_u32(at, at->config.port);
-        out_str(at, "\r\n");
-        break;
-    case STEP_SEND_PROMPT:
-        out_str(at, "AT+CIPSEND=");
-        out_u32(at, (uint32_t)at->payload_len);
-        out_str(at, "\r\n");
-        break;
-    case STEP_SEND_DATA:
-        out_bytes(at, at->payload, at->payload_len);
-        break;
-    default:
-        break;
+        case STEP_RESET:
+            out_str(at, "AT+RST\r\n");
+            break;
+        case STEP_ECHO_OFF:
+            out_str(at, "ATE0\r\n");
+            break;
+        case STEP_BAUD:
+            out_str(at, "AT+UART_CUR=");
+            out_u32(at, at->config.baud);
+            out_str(at, ",8,1,0,0\r\n");
+            break;
+        case STEP_MODE:
+            out_str(at, "AT+CWMODE=1\r\n");
+            break;
+        case STEP_JOIN:
+            out_str(at, "AT+CWJAP=");
+            out_quoted(at, at->config.ssid);
+            out_str(at, ",");
+            out_quoted(at, at->config.password);
+            out_str(at, "\r\n");
+            break;
+        case STEP_MUX:
+            out_str(at, "AT+CIPMUX=0\r\n");
+            break;
+        case STEP_START:
+            out_str(at, "AT+CIPSTART=\"TCP\",");
+            out_quoted(at, at->config.host);
+            out_str(at, ",");
+            out_u32(at, at->config.port);
+            out_str(at, "\r\n");
+            break;
+        case STEP_SEND_PROMPT:
+            out_str(at, "AT+CIPSEND=");
+            out_u32(at, (uint32_t)at->payload_len);
+            out_str(at, "\r\n");
+            break;
+        case STEP_SEND_DATA:
+            out_bytes(at, at->payload, at->payload_len);
+            break;
+        default:
+            break;
     }
 }
 
-static void start_reset(esp_at *at)
-{
+static void start_reset(esp_at* at) {
     ++at->counters.resets;
     at->wifi_ready = 0;
     out_reset(at);
@@ -158,10 +152,11 @@ static void start_reset(esp_at *at)
     }
 }
 
-static int in_setup(const esp_at *at) { return at->step >= STEP_RESET && at->step <= STEP_MUX; }
+static int in_setup(const esp_at* at) {
+    return at->step >= STEP_RESET && at->step <= STEP_MUX;
+}
 
-static void fail(esp_at *at)
-{
+static void fail(esp_at* at) {
     if (in_setup(at)) {
         at->wifi_ready = 0;
     }
@@ -171,42 +166,40 @@ static void fail(esp_at *at)
     out_reset(at);
 }
 
-static void next_setup_step(esp_at *at)
-{
+static void next_setup_step(esp_at* at) {
     switch (at->step) {
-    case STEP_RESET:
-        begin_step(at, STEP_ECHO_OFF, TIMEOUT_COMMAND_US);
-        break;
-    case STEP_ECHO_OFF:
-        if (at->config.baud != 0u) {
-            begin_step(at, STEP_BAUD, TIMEOUT_COMMAND_US);
-        } else {
+        case STEP_RESET:
+            begin_step(at, STEP_ECHO_OFF, TIMEOUT_COMMAND_US);
+            break;
+        case STEP_ECHO_OFF:
+            if (at->config.baud != 0u) {
+                begin_step(at, STEP_BAUD, TIMEOUT_COMMAND_US);
+            } else {
+                begin_step(at, STEP_MODE, TIMEOUT_COMMAND_US);
+            }
+            break;
+        case STEP_BAUD:
+            at->serial.set_baud(at->serial.user, at->config.baud);
             begin_step(at, STEP_MODE, TIMEOUT_COMMAND_US);
-        }
-        break;
-    case STEP_BAUD:
-        at->serial.set_baud(at->serial.user, at->config.baud);
-        begin_step(at, STEP_MODE, TIMEOUT_COMMAND_US);
-        break;
-    case STEP_MODE:
-        begin_step(at, STEP_JOIN, TIMEOUT_JOIN_US);
-        break;
-    case STEP_JOIN:
-        begin_step(at, STEP_MUX, TIMEOUT_COMMAND_US);
-        break;
-    case STEP_MUX:
-        at->wifi_ready = 1;
-        begin_step(at, STEP_START, TIMEOUT_START_US);
-        break;
-    default:
-        break;
+            break;
+        case STEP_MODE:
+            begin_step(at, STEP_JOIN, TIMEOUT_JOIN_US);
+            break;
+        case STEP_JOIN:
+            begin_step(at, STEP_MUX, TIMEOUT_COMMAND_US);
+            break;
+        case STEP_MUX:
+            at->wifi_ready = 1;
+            begin_step(at, STEP_START, TIMEOUT_START_US);
+            break;
+        default:
+            break;
     }
 }
 
 /* ---- input ---------------------------------------------------------------------------------- */
 
-static int line_is(const esp_at *at, const char *s)
-{
+static int line_is(const esp_at* at, const char* s) {
     size_t i = 0;
     for (; s[i] != '\0'; ++i) {
         if (i >= at->line_len || at->line[i] != s[i]) {
@@ -216,8 +209,7 @@ static int line_is(const esp_at *at, const char *s)
     return i == at->line_len;
 }
 
-static int line_ends_with(const esp_at *at, const char *s)
-{
+static int line_ends_with(const esp_at* at, const char* s) {
     size_t n = 0;
     while (s[n] != '\0') {
         ++n;
@@ -233,8 +225,7 @@ static int line_ends_with(const esp_at *at, const char *s)
     return 1;
 }
 
-static void on_line(esp_at *at)
-{
+static void on_line(esp_at* at) {
     const int error = line_is(at, "ERROR") || line_is(at, "FAIL");
     if (line_ends_with(at, "CLOSED")) { /* "CLOSED" or "<id>,CLOSED" */
         if (at->link != SINK_UPLINK_DOWN) {
@@ -252,50 +243,49 @@ static void on_line(esp_at *at)
         return;
     }
     switch (at->step) {
-    case STEP_RESET:
-        if (line_is(at, "ready")) {
-            next_setup_step(at);
-        }
-        break;
-    case STEP_ECHO_OFF:
-    case STEP_BAUD:
-    case STEP_MODE:
-    case STEP_JOIN:
-    case STEP_MUX:
-        if (line_is(at, "OK")) {
-            next_setup_step(at);
-        } else if (error) {
-            ++at->counters.errors;
-            fail(at);
-        }
-        break;
-    case STEP_START:
-        if (line_is(at, "OK") || line_is(at, "ALREADY CONNECTED")) {
-            at->step = STEP_IDLE;
-            at->link = SINK_UPLINK_UP;
-        } else if (error) {
-            ++at->counters.errors;
-            fail(at);
-        }
-        break;
-    case STEP_SEND_PROMPT:
-    case STEP_SEND_DATA:
-        if (line_is(at, "SEND OK")) {
-            ++at->counters.packets_sent;
-            at->payload_len = 0;
-            at->step = STEP_IDLE;
-        } else if (error || line_is(at, "SEND FAIL")) {
-            ++at->counters.errors;
-            fail(at);
-        }
-        break;
-    default:
-        break;
+        case STEP_RESET:
+            if (line_is(at, "ready")) {
+                next_setup_step(at);
+            }
+            break;
+        case STEP_ECHO_OFF:
+        case STEP_BAUD:
+        case STEP_MODE:
+        case STEP_JOIN:
+        case STEP_MUX:
+            if (line_is(at, "OK")) {
+                next_setup_step(at);
+            } else if (error) {
+                ++at->counters.errors;
+                fail(at);
+            }
+            break;
+        case STEP_START:
+            if (line_is(at, "OK") || line_is(at, "ALREADY CONNECTED")) {
+                at->step = STEP_IDLE;
+                at->link = SINK_UPLINK_UP;
+            } else if (error) {
+                ++at->counters.errors;
+                fail(at);
+            }
+            break;
+        case STEP_SEND_PROMPT:
+        case STEP_SEND_DATA:
+            if (line_is(at, "SEND OK")) {
+                ++at->counters.packets_sent;
+                at->payload_len = 0;
+                at->step = STEP_IDLE;
+            } else if (error || line_is(at, "SEND FAIL")) {
+                ++at->counters.errors;
+                fail(at);
+            }
+            break;
+        default:
+            break;
     }
 }
 
-static void on_byte(esp_at *at, uint8_t c)
-{
+static void on_byte(esp_at* at, uint8_t c) {
     if (at->step == STEP_SEND_PROMPT && at->at_line_start && c == '>') {
         begin_step(at, STEP_SEND_DATA, TIMEOUT_SEND_US);
         at->at_line_start = 0;
@@ -319,8 +309,7 @@ static void on_byte(esp_at *at, uint8_t c)
     }
 }
 
-static void pump(esp_at *at)
-{
+static void pump(esp_at* at) {
     pump_out(at);
     uint8_t buf[64];
     size_t n;
@@ -338,11 +327,10 @@ static void pump(esp_at *at)
 
 /* ---- public --------------------------------------------------------------------------------- */
 
-int esp_at_init(esp_at *at, const esp_at_serial *serial, const esp_at_config *config)
-{
+int esp_at_init(esp_at* at, const esp_at_serial* serial, const esp_at_config* config) {
     if (at == NULL || serial == NULL || config == NULL || serial->write == NULL || serial->read == NULL ||
-        serial->time_us == NULL || (config->baud != 0u && serial->set_baud == NULL) ||
-        config->ssid == NULL || config->password == NULL || config->host == NULL || config->port == 0u) {
+        serial->time_us == NULL || (config->baud != 0u && serial->set_baud == NULL) || config->ssid == NULL ||
+        config->password == NULL || config->host == NULL || config->port == 0u) {
         return MW_ERR_ARGUMENT;
     }
     const esp_at_counters zero = {0};
@@ -361,9 +349,8 @@ int esp_at_init(esp_at *at, const esp_at_serial *serial, const esp_at_config *co
     return MW_OK;
 }
 
-int esp_at_connect(void *user)
-{
-    esp_at *at = (esp_at *)user;
+int esp_at_connect(void* user) {
+    esp_at* at = (esp_at*)user;
     if (at->step != STEP_IDLE) {
         return -1;
     }
@@ -377,16 +364,14 @@ int esp_at_connect(void *user)
     return 0;
 }
 
-sink_uplink_state esp_at_state(void *user)
-{
-    esp_at *at = (esp_at *)user;
+sink_uplink_state esp_at_state(void* user) {
+    esp_at* at = (esp_at*)user;
     pump(at);
     return at->link;
 }
 
-int esp_at_write(void *user, const uint8_t *data, size_t len)
-{
-    esp_at *at = (esp_at *)user;
+int esp_at_write(void* user, const uint8_t* data, size_t len) {
+    esp_at* at = (esp_at*)user;
     if (at->link != SINK_UPLINK_UP) {
         return -1;
     }
@@ -402,9 +387,8 @@ int esp_at_write(void *user, const uint8_t *data, size_t len)
     return 0;
 }
 
-void esp_at_close(void *user)
-{
-    esp_at *at = (esp_at *)user;
+void esp_at_close(void* user) {
+    esp_at* at = (esp_at*)user;
     const int was_setup = in_setup(at);
     fail(at);
     if (was_setup) {
@@ -414,8 +398,7 @@ void esp_at_close(void *user)
     pump_out(at);
 }
 
-void esp_at_uplink(esp_at *at, sink_node_hal *hal)
-{
+void esp_at_uplink(esp_at* at, sink_node_hal* hal) {
     hal->user = at;
     hal->uplink_connect = esp_at_connect;
     hal->uplink_state = esp_at_state;

@@ -14,10 +14,11 @@
 
 #define US_PER_S 1000000u
 
-static uint64_t now_us(const sink_node *sink) { return sink->hal.time_us(sink->hal.user); }
+static uint64_t now_us(const sink_node* sink) {
+    return sink->hal.time_us(sink->hal.user);
+}
 
-void sink_node_default_config(sink_node_config *config)
-{
+void sink_node_default_config(sink_node_config* config) {
     const sink_node_config zero = {0};
     *config = zero;
     config->sink_id = 1;
@@ -40,8 +41,7 @@ void sink_node_default_config(sink_node_config *config)
 
 /* ---- CAN transmit queue ------------------------------------------------------------------ */
 
-static void queue_can(sink_node *sink, const mw_can_frame *frame)
-{
+static void queue_can(sink_node* sink, const mw_can_frame* frame) {
     if (sink->can_tx_count >= SINK_NODE_CAN_TX_QUEUE_LEN) {
         ++sink->counters.can_tx_overflows;
         sink->can_tx_overflow_event = 1;
@@ -52,8 +52,7 @@ static void queue_can(sink_node *sink, const mw_can_frame *frame)
     ++sink->can_tx_count;
 }
 
-static void flush_can(sink_node *sink)
-{
+static void flush_can(sink_node* sink) {
     while (sink->can_tx_count > 0u) {
         if (sink->hal.can_transmit(sink->hal.user, &sink->can_tx[sink->can_tx_head]) != 0) {
             return;
@@ -65,30 +64,26 @@ static void flush_can(sink_node *sink)
 
 /* ---- uplink --------------------------------------------------------------------------------- */
 
-static void schedule_retry(sink_node *sink, uint64_t now)
-{
+static void schedule_retry(sink_node* sink, uint64_t now) {
     sink->next_connect_us = now + sink->backoff_us;
     const uint64_t doubled = 2u * (uint64_t)sink->backoff_us;
     sink->backoff_us = doubled > sink->config.backoff_max_us ? sink->config.backoff_max_us : (uint32_t)doubled;
 }
 
-static void link_lost(sink_node *sink, uint64_t now)
-{
+static void link_lost(sink_node* sink, uint64_t now) {
     ++sink->counters.disconnects;
     sink->link = SINK_UPLINK_DOWN;
     sink->backoff_us = sink->config.backoff_min_us;
     schedule_retry(sink, now);
 }
 
-static void attempt_failed(sink_node *sink, uint64_t now)
-{
+static void attempt_failed(sink_node* sink, uint64_t now) {
     ++sink->counters.connect_failures;
     sink->link = SINK_UPLINK_DOWN;
     schedule_retry(sink, now);
 }
 
-static void manage_uplink(sink_node *sink, uint64_t now)
-{
+static void manage_uplink(sink_node* sink, uint64_t now) {
     const sink_uplink_state state = sink->hal.uplink_state(sink->hal.user);
     if (state == SINK_UPLINK_UP && sink->link != SINK_UPLINK_UP) {
         if (sink->counters.connects > 0u) {
@@ -129,8 +124,7 @@ static void manage_uplink(sink_node *sink, uint64_t now)
 
 /* ---- batches -------------------------------------------------------------------------------- */
 
-static void open_batch(sink_node *sink, uint64_t timestamp_us)
-{
+static void open_batch(sink_node* sink, uint64_t timestamp_us) {
     mw_packet_header header;
     header.sink_id = sink->config.sink_id;
     header.sequence = sink->sequence;
@@ -141,8 +135,7 @@ static void open_batch(sink_node *sink, uint64_t timestamp_us)
     sink->batch_node_frames = 0;
 }
 
-static void close_batch(sink_node *sink, uint64_t now)
-{
+static void close_batch(sink_node* sink, uint64_t now) {
     if (!sink->batch_open) {
         return;
     }
@@ -179,8 +172,7 @@ static void close_batch(sink_node *sink, uint64_t now)
 }
 
 /* Appends a record; a full batch is closed and continued with the same timestamp. */
-static void add_to_batch(sink_node *sink, const mw_can_frame *frame, uint64_t at_us, int node_frame)
-{
+static void add_to_batch(sink_node* sink, const mw_can_frame* frame, uint64_t at_us, int node_frame) {
     if (!sink->batch_open) {
         /* After an early close, later frames of the instant continue it (same timestamp). */
         open_batch(sink, sink->instant_started ? sink->batch_timestamp_us : at_us);
@@ -208,20 +200,17 @@ static void add_to_batch(sink_node *sink, const mw_can_frame *frame, uint64_t at
 
 /* ---- periodic frames ------------------------------------------------------------------------ */
 
-static uint64_t sync_due_us(const sink_node *sink, uint64_t index)
-{
+static uint64_t sync_due_us(const sink_node* sink, uint64_t index) {
     return sink->start_us + index * US_PER_S / sink->config.rate_hz;
 }
 
-static int is_sample_frame(const mw_can_frame *frame)
-{
+static int is_sample_frame(const mw_can_frame* frame) {
     const mw_function fn = mw_can_id_function(frame->id);
     return fn == MW_FN_ACCEL || fn == MW_FN_GYRO || fn == MW_FN_MAG || fn == MW_FN_ATTITUDE;
 }
 
 /* A received node frame: batch it, and close the packet when the instant is complete. */
-static void receive_frame(sink_node *sink, const mw_can_frame *frame, uint64_t at_us)
-{
+static void receive_frame(sink_node* sink, const mw_can_frame* frame, uint64_t at_us) {
     add_to_batch(sink, frame, at_us, 1);
     if (!sink->instant_started || !is_sample_frame(frame)) {
         return;
@@ -235,8 +224,7 @@ static void receive_frame(sink_node *sink, const mw_can_frame *frame, uint64_t a
     }
 }
 
-static void send_sync(sink_node *sink, uint64_t now)
-{
+static void send_sync(sink_node* sink, uint64_t now) {
     const mw_sync sync = {sink->next_counter};
     mw_can_frame frame;
     close_batch(sink, now);
@@ -254,8 +242,7 @@ static void send_sync(sink_node *sink, uint64_t now)
     add_to_batch(sink, &frame, now, 0);
 }
 
-static void send_status(sink_node *sink, uint64_t now)
-{
+static void send_status(sink_node* sink, uint64_t now) {
     mw_status status;
     mw_can_frame frame;
     status.node_id = MW_NODE_ID_SINK;
@@ -280,8 +267,7 @@ static void send_status(sink_node *sink, uint64_t now)
     }
 }
 
-int sink_node_send_config(sink_node *sink, const mw_config *config)
-{
+int sink_node_send_config(sink_node* sink, const mw_config* config) {
     mw_can_frame frame;
     const int rc = mw_config_encode(config, &frame);
     if (rc != MW_OK) {
@@ -296,16 +282,15 @@ int sink_node_send_config(sink_node *sink, const mw_config *config)
 
 /* ---- public --------------------------------------------------------------------------------- */
 
-int sink_node_init(sink_node *sink, const sink_node_hal *hal, const sink_node_config *config)
-{
-    if (sink == NULL || hal == NULL || config == NULL || hal->can_transmit == NULL ||
-        hal->can_receive == NULL || hal->time_us == NULL || hal->uplink_connect == NULL ||
-        hal->uplink_state == NULL || hal->uplink_write == NULL || hal->uplink_close == NULL) {
+int sink_node_init(sink_node* sink, const sink_node_hal* hal, const sink_node_config* config) {
+    if (sink == NULL || hal == NULL || config == NULL || hal->can_transmit == NULL || hal->can_receive == NULL ||
+        hal->time_us == NULL || hal->uplink_connect == NULL || hal->uplink_state == NULL || hal->uplink_write == NULL ||
+        hal->uplink_close == NULL) {
         return MW_ERR_ARGUMENT;
     }
-    if (config->rate_hz < MW_RATE_HZ_MIN || config->rate_hz > MW_RATE_HZ_MAX ||
-        config->max_batch_frames < 2u || config->max_batch_frames > SINK_NODE_MAX_BATCH_FRAMES ||
-        config->backoff_min_us == 0u || config->backoff_max_us < config->backoff_min_us) {
+    if (config->rate_hz < MW_RATE_HZ_MIN || config->rate_hz > MW_RATE_HZ_MAX || config->max_batch_frames < 2u ||
+        config->max_batch_frames > SINK_NODE_MAX_BATCH_FRAMES || config->backoff_min_us == 0u ||
+        config->backoff_max_us < config->backoff_min_us) {
         return MW_ERR_RANGE;
     }
     mw_can_frame probe;
@@ -344,8 +329,7 @@ int sink_node_init(sink_node *sink, const sink_node_hal *hal, const sink_node_co
     return MW_OK;
 }
 
-void sink_node_poll(sink_node *sink)
-{
+void sink_node_poll(sink_node* sink) {
     uint64_t now = now_us(sink);
     manage_uplink(sink, now);
 
@@ -368,9 +352,8 @@ void sink_node_poll(sink_node *sink)
     }
     if (now >= sink->next_config_us) {
         (void)sink_node_send_config(sink, &sink->config.node_config);
-        sink->next_config_us = sink->config.config_period_s != 0u
-                                   ? now + (uint64_t)sink->config.config_period_s * US_PER_S
-                                   : UINT64_MAX;
+        sink->next_config_us =
+            sink->config.config_period_s != 0u ? now + (uint64_t)sink->config.config_period_s * US_PER_S : UINT64_MAX;
     }
     if (sink->config.status_period_s != 0u && now >= sink->next_status_us) {
         send_status(sink, now);
@@ -379,8 +362,7 @@ void sink_node_poll(sink_node *sink)
     flush_can(sink);
 }
 
-uint64_t sink_node_next_deadline_us(const sink_node *sink)
-{
+uint64_t sink_node_next_deadline_us(const sink_node* sink) {
     if (sink->can_tx_count > 0u) {
         return now_us(sink);
     }
@@ -394,4 +376,6 @@ uint64_t sink_node_next_deadline_us(const sink_node *sink)
     return deadline;
 }
 
-uint32_t sink_node_next_counter(const sink_node *sink) { return sink->next_counter; }
+uint32_t sink_node_next_counter(const sink_node* sink) {
+    return sink->next_counter;
+}

@@ -7,9 +7,9 @@
 #define APB2_HZ 84000000u
 #define BOOT_BAUD 115200u
 #define LED_PIN 12u
-#define CAN_RING_LEN 64u    /* power of two */
-#define UART_RX_LEN 1024u   /* power of two */
-#define UART_TX_LEN 4096u   /* power of two */
+#define CAN_RING_LEN 64u  /* power of two */
+#define UART_RX_LEN 1024u /* power of two */
+#define UART_TX_LEN 4096u /* power of two */
 
 /* ---- time ----------------------------------------------------------------------------------- */
 
@@ -17,8 +17,7 @@ static uint32_t g_time_last;
 static uint64_t g_time_high;
 
 /* Main-loop context only (it extends the 32-bit counter without locking). */
-static uint64_t hal_time_us(void *user)
-{
+static uint64_t hal_time_us(void* user) {
     (void)user;
     const uint32_t now = F4_TIM2->CNT;
     if (now < g_time_last) {
@@ -35,8 +34,7 @@ static volatile uint32_t g_can_head; /* written by the interrupt */
 static volatile uint32_t g_can_tail; /* written by the main loop */
 static volatile uint32_t g_can_overruns;
 
-void can1_rx0_irq_handler(void)
-{
+void can1_rx0_irq_handler(void) {
     mw_can_frame frame;
     int rc;
     while ((rc = bxcan_receive_fifo0(&frame)) != 0) {
@@ -57,8 +55,7 @@ void can1_rx0_irq_handler(void)
     }
 }
 
-static int hal_can_receive(void *user, mw_can_frame *frame)
-{
+static int hal_can_receive(void* user, mw_can_frame* frame) {
     (void)user;
     const uint32_t tail = g_can_tail;
     if (tail == g_can_head) {
@@ -69,14 +66,12 @@ static int hal_can_receive(void *user, mw_can_frame *frame)
     return 1;
 }
 
-static int hal_can_transmit(void *user, const mw_can_frame *frame)
-{
+static int hal_can_transmit(void* user, const mw_can_frame* frame) {
     (void)user;
     return bxcan_transmit(frame);
 }
 
-static uint32_t hal_can_rx_lost(void *user)
-{
+static uint32_t hal_can_rx_lost(void* user) {
     (void)user;
     return g_can_overruns;
 }
@@ -87,8 +82,7 @@ static uint8_t g_rx[UART_RX_LEN];
 static uint8_t g_tx[UART_TX_LEN];
 static volatile uint32_t g_rx_head, g_rx_tail, g_tx_head, g_tx_tail;
 
-void usart1_irq_handler(void)
-{
+void usart1_irq_handler(void) {
     const uint32_t sr = F4_USART1->SR;
     if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
         const uint8_t c = (uint8_t)F4_USART1->DR; /* also clears ORE */
@@ -107,8 +101,7 @@ void usart1_irq_handler(void)
     }
 }
 
-static size_t serial_write(void *user, const uint8_t *data, size_t len)
-{
+static size_t serial_write(void* user, const uint8_t* data, size_t len) {
     (void)user;
     size_t n = 0;
     while (n < len && g_tx_head - g_tx_tail < UART_TX_LEN) {
@@ -121,8 +114,7 @@ static size_t serial_write(void *user, const uint8_t *data, size_t len)
     return n;
 }
 
-static size_t serial_read(void *user, uint8_t *data, size_t cap)
-{
+static size_t serial_read(void* user, uint8_t* data, size_t cap) {
     (void)user;
     size_t n = 0;
     while (n < cap && g_rx_tail != g_rx_head) {
@@ -132,8 +124,7 @@ static size_t serial_read(void *user, uint8_t *data, size_t cap)
     return n;
 }
 
-static void serial_set_baud(void *user, uint32_t baud)
-{
+static void serial_set_baud(void* user, uint32_t baud) {
     (void)user;
     while (g_tx_tail != g_tx_head) { /* let queued bytes leave at the old rate */
     }
@@ -144,28 +135,29 @@ static void serial_set_baud(void *user, uint32_t baud)
     F4_USART1->CR1 |= USART_CR1_UE;
 }
 
-static uint64_t serial_time_us(void *user) { return hal_time_us(user); }
+static uint64_t serial_time_us(void* user) {
+    return hal_time_us(user);
+}
 
-esp_at_serial board_serial(void)
-{
+esp_at_serial board_serial(void) {
     esp_at_serial serial = {NULL, serial_write, serial_read, serial_set_baud, serial_time_us};
     return serial;
 }
 
 /* ---- board ---------------------------------------------------------------------------------- */
 
-void board_sink_hal(sink_node_hal *hal)
-{
+void board_sink_hal(sink_node_hal* hal) {
     hal->can_transmit = hal_can_transmit;
     hal->can_receive = hal_can_receive;
     hal->time_us = hal_time_us;
     hal->can_rx_lost = hal_can_rx_lost;
 }
 
-void board_led(int on) { F4_GPIOD->BSRR = on ? (1u << LED_PIN) : (1u << (LED_PIN + 16u)); }
+void board_led(int on) {
+    F4_GPIOD->BSRR = on ? (1u << LED_PIN) : (1u << (LED_PIN + 16u));
+}
 
-int board_init(void)
-{
+int board_init(void) {
     F4_RCC->AHB1ENR |= F4_RCC_AHB1ENR_GPIOB | F4_RCC_AHB1ENR_GPIOD;
     F4_RCC->APB1ENR |= F4_RCC_APB1ENR_TIM2 | F4_RCC_APB1ENR_CAN1;
     F4_RCC->APB2ENR |= F4_RCC_APB2ENR_USART1;

@@ -24,7 +24,7 @@ int board_init(void);
 
 /* CAN, time and CAN-loss functions of the sink HAL (the uplink members are set by
  * esp_at_uplink()). */
-void board_sink_hal(sink_node_hal *hal);
+void board_sink_hal(sink_node_hal* hal);
 
 /* The serial port of the ESP8266. */
 esp_at_serial board_serial(void);

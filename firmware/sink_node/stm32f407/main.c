@@ -25,13 +25,11 @@
 static esp_at g_at;
 static sink_node g_sink;
 
-int main(void)
-{
+int main(void) {
     (void)board_init();
 
     const esp_at_serial serial = board_serial();
-    const esp_at_config wifi = {MOCAP_WIFI_SSID, MOCAP_WIFI_PASSWORD, MOCAP_HOST, MOCAP_HOST_PORT,
-                                MOCAP_ESP_BAUD};
+    const esp_at_config wifi = {MOCAP_WIFI_SSID, MOCAP_WIFI_PASSWORD, MOCAP_HOST, MOCAP_HOST_PORT, MOCAP_ESP_BAUD};
     (void)esp_at_init(&g_at, &serial, &wifi);
 
     sink_node_hal hal = {0};

@@ -39,20 +39,18 @@ static uint64_t div_ceil(uint64_t a, uint64_t b) {
 int mw_busload_compute(const mw_busload_params* params, mw_busload* out) {
     if (params == NULL || out == NULL) return MW_ERR_ARGUMENT;
     const uint32_t per_sample = mw_frames_per_sample(params->mode);
-    if (params->nodes > MW_NODE_ID_MAX || params->rate_hz < MW_RATE_HZ_MIN ||
-        params->rate_hz > MW_RATE_HZ_MAX || params->bitrate_bps == 0u || per_sample == 0u) {
+    if (params->nodes > MW_NODE_ID_MAX || params->rate_hz < MW_RATE_HZ_MIN || params->rate_hz > MW_RATE_HZ_MAX ||
+        params->bitrate_bps == 0u || per_sample == 0u) {
         return MW_ERR_ARGUMENT;
     }
     /* Raw and attitude frames both carry 8 data bytes; SYNC carries 4; STATUS 8. */
     const uint64_t sample_frames = (uint64_t)params->nodes * per_sample;
-    const uint64_t per_period_bits =
-        mw_can_frame_bits(MW_DLC_SYNC) + sample_frames * mw_can_frame_bits(MW_DLC_RAW);
+    const uint64_t per_period_bits = mw_can_frame_bits(MW_DLC_SYNC) + sample_frames * mw_can_frame_bits(MW_DLC_RAW);
     uint64_t frames = (1u + sample_frames) * params->rate_hz;
     uint64_t bits = per_period_bits * params->rate_hz;
     if (params->status_period_s > 0u) {
         frames += div_ceil(params->nodes, params->status_period_s);
-        bits += div_ceil((uint64_t)params->nodes * mw_can_frame_bits(MW_DLC_STATUS),
-                         params->status_period_s);
+        bits += div_ceil((uint64_t)params->nodes * mw_can_frame_bits(MW_DLC_STATUS), params->status_period_s);
     }
     out->frames_per_s = (uint32_t)frames;
     out->bits_per_s = (uint32_t)bits;

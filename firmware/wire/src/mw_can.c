@@ -35,8 +35,7 @@ static bool is_raw_kind(mw_function f) {
 }
 
 /* Common ID/DLC check of a frame that must carry `function` from a node in [node_min, 63]. */
-static int check_frame(const mw_can_frame* frame, mw_function function, uint8_t node_min,
-                       uint8_t dlc) {
+static int check_frame(const mw_can_frame* frame, mw_function function, uint8_t node_min, uint8_t dlc) {
     if (frame->id > MW_CAN_ID_MAX || mw_can_id_function(frame->id) != function ||
         mw_can_id_node(frame->id) < node_min) {
         return MW_ERR_ID;
@@ -64,9 +63,8 @@ int mw_sync_decode(const mw_can_frame* frame, mw_sync* out) {
 /* ---------------------------------------------------------------- CONFIG */
 
 static bool config_fields_valid(uint32_t rate_hz, uint32_t accel, uint32_t gyro, uint32_t mode) {
-    return rate_hz >= MW_RATE_HZ_MIN && rate_hz <= MW_RATE_HZ_MAX &&
-           accel <= (uint32_t)MW_ACCEL_16G && gyro <= (uint32_t)MW_GYRO_2000DPS &&
-           mode < MW_MODE_COUNT;
+    return rate_hz >= MW_RATE_HZ_MIN && rate_hz <= MW_RATE_HZ_MAX && accel <= (uint32_t)MW_ACCEL_16G &&
+           gyro <= (uint32_t)MW_GYRO_2000DPS && mode < MW_MODE_COUNT;
 }
 
 int mw_config_encode(const mw_config* msg, mw_can_frame* out) {
@@ -220,13 +218,11 @@ int mw_attitude_decode(const mw_can_frame* frame, mw_attitude* out) {
 int mw_status_encode(const mw_status* msg, mw_can_frame* out) {
     if (msg == NULL || out == NULL || msg->node_id > MW_NODE_ID_MAX) return MW_ERR_ARGUMENT;
     if ((unsigned)msg->state >= MW_NODE_STATE_COUNT || (unsigned)msg->mode >= MW_MODE_COUNT ||
-        (unsigned)msg->accel_range > (unsigned)MW_ACCEL_16G ||
-        (unsigned)msg->gyro_range > (unsigned)MW_GYRO_2000DPS) {
+        (unsigned)msg->accel_range > (unsigned)MW_ACCEL_16G || (unsigned)msg->gyro_range > (unsigned)MW_GYRO_2000DPS) {
         return MW_ERR_RANGE;
     }
     frame_begin(out, MW_CAN_ID(MW_FN_STATUS, msg->node_id), MW_DLC_STATUS);
-    out->data[0] = (uint8_t)((unsigned)msg->state | ((unsigned)msg->mode << 4) |
-                             (msg->mag_present ? 0x40u : 0u));
+    out->data[0] = (uint8_t)((unsigned)msg->state | ((unsigned)msg->mode << 4) | (msg->mag_present ? 0x40u : 0u));
     out->data[1] = (uint8_t)((unsigned)msg->accel_range | ((unsigned)msg->gyro_range << 2));
     out->data[2] = msg->error_flags;
     out->data[3] = msg->protocol_version;

@@ -13,18 +13,10 @@
 #include "mocap_wire/mw_crc32.h"
 #include "mw_endian.h"
 
-static const uint8_t mw_magic[4] = {MW_PACKET_MAGIC0, MW_PACKET_MAGIC1, MW_PACKET_MAGIC2,
-                                    MW_PACKET_MAGIC3};
+static const uint8_t mw_magic[4] = {MW_PACKET_MAGIC0, MW_PACKET_MAGIC1, MW_PACKET_MAGIC2, MW_PACKET_MAGIC3};
 
 /* Header field offsets. */
-enum {
-    OFF_VERSION = 4,
-    OFF_SINK_ID = 5,
-    OFF_COUNT = 6,
-    OFF_PAYLOAD_LEN = 8,
-    OFF_SEQUENCE = 10,
-    OFF_TIMESTAMP = 14
-};
+enum { OFF_VERSION = 4, OFF_SINK_ID = 5, OFF_COUNT = 6, OFF_PAYLOAD_LEN = 8, OFF_SEQUENCE = 10, OFF_TIMESTAMP = 14 };
 
 static bool frame_recordable(const mw_can_frame* f) {
     return f->id <= MW_CAN_ID_MAX && f->dlc <= MW_CAN_DLC_MAX;
@@ -41,8 +33,7 @@ size_t mw_packet_size(const mw_stamped_frame* frames, size_t count) {
 
 /* ---------------------------------------------------------------- builder */
 
-int mw_packet_builder_begin(mw_packet_builder* builder, uint8_t* buf, size_t capacity,
-                            const mw_packet_header* header) {
+int mw_packet_builder_begin(mw_packet_builder* builder, uint8_t* buf, size_t capacity, const mw_packet_header* header) {
     if (builder == NULL || buf == NULL || header == NULL) return MW_ERR_ARGUMENT;
     if (capacity < MW_PACKET_HEADER_SIZE + MW_PACKET_CRC_SIZE) return MW_ERR_SPACE;
     memcpy(buf, mw_magic, sizeof mw_magic);
@@ -88,8 +79,8 @@ int32_t mw_packet_builder_finish(mw_packet_builder* builder) {
     return (int32_t)total;
 }
 
-int32_t mw_packet_encode(const mw_packet_header* header, const mw_stamped_frame* frames,
-                         size_t count, uint8_t* out, size_t capacity) {
+int32_t mw_packet_encode(const mw_packet_header* header, const mw_stamped_frame* frames, size_t count, uint8_t* out,
+                         size_t capacity) {
     if (header == NULL || out == NULL || (frames == NULL && count > 0u)) return MW_ERR_ARGUMENT;
     if (count > MW_PACKET_MAX_FRAMES) return MW_ERR_LENGTH;
     for (size_t i = 0; i < count; ++i) {
@@ -190,8 +181,8 @@ static int parse_records(const uint8_t* pkt, size_t packet_len, mw_packet* out) 
     return MW_OK;
 }
 
-mw_stream_result mw_stream_decoder_feed(mw_stream_decoder* d, const uint8_t* data, size_t len,
-                                        size_t* consumed, mw_packet* out) {
+mw_stream_result mw_stream_decoder_feed(mw_stream_decoder* d, const uint8_t* data, size_t len, size_t* consumed,
+                                        mw_packet* out) {
     size_t used = 0;
     mw_stream_result result = MW_STREAM_NEED_MORE;
     if (d == NULL || consumed == NULL || out == NULL || (data == NULL && len > 0u)) {

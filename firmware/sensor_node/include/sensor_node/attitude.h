@@ -16,22 +16,22 @@ extern "C" {
 #endif
 
 typedef struct attitude_filter {
-    float kp;              /* proportional gain, rad/s per unit direction error (default 1.0) */
-    float ki;              /* integral gain, rad/s^2 per unit error (default 0.05) */
-    float q[4];            /* q_earth_sensor, w x y z */
-    float bias_rad_s[3];   /* integral term: minus the estimated gyro bias */
-    int initialized;       /* 0 until the first sample with a valid accelerometer */
+    float kp;            /* proportional gain, rad/s per unit direction error (default 1.0) */
+    float ki;            /* integral gain, rad/s^2 per unit error (default 0.05) */
+    float q[4];          /* q_earth_sensor, w x y z */
+    float bias_rad_s[3]; /* integral term: minus the estimated gyro bias */
+    int initialized;     /* 0 until the first sample with a valid accelerometer */
 } attitude_filter;
 
 /* Resets to "not initialised" with the default gains. */
-void attitude_reset(attitude_filter *f);
+void attitude_reset(attitude_filter* f);
 
 /* One update over dt_s seconds. The first call with a usable accelerometer (and a magnetometer
  * not parallel to it) sets q from the measurement; later calls integrate the gyro and correct.
  * Without a magnetometer, heading is only integrated. Degenerate input (zero accelerometer)
  * skips the correction, never produces NaN. */
-void attitude_update(attitude_filter *f, const float gyro_rad_s[3], const float accel[3],
-                     const float *mag /* 3 values or NULL */, float dt_s);
+void attitude_update(attitude_filter* f, const float gyro_rad_s[3], const float accel[3],
+                     const float* mag /* 3 values or NULL */, float dt_s);
 
 #ifdef __cplusplus
 }

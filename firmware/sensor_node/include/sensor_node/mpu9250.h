@@ -86,10 +86,10 @@ enum {
 
 typedef enum {
     MPU9250_OK = 0,
-    MPU9250_ERR_SPI = -1,       /* the bus transfer itself failed */
-    MPU9250_ERR_WHO_AM_I = -2,  /* no MPU9250/9255 answered */
-    MPU9250_ERR_I2C = -3,       /* AK8963 transaction NACKed or timed out */
-    MPU9250_ERR_MAG_ID = -4,    /* AK8963 answered with a wrong WIA */
+    MPU9250_ERR_SPI = -1,      /* the bus transfer itself failed */
+    MPU9250_ERR_WHO_AM_I = -2, /* no MPU9250/9255 answered */
+    MPU9250_ERR_I2C = -3,      /* AK8963 transaction NACKed or timed out */
+    MPU9250_ERR_MAG_ID = -4,   /* AK8963 answered with a wrong WIA */
     MPU9250_ERR_ARG = -5
 } mpu9250_status;
 
@@ -97,9 +97,9 @@ typedef enum {
  * full-duplex transfer of len bytes (rx may alias nothing; both buffers are len bytes) and
  * returns 0 on success. time_us is a monotonic microsecond clock. */
 typedef struct {
-    void *user;
-    int (*spi_transfer)(void *user, const uint8_t *tx, uint8_t *rx, size_t len);
-    uint64_t (*time_us)(void *user);
+    void* user;
+    int (*spi_transfer)(void* user, const uint8_t* tx, uint8_t* rx, size_t len);
+    uint64_t (*time_us)(void* user);
 } mpu9250_bus;
 
 /* One sample in counts, MPU9250 axes (see top). mag[] is all MW_MAG_INVALID when there is no
@@ -116,11 +116,11 @@ typedef struct {
 typedef struct {
     mpu9250_bus bus;
     uint8_t who_am_i;
-    uint8_t mag_asa[3];   /* AK8963 factory sensitivity adjustment, 0..255 */
-    uint8_t mag_present;  /* AK8963 found and running; mag[] is zero otherwise */
-    uint8_t accel_fs;     /* mw_accel_range */
-    uint8_t gyro_fs;      /* mw_gyro_range */
-    uint8_t dlpf_cfg;     /* CONFIG.DLPF_CFG and ACCEL_CONFIG2.A_DLPFCFG, 0..6 */
+    uint8_t mag_asa[3];  /* AK8963 factory sensitivity adjustment, 0..255 */
+    uint8_t mag_present; /* AK8963 found and running; mag[] is zero otherwise */
+    uint8_t accel_fs;    /* mw_accel_range */
+    uint8_t gyro_fs;     /* mw_gyro_range */
+    uint8_t dlpf_cfg;    /* CONFIG.DLPF_CFG and ACCEL_CONFIG2.A_DLPFCFG, 0..6 */
 } mpu9250;
 
 /* Resets the chip, checks WHO_AM_I, selects the PLL clock, sets ranges and low-pass filter,
@@ -129,24 +129,24 @@ typedef struct {
  * Returns MPU9250_OK, or MPU9250_ERR_I2C / MPU9250_ERR_MAG_ID when only the magnetometer
  * failed (the accelerometer and gyroscope are then usable and mag_present is 0), or a
  * fatal error (SPI, WHO_AM_I). */
-int mpu9250_init(mpu9250 *dev, const mpu9250_bus *bus, mw_accel_range accel_fs,
-                 mw_gyro_range gyro_fs, uint8_t dlpf_cfg);
+int mpu9250_init(mpu9250* dev, const mpu9250_bus* bus, mw_accel_range accel_fs, mw_gyro_range gyro_fs,
+                 uint8_t dlpf_cfg);
 
 /* Changes the full-scale ranges (two register writes). */
-int mpu9250_set_ranges(mpu9250 *dev, mw_accel_range accel_fs, mw_gyro_range gyro_fs);
+int mpu9250_set_ranges(mpu9250* dev, mw_accel_range accel_fs, mw_gyro_range gyro_fs);
 
 /* Low-pass filter for gyroscope and accelerometer, 0..6 (0 = 250/218 Hz ... 6 = 5 Hz). */
-int mpu9250_set_dlpf(mpu9250 *dev, uint8_t dlpf_cfg);
+int mpu9250_set_dlpf(mpu9250* dev, uint8_t dlpf_cfg);
 
 /* The widest DLPF setting whose bandwidth stays under half of sample_rate_hz. */
 uint8_t mpu9250_dlpf_for_rate(uint16_t sample_rate_hz);
 
 /* Reads one nine-axis sample (one SPI burst from ACCEL_XOUT_H through EXT_SENS_DATA_07). */
-int mpu9250_read(mpu9250 *dev, mpu9250_sample *out);
+int mpu9250_read(mpu9250* dev, mpu9250_sample* out);
 
 /* Register helpers, exposed for the node core and tests. */
-int mpu9250_write_reg(mpu9250 *dev, uint8_t reg, uint8_t value);
-int mpu9250_read_regs(mpu9250 *dev, uint8_t reg, uint8_t *out, size_t len);
+int mpu9250_write_reg(mpu9250* dev, uint8_t reg, uint8_t value);
+int mpu9250_read_regs(mpu9250* dev, uint8_t reg, uint8_t* out, size_t len);
 
 #ifdef __cplusplus
 }

@@ -34,33 +34,33 @@ extern "C" {
 
 /* Serial port: non-blocking, caller-owned. */
 typedef struct esp_at_serial {
-    void *user;
+    void* user;
     /* Queues up to len bytes for transmission; returns how many were taken (may be 0). */
-    size_t (*write)(void *user, const uint8_t *data, size_t len);
+    size_t (*write)(void* user, const uint8_t* data, size_t len);
     /* Takes up to cap received bytes; returns how many (0 = none pending). */
-    size_t (*read)(void *user, uint8_t *data, size_t cap);
+    size_t (*read)(void* user, uint8_t* data, size_t cap);
     /* Changes the port's baud rate after the bytes already queued have left the wire (called
      * after the module acknowledged AT+UART_CUR, and after AT+RST, to return to 115200); may
      * be NULL when config.baud is 0. */
-    void (*set_baud)(void *user, uint32_t baud);
-    uint64_t (*time_us)(void *user);
+    void (*set_baud)(void* user, uint32_t baud);
+    uint64_t (*time_us)(void* user);
 } esp_at_serial;
 
 typedef struct esp_at_config {
-    const char *ssid;      /* must stay valid while the client lives */
-    const char *password;
-    const char *host;      /* host name or dotted IPv4 address of mocapd */
-    uint16_t port;         /* mocapd's sink port (7000) */
-    uint32_t baud;         /* switch the link to this rate after reset (0 = stay at 115200) */
+    const char* ssid; /* must stay valid while the client lives */
+    const char* password;
+    const char* host; /* host name or dotted IPv4 address of mocapd */
+    uint16_t port;    /* mocapd's sink port (7000) */
+    uint32_t baud;    /* switch the link to this rate after reset (0 = stay at 115200) */
 } esp_at_config;
 
 typedef struct esp_at_counters {
-    uint32_t resets;          /* set-up scripts started */
-    uint32_t timeouts;        /* steps that timed out */
-    uint32_t errors;          /* steps answered with ERROR / FAIL */
-    uint32_t link_closed;     /* unsolicited CLOSED / WIFI DISCONNECT */
-    uint32_t packets_sent;    /* SEND OK */
-    uint32_t overlong_lines;  /* response lines cut at ESP_AT_LINE_MAX */
+    uint32_t resets;         /* set-up scripts started */
+    uint32_t timeouts;       /* steps that timed out */
+    uint32_t errors;         /* steps answered with ERROR / FAIL */
+    uint32_t link_closed;    /* unsolicited CLOSED / WIFI DISCONNECT */
+    uint32_t packets_sent;   /* SEND OK */
+    uint32_t overlong_lines; /* response lines cut at ESP_AT_LINE_MAX */
 } esp_at_counters;
 
 typedef struct esp_at {
@@ -68,11 +68,11 @@ typedef struct esp_at {
     esp_at_config config;
     esp_at_counters counters;
     sink_uplink_state link;
-    uint8_t wifi_ready;       /* set-up script completed; only CIPSTART is needed */
-    uint8_t step;             /* private: current script step */
-    uint8_t at_line_start;    /* private: the next byte starts a response line */
-    uint64_t deadline_us;     /* private: time-out of the current step */
-    uint32_t baud_after_flush;/* private: port rate to set once the queued bytes are out */
+    uint8_t wifi_ready;        /* set-up script completed; only CIPSTART is needed */
+    uint8_t step;              /* private: current script step */
+    uint8_t at_line_start;     /* private: the next byte starts a response line */
+    uint64_t deadline_us;      /* private: time-out of the current step */
+    uint32_t baud_after_flush; /* private: port rate to set once the queued bytes are out */
     char line[ESP_AT_LINE_MAX];
     size_t line_len;
     uint8_t out[ESP_AT_COMMAND_MAX + ESP_AT_MAX_PAYLOAD]; /* private: bytes not yet taken by the port */
@@ -83,18 +83,18 @@ typedef struct esp_at {
 } esp_at;
 
 /* Validates and copies the serial port and config. MW_OK or MW_ERR_ARGUMENT. */
-int esp_at_init(esp_at *at, const esp_at_serial *serial, const esp_at_config *config);
+int esp_at_init(esp_at* at, const esp_at_serial* serial, const esp_at_config* config);
 
 /* The sink core's uplink calls; `user` is the esp_at. */
-int esp_at_connect(void *user);
-sink_uplink_state esp_at_state(void *user);
-int esp_at_write(void *user, const uint8_t *data, size_t len);
-void esp_at_close(void *user);
+int esp_at_connect(void* user);
+sink_uplink_state esp_at_state(void* user);
+int esp_at_write(void* user, const uint8_t* data, size_t len);
+void esp_at_close(void* user);
 
 /* Fills the uplink members of a sink HAL with the functions above. The sink HAL has one user
  * pointer, so the caller's CAN/time functions must reach their own state another way (the
  * STM32 image uses file-scope state); hal->user is set to `at`. */
-void esp_at_uplink(esp_at *at, sink_node_hal *hal);
+void esp_at_uplink(esp_at* at, sink_node_hal* hal);
 
 #ifdef __cplusplus
 }

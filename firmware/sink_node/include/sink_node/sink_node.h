@@ -75,62 +75,62 @@ typedef enum sink_uplink_state {
 } sink_uplink_state;
 
 typedef struct sink_node_hal {
-    void *user; /* passed to every call */
+    void* user; /* passed to every call */
     /* Offers one frame to the CAN controller: 0 = accepted, nonzero = mailboxes busy (the core
      * keeps it queued and offers it again on the next poll). */
-    int (*can_transmit)(void *user, const mw_can_frame *frame);
+    int (*can_transmit)(void* user, const mw_can_frame* frame);
     /* Takes one received frame: 1 = *frame filled, 0 = nothing pending. The core stamps it
      * with time_us() when it takes it. */
-    int (*can_receive)(void *user, mw_can_frame *frame);
+    int (*can_receive)(void* user, mw_can_frame* frame);
     /* Monotonic microseconds since an arbitrary origin. */
-    uint64_t (*time_us)(void *user);
+    uint64_t (*time_us)(void* user);
     /* Starts a connection attempt (it may complete before returning): 0 = started or
      * connected, negative = failed at once. Called only when uplink_state() is DOWN. */
-    int (*uplink_connect)(void *user);
+    int (*uplink_connect)(void* user);
     /* Current connection state; the HAL reports a connection the peer dropped as DOWN. */
-    sink_uplink_state (*uplink_state)(void *user);
+    sink_uplink_state (*uplink_state)(void* user);
     /* Writes one whole packet or nothing: 0 = taken, 1 = busy (the packet is dropped and
      * counted), negative = the connection failed (the core calls uplink_close). */
-    int (*uplink_write)(void *user, const uint8_t *data, size_t len);
+    int (*uplink_write)(void* user, const uint8_t* data, size_t len);
     /* Closes the connection or abandons the attempt; uplink_state() is DOWN afterwards. */
-    void (*uplink_close)(void *user);
+    void (*uplink_close)(void* user);
     /* Optional (may be NULL): CAN frames lost on reception so far (controller FIFO or driver
      * ring overruns), reported in the sink's STATUS. */
-    uint32_t (*can_rx_lost)(void *user);
+    uint32_t (*can_rx_lost)(void* user);
 } sink_node_hal;
 
 typedef struct sink_node_config {
-    uint8_t sink_id;            /* written into every packet header */
-    uint16_t rate_hz;           /* SYNC rate, MW_RATE_HZ_MIN..MW_RATE_HZ_MAX */
-    uint32_t first_counter;     /* counter of the first SYNC (tests start near the wrap) */
-    uint16_t max_batch_frames;  /* packet size limit in frames, 2..SINK_NODE_MAX_BATCH_FRAMES */
-    uint32_t backoff_min_us;    /* first reconnect delay */
-    uint32_t backoff_max_us;    /* largest reconnect delay */
-    uint32_t connect_timeout_us;/* a CONNECTING attempt older than this has failed */
-    uint8_t status_period_s;    /* sink STATUS into the stream every N s, 0 = never */
-    uint8_t config_period_s;    /* CONFIG broadcast every N s, 0 = only at start */
-    mw_config node_config;      /* what the nodes are told (node_id is forced to 0) */
-    uint8_t early_close;        /* 1 = close an instant's packet once it is complete (above) */
+    uint8_t sink_id;             /* written into every packet header */
+    uint16_t rate_hz;            /* SYNC rate, MW_RATE_HZ_MIN..MW_RATE_HZ_MAX */
+    uint32_t first_counter;      /* counter of the first SYNC (tests start near the wrap) */
+    uint16_t max_batch_frames;   /* packet size limit in frames, 2..SINK_NODE_MAX_BATCH_FRAMES */
+    uint32_t backoff_min_us;     /* first reconnect delay */
+    uint32_t backoff_max_us;     /* largest reconnect delay */
+    uint32_t connect_timeout_us; /* a CONNECTING attempt older than this has failed */
+    uint8_t status_period_s;     /* sink STATUS into the stream every N s, 0 = never */
+    uint8_t config_period_s;     /* CONFIG broadcast every N s, 0 = only at start */
+    mw_config node_config;       /* what the nodes are told (node_id is forced to 0) */
+    uint8_t early_close;         /* 1 = close an instant's packet once it is complete (above) */
 } sink_node_config;
 
 /* Counters only go up (wrap at 2^32). */
 typedef struct sink_node_counters {
-    uint32_t frames_in;         /* CAN frames received */
-    uint32_t frames_dropped;    /* received frames in packets that were not delivered */
-    uint32_t packets_out;       /* packets the uplink took */
-    uint32_t packets_dropped;   /* packets built while down, or refused as busy */
-    uint32_t packets_busy;      /* of which refused as busy */
-    uint32_t batch_splits;      /* packets closed early (max_batch_frames or offset_us range) */
-    uint32_t bytes_out;         /* bytes the uplink took */
-    uint32_t syncs_sent;        /* SYNC frames queued for the bus */
-    uint32_t syncs_skipped;     /* SYNC instants skipped because the loop was late */
-    uint32_t can_tx_overflows;  /* SYNC/CONFIG frames dropped, CAN TX queue full */
-    uint32_t connect_attempts;  /* uplink_connect calls */
-    uint32_t connect_failures;  /* attempts that failed or timed out */
-    uint32_t connects;          /* attempts that reached UP */
-    uint32_t reconnects;        /* connects after the first one */
-    uint32_t disconnects;       /* UP -> DOWN transitions (peer drop or write error) */
-    uint32_t early_closes;      /* packets closed before the next SYNC: instant complete */
+    uint32_t frames_in;        /* CAN frames received */
+    uint32_t frames_dropped;   /* received frames in packets that were not delivered */
+    uint32_t packets_out;      /* packets the uplink took */
+    uint32_t packets_dropped;  /* packets built while down, or refused as busy */
+    uint32_t packets_busy;     /* of which refused as busy */
+    uint32_t batch_splits;     /* packets closed early (max_batch_frames or offset_us range) */
+    uint32_t bytes_out;        /* bytes the uplink took */
+    uint32_t syncs_sent;       /* SYNC frames queued for the bus */
+    uint32_t syncs_skipped;    /* SYNC instants skipped because the loop was late */
+    uint32_t can_tx_overflows; /* SYNC/CONFIG frames dropped, CAN TX queue full */
+    uint32_t connect_attempts; /* uplink_connect calls */
+    uint32_t connect_failures; /* attempts that failed or timed out */
+    uint32_t connects;         /* attempts that reached UP */
+    uint32_t reconnects;       /* connects after the first one */
+    uint32_t disconnects;      /* UP -> DOWN transitions (peer drop or write error) */
+    uint32_t early_closes;     /* packets closed before the next SYNC: instant complete */
 } sink_node_counters;
 
 typedef struct sink_node {
@@ -139,22 +139,22 @@ typedef struct sink_node {
     sink_node_counters counters;
     /* SYNC schedule */
     uint64_t start_us;
-    uint64_t sync_index;        /* index of the next SYNC since start */
-    uint32_t next_counter;      /* counter of the next SYNC */
+    uint64_t sync_index;   /* index of the next SYNC since start */
+    uint32_t next_counter; /* counter of the next SYNC */
     uint64_t next_config_us;
     uint64_t next_status_us;
     /* uplink */
-    sink_uplink_state link;     /* state seen at the last poll */
+    sink_uplink_state link; /* state seen at the last poll */
     uint64_t next_connect_us;
     uint64_t connect_started_us;
-    uint32_t backoff_us;        /* delay before the next attempt */
-    uint32_t sequence;          /* of the next packet on this connection */
+    uint32_t backoff_us; /* delay before the next attempt */
+    uint32_t sequence;   /* of the next packet on this connection */
     /* batch */
     uint8_t batch_open;
     uint64_t batch_timestamp_us;
-    uint32_t batch_node_frames; /* received frames in the open batch (not SYNC/STATUS) */
-    uint8_t instant_started;    /* a SYNC has been sent: later frames belong to its instant */
-    uint8_t instant_closed_early; /* this instant's packet has been closed early */
+    uint32_t batch_node_frames;      /* received frames in the open batch (not SYNC/STATUS) */
+    uint8_t instant_started;         /* a SYNC has been sent: later frames belong to its instant */
+    uint8_t instant_closed_early;    /* this instant's packet has been closed early */
     uint32_t instant_sample_frames;  /* sample frames received since the last SYNC */
     uint32_t expected_sample_frames; /* sample frames of the previous complete instant */
     mw_packet_builder builder;
@@ -170,28 +170,28 @@ typedef struct sink_node {
 /* Defaults: 100 Hz, 128 frames per packet, back-off 100 ms .. 5 s, connect timeout 10 s,
  * STATUS every 1 s, CONFIG every 1 s, nodes at +-16 g, +-2000 dps, raw mode, STATUS 1 s,
  * early close on. */
-void sink_node_default_config(sink_node_config *config);
+void sink_node_default_config(sink_node_config* config);
 
 /* Validates the config, copies the HAL, starts the schedule (the first SYNC is due at once)
  * and the first connection attempt (at the first poll). Returns MW_OK, or MW_ERR_ARGUMENT
  * (NULL / missing HAL function) or MW_ERR_RANGE (a config field out of range). */
-int sink_node_init(sink_node *sink, const sink_node_hal *hal, const sink_node_config *config);
+int sink_node_init(sink_node* sink, const sink_node_hal* hal, const sink_node_config* config);
 
 /* Does everything due now: uplink attempts/time-outs, drains CAN RX into the batch, sends a
  * due SYNC (closing the batch first), CONFIG and STATUS, and offers queued CAN frames. */
-void sink_node_poll(sink_node *sink);
+void sink_node_poll(sink_node* sink);
 
 /* Time at which the next poll has scheduled work (next SYNC, next connect attempt, or a
  * pending CAN frame: now). A caller without CAN interrupts may sleep until then, but frames
  * arriving meanwhile are stamped late. */
-uint64_t sink_node_next_deadline_us(const sink_node *sink);
+uint64_t sink_node_next_deadline_us(const sink_node* sink);
 
 /* Counter of the next SYNC to be sent. */
-uint32_t sink_node_next_counter(const sink_node *sink);
+uint32_t sink_node_next_counter(const sink_node* sink);
 
 /* Queues a CONFIG for the nodes (node_id 0 = all) and makes it the periodic broadcast when
  * it is addressed to all. Returns MW_OK or the encoder's error (invalid fields). */
-int sink_node_send_config(sink_node *sink, const mw_config *config);
+int sink_node_send_config(sink_node* sink, const mw_config* config);
 
 #ifdef __cplusplus
 }

@@ -38,7 +38,7 @@ typedef struct mw_busload {
     uint32_t frames_per_s;  /**< SYNC + samples + STATUS (rounded up) */
     uint32_t bits_per_s;    /**< worst-case stuffing, rounded up */
     uint32_t load_permille; /**< bits_per_s * 1000 / bitrate_bps, rounded up */
-    bool fits; /**< bits_per_s <= bitrate_bps: every sample's frames fit in its period */
+    bool fits;              /**< bits_per_s <= bitrate_bps: every sample's frames fit in its period */
 } mw_busload;
 
 /** Fills *out. MW_ERR_ARGUMENT for NULL or a parameter outside its range. */

@@ -73,9 +73,8 @@ typedef enum mw_function {
 } mw_function;
 
 /** 11-bit ID of a function for a node: (function << 6) | node. No range check (a macro). */
-#define MW_CAN_ID(function, node)                              \
-    ((uint16_t)((((unsigned)(function)) << MW_CAN_NODE_BITS) | \
-                (((unsigned)(node)) & MW_CAN_NODE_MASK)))
+#define MW_CAN_ID(function, node) \
+    ((uint16_t)((((unsigned)(function)) << MW_CAN_NODE_BITS) | (((unsigned)(node)) & MW_CAN_NODE_MASK)))
 #define MW_CAN_ID_SYNC 0x000u
 
 /** What a node sends per sample. */
@@ -157,8 +156,8 @@ typedef struct mw_status {
     uint8_t error_flags;        /**< MW_ERRF_* */
     uint8_t protocol_version;   /**< MW_CAN_PROTOCOL_VERSION of the sender's firmware */
     uint16_t uptime_s;          /**< seconds since reset, wraps at 65536 */
-    uint8_t tx_overflows; /**< frames dropped (CAN TX full; sink: CAN RX full), wraps at 256 */
-    uint8_t sync_missed;  /**< SYNCs expected but not received (sink: 0), wraps at 256 */
+    uint8_t tx_overflows;       /**< frames dropped (CAN TX full; sink: CAN RX full), wraps at 256 */
+    uint8_t sync_missed;        /**< SYNCs expected but not received (sink: 0), wraps at 256 */
 } mw_status;
 
 /** Any decoded message: `function` selects the member of `u`. */

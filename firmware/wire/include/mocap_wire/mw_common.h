@@ -26,17 +26,15 @@ extern "C" {
 /** Error codes. All negative so that "ret < 0" means failure. */
 typedef enum mw_error {
     MW_OK = 0,
-    MW_ERR_ARGUMENT =
-        -1,            /**< caller error: NULL pointer or argument outside its documented domain */
-    MW_ERR_DLC = -2,   /**< CAN frame has the wrong data length for its ID (or DLC > 8) */
-    MW_ERR_ID = -3,    /**< CAN ID is not one of the IDs in docs/protocol.md (or > 0x7FF) */
-    MW_ERR_RANGE = -4, /**< a field holds a value outside its documented range */
-    MW_ERR_SPACE = -5, /**< the caller's output buffer (or the packet) is full */
-    MW_ERR_VERSION = -6, /**< TCP packet version is not MW_PACKET_VERSION */
-    MW_ERR_LENGTH =
-        -7,          /**< TCP packet header claims a frame count / payload length that cannot be */
-    MW_ERR_CRC = -8, /**< TCP packet CRC-32 does not match */
-    MW_ERR_RECORD = -9 /**< TCP packet payload holds a bad frame record (ID bits, DLC, length) */
+    MW_ERR_ARGUMENT = -1, /**< caller error: NULL pointer or argument outside its documented domain */
+    MW_ERR_DLC = -2,      /**< CAN frame has the wrong data length for its ID (or DLC > 8) */
+    MW_ERR_ID = -3,       /**< CAN ID is not one of the IDs in docs/protocol.md (or > 0x7FF) */
+    MW_ERR_RANGE = -4,    /**< a field holds a value outside its documented range */
+    MW_ERR_SPACE = -5,    /**< the caller's output buffer (or the packet) is full */
+    MW_ERR_VERSION = -6,  /**< TCP packet version is not MW_PACKET_VERSION */
+    MW_ERR_LENGTH = -7,   /**< TCP packet header claims a frame count / payload length that cannot be */
+    MW_ERR_CRC = -8,      /**< TCP packet CRC-32 does not match */
+    MW_ERR_RECORD = -9    /**< TCP packet payload holds a bad frame record (ID bits, DLC, length) */
 } mw_error;
 
 /** Static, human-readable name of an error code ("MW_ERR_DLC"); "MW_ERR_?" for unknown codes. */

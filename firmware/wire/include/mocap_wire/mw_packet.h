@@ -45,8 +45,7 @@ extern "C" {
 /** Most frames one packet may carry (63 nodes x 4 frames + SYNC + STATUS fit with room). */
 #define MW_PACKET_MAX_FRAMES 512u
 /** Largest packet on the wire: 22 + 512 * 13 + 4 = 6682 bytes. */
-#define MW_PACKET_MAX_SIZE \
-    (MW_PACKET_HEADER_SIZE + MW_PACKET_MAX_FRAMES * MW_PACKET_RECORD_MAX + MW_PACKET_CRC_SIZE)
+#define MW_PACKET_MAX_SIZE (MW_PACKET_HEADER_SIZE + MW_PACKET_MAX_FRAMES * MW_PACKET_RECORD_MAX + MW_PACKET_CRC_SIZE)
 
 /** Header fields a sink chooses (magic, version, count and length are implied). */
 typedef struct mw_packet_header {
@@ -76,8 +75,8 @@ size_t mw_packet_size(const mw_stamped_frame* frames, size_t count);
  * MW_ERR_ARGUMENT (NULL), MW_ERR_LENGTH (count > MW_PACKET_MAX_FRAMES), MW_ERR_RECORD (a frame
  * with id > 0x7FF or dlc > 8), MW_ERR_SPACE (capacity too small). O(bytes).
  */
-int32_t mw_packet_encode(const mw_packet_header* header, const mw_stamped_frame* frames,
-                         size_t count, uint8_t* out, size_t capacity);
+int32_t mw_packet_encode(const mw_packet_header* header, const mw_stamped_frame* frames, size_t count, uint8_t* out,
+                         size_t capacity);
 
 /**
  * Incremental packet writer for the sink. The builder borrows `buf` from begin() until finish()
@@ -92,8 +91,7 @@ typedef struct mw_packet_builder {
 
 /** Starts a packet in buf. MW_ERR_SPACE if capacity < MW_PACKET_HEADER_SIZE + MW_PACKET_CRC_SIZE.
  */
-int mw_packet_builder_begin(mw_packet_builder* builder, uint8_t* buf, size_t capacity,
-                            const mw_packet_header* header);
+int mw_packet_builder_begin(mw_packet_builder* builder, uint8_t* buf, size_t capacity, const mw_packet_header* header);
 
 /**
  * Appends one frame record. MW_ERR_RECORD for a bad frame (id > 0x7FF, dlc > 8), MW_ERR_SPACE if
@@ -162,8 +160,8 @@ size_t mw_stream_decoder_buffered(const mw_stream_decoder* decoder);
  * `data` may be NULL when len is 0. `out` is written only when MW_STREAM_PACKET is returned.
  * Cost: O(consumed + buffered) per call; no allocation.
  */
-mw_stream_result mw_stream_decoder_feed(mw_stream_decoder* decoder, const uint8_t* data, size_t len,
-                                        size_t* consumed, mw_packet* out);
+mw_stream_result mw_stream_decoder_feed(mw_stream_decoder* decoder, const uint8_t* data, size_t len, size_t* consumed,
+                                        mw_packet* out);
 
 #ifdef __cplusplus
 }

@@ -41,12 +41,7 @@ extern "C" {
 #define MW_MAG_INVALID INT16_MIN
 
 /** Accelerometer full-scale range; the values equal the MPU9250 ACCEL_FS_SEL field. */
-typedef enum mw_accel_range {
-    MW_ACCEL_2G = 0,
-    MW_ACCEL_4G = 1,
-    MW_ACCEL_8G = 2,
-    MW_ACCEL_16G = 3
-} mw_accel_range;
+typedef enum mw_accel_range { MW_ACCEL_2G = 0, MW_ACCEL_4G = 1, MW_ACCEL_8G = 2, MW_ACCEL_16G = 3 } mw_accel_range;
 
 /** Gyroscope full-scale range; the values equal the MPU9250 GYRO_FS_SEL field. */
 typedef enum mw_gyro_range {
