@@ -12,8 +12,8 @@
 # the change that caused it.
 #
 # --record-raw first re-records the replay input, data/walk.mocapraw: the real daemon on
-# loopback fed by `mocap-sim stream` (1 subject, 15 nodes, 50 Hz, 1.2 s still T-pose then
-# the built-in walk, 2.5 s). Live timing differs run to run, so a new recording changes the
+# loopback fed by `mocap-sim stream` (1 subject, 15 nodes, 50 Hz, 2.2 s still T-pose then
+# the built-in walk, 3.4 s in all). Live timing differs run to run, so a new recording changes the
 # replay's expected files; do it only when the raw format changes.
 set -euo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -62,8 +62,8 @@ TOML
   "$MOCAPD" --config "$SCRATCH/record.toml" > "$SCRATCH/record.log" 2>&1 &
   DAEMON=$!
   for _ in $(seq 100); do (echo > "/dev/tcp/127.0.0.1/$SINK") 2>/dev/null && break; sleep 0.1; done
-  "$MOCAP_SIM" stream --connect "127.0.0.1:$SINK" --subjects 1 --nodes 15 --rate 50 --duration 2.5 \
-    --calibrate-s 1.2 --motion walk --seed 12
+  "$MOCAP_SIM" stream --connect "127.0.0.1:$SINK" --subjects 1 --nodes 15 --rate 50 --duration 3.4 \
+    --calibrate-s 2.2 --motion walk --seed 12
   kill -TERM "$DAEMON"
   wait "$DAEMON"
   DAEMON=""
@@ -78,6 +78,7 @@ for run in 1 2; do
   export MOCAP_REGRESSION_WRITE="$SCRATCH/run$run"
   mkdir "$MOCAP_REGRESSION_WRITE"
   for name in $filters; do "$HERE/run_case.sh" filter "$name"; done
+  "$HERE/run_case.sh" replay
 done
 diff -r "$SCRATCH/run1" "$SCRATCH/run2" || { echo "NOT DETERMINISTIC: two runs differ (above)" >&2; exit 1; }
 echo "deterministic: two runs gave identical files"
