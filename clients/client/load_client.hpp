@@ -51,7 +51,7 @@ struct LoadResult {
 
 LoadResult run_load(const LoadOptions& options);
 
-/// One JSON object (design.md contract: clients, frames, gaps, drops, p50_ms, p90_ms,
+/// One JSON object (docs/design.md, "Command-line contracts": clients, frames, gaps, drops, p50_ms, p90_ms,
 /// p99_ms, max_ms; plus the other LoadResult fields).
 std::string load_result_json(const LoadResult& result);
 

@@ -1,6 +1,6 @@
 // evaluation.hpp — orientation error metrics of a filter run against a reference.
 //
-// Definitions (design.md, as in the BROAD benchmark): q_err = q_est ⊗ conj(q_ref);
+// Definitions (docs/design.md, "Error metrics", as in the BROAD benchmark): q_err = q_est ⊗ conj(q_ref);
 // total = 2·acos(|w|), heading = 2·atan(|z/w|), inclination = 2·acos(√(w²+z²)); the
 // earth z axis must be vertical (ENU or NED). Roll/pitch/yaw errors are differences of
 // ZYX Euler angles of q_est and q_ref, wrapped to (-180°, 180°]. RMSE over the evaluated

@@ -1,4 +1,4 @@
-// mocap-filter: runs one orientation filter over a benchmark recording (design.md contract).
+// mocap-filter: runs one orientation filter over a benchmark recording (docs/design.md, "Command-line contracts").
 //
 //   mocap-filter --filter NAME [--param k=v]... [--frame enu|ned] --in IN.csv --out OUT.csv
 //                [--eval] [--skip-seconds S]

@@ -1,4 +1,4 @@
-// recording_csv.hpp — the benchmark CSV of one sensor, read and written (design.md).
+// recording_csv.hpp — the benchmark CSV of one sensor, read and written (docs/design.md, "Command-line contracts").
 //
 // Input header: t,gx,gy,gz,ax,ay,az,mx,my,mz and optionally qw,qx,qy,qz (reference
 // orientation) and movement (0/1: samples to evaluate), in any order; unknown columns are

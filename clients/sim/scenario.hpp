@@ -10,9 +10,10 @@
 //   magnetic   realistic plus a bounded magnetic disturbance near the middle (a steel object:
 //              the horizontal field turns by 39° and its norm and dip change a little).
 //
-// Conventions (design.md): earth frame ENU, q_earth_sensor rotates sensor vectors into the
-// earth frame, (w, x, y, z) Hamilton. The accelerometer reads real specific force
-// f = R(q)ᵀ (a_lin + [0, 0, 9.81]) (+9.81 on the up axis at rest), not the paper's sign.
+// Conventions (docs/design.md, "Quaternions and frames"): earth frame ENU, q_earth_sensor
+// rotates sensor vectors into the earth frame, (w, x, y, z) Hamilton. The accelerometer reads
+// real specific force f = R(q)ᵀ (a_lin + [0, 0, 9.81]) (+9.81 on the up axis at rest), not the
+// paper's sign.
 //
 // Discretisation: row k's gyro reading (without bias and noise) is the constant body rate
 // that carries truth k-1 to truth k over dt: q_k = q_{k-1} ⊗ exp(ω_k dt / 2). A filter that

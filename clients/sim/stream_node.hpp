@@ -1,7 +1,7 @@
 // stream_node.hpp — one simulated sensor node of `mocap-sim stream`: from its segment's true
 // motion to the CAN frames an MPU9250 node would send for one SYNC.
 //
-// Model (ENU earth frame, design.md conventions):
+// Model (ENU earth frame, docs/design.md, "Quaternions and frames"):
 //   q_earth_sensor = q_earth_segment ⊗ q_segment_sensor, with a fixed mounting rotation drawn
 //   per node from the seed: a random axis and an angle up to 30° (the root segment's node
 //   turns only about its own x axis, so its x axis still points forward for the daemon's

@@ -1,4 +1,4 @@
-// clock.hpp — injected time source (house style 3: inject time, never fetch it).
+// clock.hpp — injected time source (docs/style.md, "Inject time").
 //
 // Core never reads a clock itself; the daemon passes an implementation (wall clock,
 // CLOCK_REALTIME µs, so stage stamps compare with the sink's and the client's clocks) and

@@ -1,5 +1,5 @@
 // counters.hpp — monotonically increasing event counters, grouped per component
-// (house style 5: every component exposes counters that only go up; the daemon publishes them).
+// (docs/style.md, "Counters only go up": every component exposes counters that only go up; the daemon publishes them).
 //
 // Contract
 // - Counter: add() from any thread (relaxed atomic fetch_add: a locked read-modify-write,

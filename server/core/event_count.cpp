@@ -34,7 +34,7 @@ void EventCount::wait(Key key) noexcept {
 }
 
 bool EventCount::wait_for(Key key, std::int64_t timeout_us) noexcept {
-    // One sleep at most: the caller owns time (house style 3) and loops on its own clock.
+    // One sleep at most: the caller owns time (docs/style.md, "Inject time") and loops on its own clock.
     bool notified = epoch_.load(std::memory_order_acquire) != key;
     if (!notified && timeout_us > 0) {
         const timespec rel{static_cast<time_t>(timeout_us / 1'000'000),

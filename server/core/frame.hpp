@@ -1,7 +1,7 @@
 // frame.hpp — the values that travel through the pipeline: one segment's sample in,
 // one subject's assembled pose frame out.
 //
-// Ownership: plain values, copied into fixed-capacity rings (no heap, house style 7).
+// Ownership: plain values, copied into fixed-capacity rings (no heap: docs/style.md, "Hot path never allocates").
 // Times: every *_us field is microseconds. sample_us is the sample instant on the sink's
 // clock; the stage stamps are the daemon host's wall clock (CLOCK_REALTIME, µs since the
 // epoch) so that a client on the same host (or a PTP/NTP-synchronised one) can measure

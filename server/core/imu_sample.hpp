@@ -1,6 +1,6 @@
 // imu_sample.hpp — one timestamped 9-axis sample from one sensor node.
 //
-// Units (house style rule 4): seconds are never stored; the timestamp is integer
+// Units (docs/style.md, "Units in names"): seconds are never stored; the timestamp is integer
 // microseconds on the clock of whoever produced the sample (the sink for live data,
 // the file for recordings). Nothing in this header reads a clock.
 // Thread-safety: plain value type.

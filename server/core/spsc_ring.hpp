@@ -6,7 +6,7 @@
 //   synchronisation point (thread start/join). size_approx()/capacity() may be called from
 //   any thread.
 // - Capacity is a power of two >= 2, fixed at construction (the only allocation). After
-//   that, push and pop never allocate, never block, never take a lock (house style 7).
+//   that, push and pop never allocate, never block, never take a lock (docs/style.md, "Hot path never allocates").
 // - T is copied in by try_push and out by try_pop (or read in place with front()/pop()).
 //   T must be default-constructible and nothrow-copy-assignable; slots are
 //   default-constructed once up front.

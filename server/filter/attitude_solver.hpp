@@ -2,10 +2,10 @@
 //
 // Two solvers of the same problem (find q with q ⊗ f_s ⊗ q* = up and q ⊗ h_s ⊗ q* = h_ref):
 //  - solve_lma: Levenberg–Marquardt, Fourati et al. (CSMO paper) steps 1–7, with the errata
-//    of design.md: the Jacobian is the 6x3 stack J = −2 [[ĥᴺ]ₓ ; [f̂ᴺ]ₓ] and the correction is
-//    applied on the earth side, q ← [1, Δ] ⊗ q. Both directions weigh the same, so magnetometer
-//    noise also tilts the result (as in the paper). Warm-started from a previous estimate it
-//    converges in 1–3 iterations.
+//    of docs/design.md, "Errata: LMA": the Jacobian is the 6x3 stack J = −2 [[ĥᴺ]ₓ ; [f̂ᴺ]ₓ]
+//    and the correction is applied on the earth side, q ← [1, Δ] ⊗ q. Both directions weigh the
+//    same, so magnetometer noise also tilts the result (as in the paper). Warm-started from a
+//    previous estimate it converges in 1–3 iterations.
 //  - solve_triad: closed form (TRIAD, accelerometer primary): tilt exactly from the
 //    accelerometer, heading from the field's horizontal direction. Used to initialise.
 //

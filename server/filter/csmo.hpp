@@ -1,5 +1,5 @@
 // csmo.hpp — Complementary Sliding Mode Observer (Fourati, Manamanni, Afilal, Handrich),
-// eq. 9–17 with the errata of design.md.
+// eq. 9–17 with the errata of docs/design.md, "Errata: CSMO".
 //
 // Each sample:
 //   1. propagate with the gyroscope:   q⁻ = q ⊗ exp(ω dt / 2)
@@ -7,7 +7,7 @@
 //      from q⁻ (a measurement the solver rejects skips steps 3–4 and is counted)
 //   3. error, sensor side:            q_e = q⁻* ⊗ q_m   (sign chosen so q_e,w >= 0)
 //   4. correction (switching + linear), multiplied onto the propagated quaternion
-//      (eq. 11 corrects the derivative; in discrete time it is a product, design.md):
+//      (eq. 11 corrects the derivative; in discrete time it is a product: docs/design.md, "Errata: CSMO"):
 //        c_i = s · (k_i · clip(q_e,i / ρ, −1, 1) + k_{i+3} · q_e,i),   i = x, y, z
 //        q = normalise(q⁻ ⊗ [1, c])
 //      (eq. 16 is garbled in print; the boundary-layer saturation clip(q_e/ρ) is the erratum.)
@@ -60,8 +60,8 @@ struct CsmoParams {
     double dip_deg = std::numeric_limits<double>::quiet_NaN();  ///< key "dip_deg": field
                                                                 ///< inclination below the horizon, deg (paper: 60); NaN
                                                                 ///< = each sample's own dip
-    double lm_lambda = 0.01;  ///< key "lm_lambda": LMA damping (design.md erratum: 0.01)
-    double lm_alpha = 1.0;    ///< key "lm_alpha": LMA step scale (design.md erratum: 1)
+    double lm_lambda = 0.01;  ///< key "lm_lambda": LMA damping (docs/design.md, "Errata: LMA": 0.01)
+    double lm_alpha = 1.0;    ///< key "lm_alpha": LMA step scale (docs/design.md, "Errata: LMA": 1)
     int lm_iterations = 2;    ///< key "lm_iterations": LMA iterations per sample (warm-started)
     double max_step_s = 0.5;  ///< key "max_step_s": larger timestamp steps restart the time base
 };

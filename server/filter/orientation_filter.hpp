@@ -1,9 +1,9 @@
 // orientation_filter.hpp — the one interface every orientation filter implements.
 //
-// A filter is Params + State (+ derived coefficients), no I/O, no clock (house style 2, 3):
-// the time step comes from the samples' own timestamps. One instance estimates one
-// sensor's q_earth_sensor in ENU (x east, y north, z up); callers that want NED convert
-// with q_enu_ned() (quaternion.hpp).
+// A filter is Params + State (+ derived coefficients), no I/O, no clock (docs/style.md,
+// "Params and State" and "Inject time"): the time step comes from the samples' own
+// timestamps. One instance estimates one sensor's q_earth_sensor in ENU (x east, y north,
+// z up); callers that want NED convert with q_enu_ned() (quaternion.hpp).
 //
 // Thread-safety: an instance is not thread-safe; the pipeline pins each instance to
 // one worker. Cost: documented per filter (tens of ns to µs per update).

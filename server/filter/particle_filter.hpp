@@ -1,6 +1,6 @@
 // particle_filter.hpp — regularised quaternion particle filter with gyro-bias state
 // (Li et al., "Networked Human Motion Capture System Based on Quaternion Navigation"),
-// with the erratum and the pitfalls listed in design.md handled.
+// with the erratum and the pitfalls of docs/design.md, "Errata: particle filter", handled.
 //
 // Particle i carries an attitude q_i (q_earth_sensor) and a gyro bias b_i (rad/s).
 //   init     around the first measurement q_m (not uniformly): q_i = exp(δ_i/2) ⊗ q_m with

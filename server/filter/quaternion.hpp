@@ -1,6 +1,6 @@
 // quaternion.hpp — quaternion utilities shared by every filter and the skeleton.
 //
-// Convention (design.md): quaternions are (w, x, y, z), Hamilton product, unit norm.
+// Convention (docs/design.md, "Quaternions and frames"): quaternions are (w, x, y, z), Hamilton product, unit norm.
 // `q_a_b` rotates a vector from frame b into frame a: v_a = q_a_b ⊗ v_b ⊗ q_a_b*.
 // Eigen::Quaterniond already implements the Hamilton product and stores (x, y, z, w)
 // internally; construct it as Quat(w, x, y, z). All functions are pure and cheap
@@ -79,7 +79,7 @@ Quat from_euler_zyx(const EulerZyx& e);
 /// Smallest angle of the rotation q, rad in [0, π].
 double angle_rad(const Quat& q);
 
-/// Error metrics of the BROAD benchmark (design.md) for q_err = q_est ⊗ conj(q_ref),
+/// Error metrics of the BROAD benchmark (docs/design.md, "Error metrics") for q_err = q_est ⊗ conj(q_ref),
 /// where the earth z axis is vertical (ENU or NED).
 double error_total_rad(const Quat& q_err);        ///< 2·acos(|w|)
 double error_heading_rad(const Quat& q_err);      ///< 2·atan(|z/w|)

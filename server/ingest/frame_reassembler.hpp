@@ -1,6 +1,6 @@
 // frame_reassembler.hpp — CAN frames of one bus -> one sample per node per SYNC instant.
 //
-// The same reassembler serves both transports (design.md): the sink tunnels CAN frames over
+// The same reassembler serves both transports (docs/design.md, "Data flow"): the sink tunnels CAN frames over
 // TCP, SocketCAN reads them from the bus; either way ingest hands every frame with a
 // receive time to the bus's FrameReassembler.
 //

@@ -1,6 +1,6 @@
 // client_send_queue.hpp — one client's bounded queue of outgoing frames: when it is
 // full the OLDEST frame is dropped and counted, so a client that reads too slowly sees
-// a gap and never slows the pipeline (house style 6). Used by the pose stream
+// a gap and never slows the pipeline (docs/style.md, "Encode once, drop the oldest"). Used by the pose stream
 // (client_session), the live BVH sessions (bvh_server) and the viewer's WebSockets
 // (http_server).
 //

@@ -2,7 +2,7 @@
 //
 // A frame is encoded ONCE per field selection into an immutable shared buffer
 // (length prefix + mocap.v1.ServerMessage{frame}); every subscribed client writes the
-// same buffer (house style 6). The encoder reuses one message object, so after the
+// same buffer (docs/style.md, "Encode once, drop the oldest"). The encoder reuses one message object, so after the
 // first frames its repeated fields keep their capacity and encoding allocates only the
 // output buffer.
 //

@@ -2,7 +2,7 @@
 // next to the assembler's SubjectFrame: the calibrated skeleton pose.
 //
 // The skeleton component computes these values; the serve component only encodes them,
-// so it does not depend on the body model. Plain value type, no heap (house style 7).
+// so it does not depend on the body model. Plain value type, no heap (docs/style.md, "Hot path never allocates").
 #pragma once
 
 #include <array>

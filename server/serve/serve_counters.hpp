@@ -1,4 +1,4 @@
-// serve_counters.hpp — counters of the pose service (only go up; house style 5) and a
+// serve_counters.hpp — counters of the pose service (docs/style.md, "Counters only go up") and a
 // log limiter so that a flood of bad clients yields one log line per interval.
 //
 // Thread-safety: all members are atomics, updated with relaxed ordering from any serve

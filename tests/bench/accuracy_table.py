@@ -219,7 +219,7 @@ def render(args, names, available, scenarios, seeds, table, conv, study, runs):
     L.append("It runs the real tools, `mocap-sim csv` then `mocap-filter --eval --skip-seconds %g`, for every "
              "filter of `mocap-filter --list` (%s) on the three scenarios with seeds %d–%d (%d filter runs). "
              "Every number is a median over the seeds, with the smallest and largest in parentheses. "
-             "Errors are the BROAD definitions of design.md (q_err = q_est ⊗ conj(q_ref); total, inclination, "
+             "Errors are the BROAD definitions of [docs/design.md, \"Error metrics\"](design.md#error-metrics) (q_err = q_est ⊗ conj(q_ref); total, inclination, "
              "heading; roll/pitch/yaw are ZYX Euler differences, wrapped), RMSE in degrees over the samples with "
              "`movement = 1` after the first %g s."
              % (SKIP_S, ", ".join("`%s`" % n for n in names), seeds[0], seeds[-1], runs, SKIP_S))

@@ -149,7 +149,7 @@ TEST(ParticleFilter, FouratiScenarioWithItsNoiseLevels) {
 }
 
 TEST(ParticleFilter, BiasShrinkageAndJitterAndRegularisationMatter) {
-    // design.md pitfalls, measured: without bias shrinkage/jitter the bias particles
+    // docs/design.md, "Errata: particle filter", measured: without bias shrinkage/jitter the bias particles
     // collapse or drift (mean 4.3° vs 0.7°); without regularisation the cloud degenerates.
     const double base = mean_total({}, sim::ScenarioKind::realistic, {1, 2, 3});
     ParticleFilterParams no_bias_reg;

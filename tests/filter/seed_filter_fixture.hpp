@@ -1,5 +1,5 @@
 // seed_filter_fixture.hpp — helpers shared by the CSMO and particle-filter tests: run a
-// filter over a simulated recording and score it with design.md's error metrics, and a
+// filter over a simulated recording and score it with the error metrics of docs/design.md, "Error metrics",, and a
 // small inline motion (constant body rate, gravity and field rotated by the truth).
 #pragma once
 

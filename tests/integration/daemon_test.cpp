@@ -1,5 +1,5 @@
 // The real mocapd on loopback with a generated config, fed by the real mocap-sim stream,
-// read through the real pose port (house style 10). Orientation accuracy is checked against
+// read through the real pose port (docs/style.md, "Real binaries on loopback"). Orientation accuracy is checked against
 // the simulator's own truth file.
 #include <gtest/gtest.h>
 

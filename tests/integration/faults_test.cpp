@@ -1,9 +1,9 @@
-// Faults, bad input, signals and limits against the real mocapd on loopback (house style 10;
-// docs/reliability.md lists what each test tries and what it measured). Every test keeps a
-// normal client subscribed to a normally streaming subject and requires it to receive every
-// frame (gap-free) while the daemon is attacked or faulted. Sinks are either the real
-// `mocap-sim stream` or WireSink: packets built here with the wire library, so a test can cut,
-// reorder, duplicate or re-stamp them.
+// Faults, bad input, signals and limits against the real mocapd on loopback (docs/style.md,
+// "Real binaries on loopback"; docs/reliability.md lists what each test tries and what it
+// measured). Every test keeps a normal client subscribed to a normally streaming subject and
+// requires it to receive every frame (gap-free) while the daemon is attacked or faulted. Sinks
+// are either the real `mocap-sim stream` or WireSink: packets built here with the wire library,
+// so a test can cut, reorder, duplicate or re-stamp them.
 #include <arpa/inet.h>
 #include <ifaddrs.h>
 #include <netinet/in.h>
