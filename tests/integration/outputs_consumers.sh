@@ -22,8 +22,10 @@
 set -euo pipefail
 MOCAPD=$1 SIM=$2 CLIENT=$3 REPAIR=$4 ROUNDTRIP=$5
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-CLIP="${MOCAP_CLIP:-$HERE/../../../shared/data/motion/cmu_131_01_walk.bvh}"
-[[ -f "$CLIP" ]] || CLIP=/work/shared/data/motion/cmu_131_01_walk.bvh
+# The clip is committed with the skeleton tests: CMU Graphics Lab Motion Capture Database,
+# subject 131 (credit in tests/skeleton/data/README.md). MOCAP_CLIP picks another BVH file.
+CLIP="${MOCAP_CLIP:-$HERE/../skeleton/data/cmu_131_01_walk.bvh}"
+[[ -f "$CLIP" ]] || { echo "FAIL: motion clip $CLIP not found" >&2; exit 1; }
 JOINTS=15
 VALUES=$((6 + 3 * (JOINTS - 1)))
 DIR="$(mktemp -d /tmp/mocap-outputs.XXXXXX)"
