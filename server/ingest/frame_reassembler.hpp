@@ -1,8 +1,8 @@
 // frame_reassembler.hpp — CAN frames of one bus -> one sample per node per SYNC instant.
 //
-// The same reassembler serves both transports (docs/design.md, "Data flow"): the sink tunnels CAN frames over
-// TCP, SocketCAN reads them from the bus; either way ingest hands every frame with a
-// receive time to the bus's FrameReassembler.
+// The same reassembler serves both transports (docs/design.md, "Data flow"): the sink tunnels
+// CAN frames over TCP, SocketCAN reads them from the bus; either way ingest hands every frame
+// with a receive time to the bus's FrameReassembler.
 //
 // Per node, the ACCEL, GYRO and MAG frames of one SYNC instant (recognised by the low 16
 // counter bits they carry, extended against the bus's latest SYNC with mw_counter_extend)
