@@ -14,14 +14,6 @@ namespace {
 constexpr std::uint32_t kMaxSubscribeSubjects = 4096;
 constexpr std::uint32_t kMaxDecimation = 100000;
 
-bool is_loopback(const asio::ip::address& address) {
-    if (address.is_loopback()) return true;
-    if (address.is_v6() && address.to_v6().is_v4_mapped()) {
-        return asio::ip::make_address_v4(asio::ip::v4_mapped, address.to_v6()).is_loopback();
-    }
-    return false;
-}
-
 }  // namespace
 
 SharedBytes encode_goodbye(CloseReason reason, std::string_view text) {
@@ -29,17 +21,6 @@ SharedBytes encode_goodbye(CloseReason reason, std::string_view text) {
     message.mutable_goodbye()->set_reason(static_cast<v1::GoodbyeReason>(reason));
     message.mutable_goodbye()->set_message(std::string(text));
     return encode_server_message(message);
-}
-
-bool token_equal(std::string_view expected, std::string_view given) {
-    const std::size_t n = std::max(expected.size(), given.size());
-    unsigned diff = expected.size() == given.size() ? 0u : 1u;
-    for (std::size_t i = 0; i < n; ++i) {
-        const auto a = static_cast<unsigned char>(i < expected.size() ? expected[i] : 0);
-        const auto b = static_cast<unsigned char>(i < given.size() ? given[i] : 0);
-        diff |= static_cast<unsigned>(a ^ b);
-    }
-    return diff == 0;
 }
 
 ClientSession::ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, std::size_t lane, std::uint64_t id)
@@ -61,9 +42,7 @@ ClientSession::ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, 
 ClientSession::~ClientSession() = default;
 
 void ClientSession::start() {
-    boost::system::error_code ec;
-    const auto peer = socket_.remote_endpoint(ec);
-    peer_is_loopback_ = !ec && is_loopback(peer.address());
+    peer_is_loopback_ = peer_on_loopback(socket_);
     if (SharedBytes hello = ctx_.hello()) replies_.push_back(std::move(hello));
     do_write();
     do_read();
@@ -236,23 +215,11 @@ void ClientSession::handle_stats(const v1::ClientMessage& message) {
 void ClientSession::handle_control(const v1::ClientMessage& message) {
     const v1::ControlRequest& request = message.control();
     const ServeConfig& config = ctx_.config;
-    auto refuse = [&](ServeCounters::C& counter, const char* why) {
-        counter.fetch_add(1, std::memory_order_relaxed);
-        std::uint64_t suppressed = 0;
-        if (ctx_.log.allow(LogLimiter::kControlRefused, suppressed)) {
-            spdlog::warn("serve: control request from client {} refused: {} ({} suppressed)", id_, why, suppressed);
-        }
-        return ControlResult::failure(why);
-    };
     ControlResult result;
-    if (config.control_token.empty()) {
-        result = refuse(ctx_.counters.control_refused_disabled, "control disabled (no token configured)");
-    } else if (config.control_loopback_only && !peer_is_loopback_) {
-        result = refuse(ctx_.counters.control_refused_not_loopback, "control only from loopback");
-    } else if (request.token().empty()) {
-        result = refuse(ctx_.counters.control_refused_no_token, "token required");
-    } else if (!token_equal(config.control_token, request.token())) {
-        result = refuse(ctx_.counters.control_refused_bad_token, "bad token");
+    const std::string who = fmt::format("serve: control request from client {}", id_);
+    if (const auto refusal = authorize_control({config.control_token, config.control_loopback_only}, peer_is_loopback_,
+                                               request.token(), ctx_.counters.control, ctx_.log, who)) {
+        result = ControlResult::failure(refusal->reason);
     } else {
         const ControlHandlers& h = ctx_.handlers;
         using R = v1::ControlRequest;
@@ -276,7 +243,7 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
                 result = ControlResult::failure("no action in request");
                 break;
         }
-        (result.ok ? ctx_.counters.control_ok : ctx_.counters.control_failed).fetch_add(1, std::memory_order_relaxed);
+        ctx_.counters.control.count_result(result);
     }
     reply_->Clear();
     v1::ControlReply* reply = reply_->mutable_control_reply();

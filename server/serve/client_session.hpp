@@ -50,9 +50,6 @@ enum class CloseReason { kServerFull = 1, kTimeout, kMalformed, kRateLimited, kS
 /// Goodbye message bytes (length-prefixed) for `reason`.
 SharedBytes encode_goodbye(CloseReason reason, std::string_view text);
 
-/// Constant-time token comparison (time depends only on the longer length).
-bool token_equal(std::string_view expected, std::string_view given);
-
 /// What every session of one server shares. Owned by PoseServer; outlives sessions.
 struct SessionContext {
     const ServeConfig& config;

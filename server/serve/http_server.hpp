@@ -51,6 +51,7 @@
 
 #include "core/asio.hpp"
 #include "core/frame.hpp"
+#include "serve/control_access.hpp"
 #include "serve/pose_frame.hpp"
 #include "serve/prometheus_text.hpp"
 #include "serve/publish_backlog.hpp"
@@ -115,11 +116,7 @@ struct HttpServerCounters {
     C ws_backlog_dropped{0};  ///< the serve thread fell behind publish()
     C ws_client_messages{0};  ///< messages browsers sent (ignored)
     C write_errors{0};
-    C control_ok{0};
-    C control_failed{0};
-    C control_refused_disabled{0};
-    C control_refused_not_loopback{0};
-    C control_refused_bad_token{0};  ///< missing or wrong token
+    ControlCounters control;  ///< http.control_* (control_access.hpp)
     /// Every counter as "http.<name>".
     [[nodiscard]] std::vector<NamedCounter> snapshot() const;
 };
@@ -148,9 +145,9 @@ public:
     /// Wall-clock time of the newest published frame (0 = none yet); any thread.
     [[nodiscard]] std::int64_t last_frame_us() const { return last_frame_us_.load(); }
 
-    class Session;  // http_server.cpp: base of the two below
-    class HttpSession;
-    class WsSession;
+    class Session;      // ws_connection.hpp: base of the two below
+    class HttpSession;  // http_connection.hpp
+    class WsSession;    // ws_connection.hpp
 
 private:
     friend class HttpSession;

@@ -27,12 +27,7 @@ std::vector<NamedCounter> ServeCounters::snapshot() const {
     add("rate_limited", rate_limited);
     add("write_errors", write_errors);
     add("stats_requests", stats_requests);
-    add("control_ok", control_ok);
-    add("control_failed", control_failed);
-    add("control_refused_disabled", control_refused_disabled);
-    add("control_refused_not_loopback", control_refused_not_loopback);
-    add("control_refused_no_token", control_refused_no_token);
-    add("control_refused_bad_token", control_refused_bad_token);
+    control.append_to(out, "serve.");
     return out;
 }
 

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "serve/control_access.hpp"
 #include "serve/serve_config.hpp"
 
 namespace mocap::serve {
@@ -35,12 +36,7 @@ struct ServeCounters {
     C rate_limited{0};        ///< clients closed for sending too many messages
     C write_errors{0};
     C stats_requests{0};
-    C control_ok{0};
-    C control_failed{0};            ///< authorised, but the action reported an error
-    C control_refused_disabled{0};  ///< no token configured
-    C control_refused_not_loopback{0};
-    C control_refused_no_token{0};
-    C control_refused_bad_token{0};
+    ControlCounters control;  ///< serve.control_* (control_access.hpp)
 
     /// Every counter as "serve.<name>".
     [[nodiscard]] std::vector<NamedCounter> snapshot() const;

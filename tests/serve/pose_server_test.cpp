@@ -358,7 +358,7 @@ TEST(PoseServer, ControlNeedsTheRightToken) {
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;  // no token
     EXPECT_FALSE(reply.ok());
     EXPECT_NE(reply.error().find("token"), std::string::npos);
-    EXPECT_EQ(s.server.counters().control_refused_no_token.load(), 1u);
+    EXPECT_EQ(s.server.counters().control.refused_no_token.load(), 1u);
 
     request.set_token("s3cret-tokem");  // wrong, same length
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
@@ -366,7 +366,7 @@ TEST(PoseServer, ControlNeedsTheRightToken) {
     request.set_token("s3cret-token-and-more");  // right prefix, longer
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
-    EXPECT_EQ(s.server.counters().control_refused_bad_token.load(), 2u);
+    EXPECT_EQ(s.server.counters().control.refused_bad_token.load(), 2u);
     EXPECT_EQ(calls.load(), 0);
 
     request.set_token("s3cret-token");
@@ -387,8 +387,8 @@ TEST(PoseServer, ControlNeedsTheRightToken) {
     reload.mutable_reload();
     ASSERT_TRUE(c.control(reload, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
-    EXPECT_EQ(s.server.counters().control_ok.load(), 1u);
-    EXPECT_EQ(s.server.counters().control_failed.load(), 2u);
+    EXPECT_EQ(s.server.counters().control.ok.load(), 1u);
+    EXPECT_EQ(s.server.counters().control.failed.load(), 2u);
 }
 
 TEST(PoseServer, ControlIsRefusedWhenNoTokenIsConfigured) {
@@ -410,7 +410,7 @@ TEST(PoseServer, ControlIsRefusedWhenNoTokenIsConfigured) {
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
     EXPECT_EQ(calls.load(), 0);
-    EXPECT_EQ(s.server.counters().control_refused_disabled.load(), 1u);
+    EXPECT_EQ(s.server.counters().control.refused_disabled.load(), 1u);
 }
 
 // The first IPv4 address of this host that is not loopback, if any.
@@ -451,7 +451,7 @@ TEST(PoseServer, ControlFromANonLoopbackPeerIsRefusedByDefault) {
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
     EXPECT_NE(reply.error().find("loopback"), std::string::npos);
-    EXPECT_EQ(s.server.counters().control_refused_not_loopback.load(), 1u);
+    EXPECT_EQ(s.server.counters().control.refused_not_loopback.load(), 1u);
     EXPECT_EQ(calls.load(), 0);
 
     PoseClient local = s.connect();  // the same request over loopback is accepted

@@ -1,0 +1,98 @@
+// pose_json.cpp — the web endpoint's JSON texts (pose_json.hpp).
+#include "serve/pose_json.hpp"
+
+#include <spdlog/fmt/fmt.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iterator>
+#include <nlohmann/json.hpp>
+
+#include "serve/http_server.hpp"
+
+namespace mocap::serve {
+
+namespace {
+
+// `v` rounded to `decimals` places, so the shortest text nlohmann prints has at most that
+// many (0.1 mm for lengths); a non-finite value stays so and is written as null.
+double round_to(double v, int decimals) {
+    const double scale = std::pow(10.0, decimals);
+    return std::isfinite(v) ? std::round(v * scale) / scale : v;
+}
+
+// Names come from the configuration: invalid UTF-8 becomes U+FFFD rather than an exception.
+std::string dump(const nlohmann::ordered_json& j) {
+    return j.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
+}
+
+// JSON has no NaN/Inf: a non-finite value is written as null.
+void append_number(std::string& out, double v, int decimals) {
+    if (!std::isfinite(v)) {
+        out += "null";
+        return;
+    }
+    fmt::format_to(std::back_inserter(out), "{:.{}f}", v, decimals);
+}
+
+}  // namespace
+
+std::string encode_hello_json(const HttpDescription& description, const HelloJsonFields& fields) {
+    nlohmann::ordered_json segments = nlohmann::ordered_json::array();
+    for (const HttpSegment& s : description.segments) {
+        segments.push_back({{"name", s.name},
+                            {"parent", s.parent},
+                            {"end_m", {round_to(s.end_m[0], 4), round_to(s.end_m[1], 4), round_to(s.end_m[2], 4)}}});
+    }
+    const nlohmann::ordered_json hello{
+        {"type", "hello"},
+        {"subject", fields.subject},
+        {"subjects", description.subjects},
+        {"world_frame", description.world_frame},
+        {"queue_frames", fields.queue_frames},
+        {"control", {{"enabled", fields.control_enabled}, {"loopback_only", fields.control_loopback_only}}},
+        {"segments", std::move(segments)}};
+    return dump(hello);
+}
+
+std::string encode_frame_json(const SubjectFrame& frame, const SkeletonPose& pose, std::int64_t encoded_us) {
+    const std::size_t n = std::min<std::size_t>(frame.segment_count, pose.segment_count);
+    std::string out;
+    out.reserve(256 + n * 96);
+    const StageTimes& t = frame.times;
+    fmt::format_to(std::back_inserter(out),
+                   R"({{"type":"frame","subject":{},"sync":{},"sample_us":{},"stamps":{{"sink_send_us":{},)"
+                   R"("received_us":{},"filtered_us":{},"assembled_us":{},"encoded_us":{}}},"pos":[)",
+                   frame.subject_id, frame.sync, frame.sample_us, t.sink_send_us, t.received_us, t.filtered_us,
+                   t.assembled_us, encoded_us);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t k = 0; k < 3; ++k) {
+            if (i + k) out += ',';
+            append_number(out, pose.position_m[i][k], 4);
+        }
+    }
+    out += R"(],"q":[)";
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t k = 0; k < 4; ++k) {
+            if (i + k) out += ',';
+            append_number(out, pose.q_world_segment_wxyz[i][k], 5);
+        }
+    }
+    out += R"(],"flags":[)";
+    for (std::size_t i = 0; i < n; ++i) {
+        fmt::format_to(std::back_inserter(out), "{}{}", i ? "," : "",
+                       static_cast<unsigned>(frame.segments[i].flags | pose.extra_flags[i]));
+    }
+    out += "]}";
+    return out;
+}
+
+std::string encode_drops_json(std::uint64_t dropped, std::uint64_t dropped_total) {
+    return fmt::format(R"({{"type":"drops","dropped":{},"dropped_total":{}}})", dropped, dropped_total);
+}
+
+std::string encode_control_reply_json(const ControlResult& result) {
+    return dump(nlohmann::ordered_json{{"ok", result.ok}, {"error", result.error}}) + "\n";
+}
+
+}  // namespace mocap::serve
