@@ -29,7 +29,7 @@
 
 #include "core/frame.hpp"
 #include "skeleton/body_model.hpp"
-#include "skeleton/bvh.hpp"
+#include "skeleton/bvh_mapping.hpp"
 
 namespace mocap::sim {
 

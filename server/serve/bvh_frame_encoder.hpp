@@ -19,7 +19,7 @@
 #include "serve/bvh_text.hpp"
 #include "serve/pose_frame.hpp"
 #include "skeleton/body_model.hpp"
-#include "skeleton/bvh.hpp"
+#include "skeleton/bvh_write.hpp"
 
 namespace mocap::serve {
 

@@ -1,5 +1,6 @@
-// bvh.hpp — BVH (Biovision Hierarchy) reading and writing, and the mapping from a BVH
-// skeleton (the CMU clips) onto a BodyModel.
+// bvh.hpp — BVH (Biovision Hierarchy) clips: reading them, their axes and the global pose
+// of a frame. Writing is in bvh_write.hpp, the mapping of a BVH skeleton (the CMU clips)
+// onto a BodyModel in bvh_mapping.hpp; both build on the types here.
 //
 // Reading. parse_bvh() takes the whole text and returns a BvhClip or an error naming the
 // line. It is strict and bounded (BvhLimits), because files and live streams are untrusted:
@@ -22,16 +23,8 @@
 // faces ENU +x with its left on +y, and its rest pose gives identity joint orientations:
 // q_enu_joint = q_enu_bvh ⊗ q_bvh_joint ⊗ conj(q_enu_bvh).
 //
-// Writing. The writer emits a BodyModel as HIERARCHY (joint names = segment names, OFFSETs
-// in a configurable unit, centimetres by default; the root with 6 channels
-// Xposition Yposition Zposition + 3 rotations, every other joint 3 rotations, one rotation
-// order for all joints, ZXY by default; an End Site at every leaf from SegmentDef::end_m)
-// and one MOTION line per frame from world segment orientations and the root position.
-// The rest pose of a written file is the T-pose. A generic writer of a parsed clip exists
-// for round trips.
-//
 // Thread-safety: pure functions on values. Cost: parse O(text); global pose O(joints)
-// without allocation; append_bvh_motion_line allocates only if `out` lacks capacity.
+// without allocation.
 #pragma once
 
 #include <array>
@@ -45,7 +38,6 @@
 
 #include "core/frame.hpp"
 #include "skeleton/body_model.hpp"
-#include "skeleton/euler.hpp"
 
 namespace mocap::skeleton {
 
@@ -120,92 +112,5 @@ inline Vec3 bvh_from_enu(const Vec3& v) {
 /// Spans must hold clip.joints.size() entries (checked by assert). No allocation.
 void bvh_global_pose(const BvhClip& clip, std::span<const double> frame_values, double unit_m,
                      std::span<Quat> q_enu_joint, std::span<Vec3> p_enu_joint_m);
-
-/// Writes a parsed clip back as BVH text (6 decimals). parse_bvh(write_bvh(c)) == c to
-/// within 5e-7 in every value.
-std::string write_bvh(const BvhClip& clip);
-
-// --- BodyModel writer ------------------------------------------------------------------
-
-struct BvhWriteOptions {
-    double units_per_m = 100.0;  ///< OFFSET and root position unit: 100 = centimetres
-    RotationOrder order{};       ///< for every joint; default ZXY
-    int decimals = 4;            ///< digits after the point in MOTION values (degrees / unit)
-};
-
-/// "HIERARCHY\n" ... up to and including the root's closing "}\n". Model must be valid.
-std::string bvh_hierarchy_text(const BodyModel& model, const BvhWriteOptions& options = {});
-/// "MOTION\nFrames: N\nFrame Time: T\n".
-std::string bvh_motion_header(std::size_t frames, double frame_time_s);
-/// Values per MOTION line for this model: 6 + 3 × (segments − 1).
-std::size_t bvh_values_per_frame(const BodyModel& model);
-/// Appends one MOTION line (terminated by '\n') for world segment orientations
-/// (q_world_segment[i] for model segment i; world = ENU or the heading-aligned body frame)
-/// and the root joint position in metres (world axes).
-void append_bvh_motion_line(const BodyModel& model, const BvhWriteOptions& options,
-                            std::span<const Quat> q_world_segment, const Vec3& root_position_m, std::string& out);
-
-// --- Mapping a BVH skeleton onto a BodyModel --------------------------------------------
-
-/// Where one model segment comes from: the first of `joints` present in the clip drives
-/// the segment (its global orientation and position); the first of `tips` present gives
-/// the segment's long axis in the BVH rest pose ("End Site" = that joint's End Site;
-/// empty list = no long-axis correction, as for the pelvis).
-struct BvhSegmentSource {
-    std::string segment;
-    std::vector<std::string> joints;
-    std::vector<std::string> tips;
-};
-
-/// The 15 default segments from the CMU skeleton as converted for 3ds Max (the clips in
-/// the shared motion data: Hips, lowerback, Chest, Chest2, Neck, Head, LeftShoulder,
-/// LeftElbow, lhand, LeftHip, LeftKnee, LeftAnkle, LeftToe, ...), with the names of the
-/// other common CMU conversion (Hips, Spine1, Head, LeftArm, LeftForeArm, LeftHand,
-/// LeftUpLeg, LeftLeg, LeftFoot, LeftToeBase, ...) as fallbacks:
-///   pelvis <- Hips;  trunk <- Chest2 (the joint the arms hang from, tip Neck);
-///   head <- Head;  upper arm <- LeftArm|LeftShoulder (LeftArm first: in the second naming
-///   LeftShoulder is the collar);  forearm <- LeftElbow|LeftForeArm;
-///   hand <- lhand|LeftHand;  thigh <- LeftHip|LeftUpLeg;  calf <- LeftKnee|LeftLeg;
-///   foot <- LeftAnkle|LeftFoot;  and the same on the right.
-std::vector<BvhSegmentSource> cmu_segment_sources();
-
-/// Per model segment: the driving BVH joint and the constant rotation q_joint_segment with
-/// q_enu_segment = q_enu_joint ⊗ q_joint_segment. It turns the model's T-pose long axis
-/// (SegmentDef::end_m) onto the joint's rest-pose bone direction (shortest arc), so that
-/// segment orientations follow the model's frame convention (identity = T-pose). The CMU
-/// rest pose has the arms down, so a CMU clip at rest yields the N-pose (calibration.hpp).
-struct BvhSegmentMapping {
-    std::size_t segment_count = 0;
-    std::array<int, kMaxSegments> joint{};
-    std::array<Quat, kMaxSegments> q_joint_segment = identity_quats();
-    std::array<Vec3, kMaxSegments> rest_tip_enu = zero_vec3s();  ///< joint -> tip at rest, file units
-};
-
-struct BvhMappingResult {
-    std::optional<BvhSegmentMapping> mapping;
-    std::string error;  ///< names the segment or joint that could not be resolved
-    explicit operator bool() const { return mapping.has_value(); }
-};
-
-/// Every model segment must have a source whose joint exists in the clip.
-BvhMappingResult map_bvh_to_model(const BvhClip& clip, const BodyModel& model,
-                                  std::span<const BvhSegmentSource> sources);
-
-/// The model `base` (names, hierarchy, node ids, filters) with the clip's dimensions: each
-/// segment's offset is its driving joint's rest position relative to the parent's driving
-/// joint, turned into the parent's T-pose frame (conj(q_joint_segment) of the parent); each
-/// end_m keeps the base direction with the clip's rest bone length (segments without a
-/// tip keep base.end_m); root_height_m is the root joint's rest height above the lowest
-/// rest point of the clip. Forward kinematics of the result with bvh_segment_pose()
-/// orientations then reproduces the clip's limb joint positions (see the tests).
-/// unit_m = metres per file unit. No validation beyond the mapping's.
-BodyModel body_model_from_bvh(const BvhClip& clip, const BvhSegmentMapping& mapping, const BodyModel& base,
-                              double unit_m);
-
-/// Segment orientations (ENU) and segment origins (the driving joint's position, metres)
-/// from one frame's global joint pose (bvh_global_pose). No allocation.
-void bvh_segment_pose(const BvhSegmentMapping& mapping, std::span<const Quat> q_enu_joint,
-                      std::span<const Vec3> p_enu_joint_m, std::span<Quat> q_enu_segment,
-                      std::span<Vec3> p_enu_segment_m);
 
 }  // namespace mocap::skeleton

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "fuzz_target.hpp"
-#include "skeleton/bvh.hpp"
+#include "skeleton/bvh_write.hpp"
 
 namespace sk = mocap::skeleton;
 

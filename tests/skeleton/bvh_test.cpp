@@ -1,4 +1,6 @@
 #include "skeleton/bvh.hpp"
+#include "skeleton/bvh_mapping.hpp"
+#include "skeleton/bvh_write.hpp"
 
 #include <gtest/gtest.h>
 

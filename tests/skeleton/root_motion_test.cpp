@@ -5,7 +5,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "skeleton/bvh.hpp"
+#include "skeleton/bvh_mapping.hpp"
 
 namespace mocap::skeleton {
 namespace {
