@@ -8,8 +8,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <nlohmann/json.hpp>
 
-#include "json_out.hpp"
 #include "pose_client.hpp"
 
 namespace mocap::client {
@@ -183,56 +183,27 @@ LoadResult run_load(const LoadOptions& options) {
 }
 
 std::string load_result_json(const LoadResult& r) {
-    std::string out = "{";
-    auto key = [&out](const char* k) {
-        if (out.size() > 1) out += ',';
-        json_string(out, k);
-        out += ':';
-    };
-    auto opt = [&](const char* k, const std::optional<double>& v) {
-        key(k);
-        if (v) {
-            json_number(out, *v, 6);
-        } else {
-            out += "null";
-        }
-    };
-    key("clients");
-    json_uint(out, r.clients);
-    key("connected");
-    json_uint(out, r.connected);
-    key("stalled");
-    json_uint(out, r.stalled);
-    key("closed_early");
-    json_uint(out, r.closed_early);
-    key("duration_s");
-    json_number(out, r.duration_s, 6);
-    key("frames");
-    json_uint(out, r.frames);
-    key("frames_per_client_min");
-    json_uint(out, r.frames_per_client_min);
-    key("frames_per_client_max");
-    json_uint(out, r.frames_per_client_max);
-    key("gaps");
-    json_uint(out, r.gaps);
-    key("missing_frames");
-    json_uint(out, r.missing_frames);
-    key("drops");
-    json_uint(out, r.drops);
-    key("latency_samples");
-    json_uint(out, r.latency_samples);
-    key("negative_latencies");
-    json_uint(out, r.negative_latencies);
-    opt("p50_ms", r.p50_ms);
-    opt("p90_ms", r.p90_ms);
-    opt("p99_ms", r.p99_ms);
-    opt("max_ms", r.max_ms);
-    if (!r.error.empty()) {
-        key("error");
-        json_string(out, r.error);
-    }
-    out += '}';
-    return out;
+    auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); };
+    nlohmann::ordered_json j{{"clients", r.clients},
+                             {"connected", r.connected},
+                             {"stalled", r.stalled},
+                             {"closed_early", r.closed_early},
+                             {"duration_s", r.duration_s},
+                             {"frames", r.frames},
+                             {"frames_per_client_min", r.frames_per_client_min},
+                             {"frames_per_client_max", r.frames_per_client_max},
+                             {"gaps", r.gaps},
+                             {"missing_frames", r.missing_frames},
+                             {"drops", r.drops},
+                             {"latency_samples", r.latency_samples},
+                             {"negative_latencies", r.negative_latencies},
+                             {"p50_ms", opt(r.p50_ms)},
+                             {"p90_ms", opt(r.p90_ms)},
+                             {"p99_ms", opt(r.p99_ms)},
+                             {"max_ms", opt(r.max_ms)}};
+    if (!r.error.empty()) j["error"] = r.error;
+    // An error text is not ours to trust as UTF-8: invalid bytes become U+FFFD, not an exception.
+    return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace mocap::client

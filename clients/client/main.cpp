@@ -16,10 +16,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "core/guarded_main.hpp"
-#include "json_out.hpp"
 #include "load_client.hpp"
 #include "output_commands.hpp"
 #include "pose_client.hpp"
@@ -46,74 +46,56 @@ std::uint32_t parse_fields(const std::vector<std::string>& names) {
     return fields;
 }
 
+// The wire carries floats: a float-valued JSON prints each as the shortest text that reads
+// back to the same float ("0.70710677"), not the 17 digits of its double widening.
+using FloatJson =
+    nlohmann::basic_json<nlohmann::ordered_map, std::vector, std::string, bool, std::int64_t, std::uint64_t, float>;
+
+// Names and error texts come from the peer: invalid UTF-8 becomes U+FFFD, not an exception.
+template <class Json>
+std::string dump_json(const Json& j) {
+    return j.dump(-1, ' ', false, Json::error_handler_t::replace);
+}
+
 std::string frame_json(const v1::SkeletonFrame& f, const v1::Hello& hello, std::int64_t receive_us) {
-    using namespace mocap::client;
-    std::string out = "{\"subject\":";
-    json_uint(out, f.subject_id());
-    out += ",\"sync\":";
-    json_uint(out, f.sync());
-    auto field = [&out](const char* name, std::int64_t value, const char* before = ",") {
-        out += before;
-        json_string(out, name);
-        out += ':';
-        json_int(out, value);
-    };
-    field("sample_us", f.sample_us());
-    field("receive_us", receive_us);
-    out += ",\"times\":";
-    field("sink_send_us", f.times().sink_send_us(), "{");
-    field("received_us", f.times().received_us());
-    field("filtered_us", f.times().filtered_us());
-    field("assembled_us", f.times().assembled_us());
-    field("encoded_us", f.times().encoded_us());
-    out += "},\"segments\":[";
+    FloatJson out{{"subject", f.subject_id()},
+                  {"sync", f.sync()},
+                  {"sample_us", f.sample_us()},
+                  {"receive_us", receive_us},
+                  {"times",
+                   {{"sink_send_us", f.times().sink_send_us()},
+                    {"received_us", f.times().received_us()},
+                    {"filtered_us", f.times().filtered_us()},
+                    {"assembled_us", f.times().assembled_us()},
+                    {"encoded_us", f.times().encoded_us()}}}};
     const int n = static_cast<int>(f.segment_count());
     const bool has_q = f.q_world_segment_wxyz_size() == 4 * n;
     const bool has_p = f.position_m_size() == 3 * n;
     const bool has_raw = f.q_earth_sensor_wxyz_size() == 4 * n;
-    auto array = [&out](const auto& values, int first, int count) {
-        out += '[';
-        for (int c = 0; c < count; ++c) {
-            if (c) out += ',';
-            json_number(out, values.Get(first + c), 7);
-        }
-        out += ']';
+    auto array = [](const auto& values, int first, int count) {
+        FloatJson a = FloatJson::array();
+        for (int c = 0; c < count; ++c)
+            a.push_back(values.Get(first + c));
+        return a;
     };
+    FloatJson& segments = out["segments"] = FloatJson::array();
+    const auto& segs = hello.skeleton().segments();
     for (int i = 0; i < n; ++i) {
-        if (i) out += ',';
-        out += "{\"name\":";
-        const auto& segs = hello.skeleton().segments();
-        json_string(out, i < segs.size() ? segs.Get(i).name() : "segment" + std::to_string(i));
-        if (has_q) {
-            out += ",\"q\":";
-            array(f.q_world_segment_wxyz(), 4 * i, 4);
-        }
-        if (has_p) {
-            out += ",\"p\":";
-            array(f.position_m(), 3 * i, 3);
-        }
-        if (has_raw) {
-            out += ",\"q_raw\":";
-            array(f.q_earth_sensor_wxyz(), 4 * i, 4);
-        }
-        out += ",\"flags\":";
-        json_uint(out, i < f.flags_size() ? f.flags(i) : 0);
-        out += '}';
+        FloatJson s{{"name", i < segs.size() ? segs.Get(i).name() : "segment" + std::to_string(i)}};
+        if (has_q) s["q"] = array(f.q_world_segment_wxyz(), 4 * i, 4);
+        if (has_p) s["p"] = array(f.position_m(), 3 * i, 3);
+        if (has_raw) s["q_raw"] = array(f.q_earth_sensor_wxyz(), 4 * i, 4);
+        s["flags"] = i < f.flags_size() ? f.flags(i) : 0u;
+        segments.push_back(std::move(s));
     }
-    out += ']';
     if (f.joint_angles_rad_size() > 0) {
-        out += ",\"joint_angles_rad\":{";
+        FloatJson& angles = out["joint_angles_rad"] = FloatJson::object();
         const auto& names = hello.skeleton().joint_angle_names();
         for (int j = 0; j < f.joint_angles_rad_size(); ++j) {
-            if (j) out += ',';
-            json_string(out, j < names.size() ? names.Get(j) : "joint" + std::to_string(j));
-            out += ':';
-            json_number(out, f.joint_angles_rad(j), 7);
+            angles[j < names.size() ? names.Get(j) : "joint" + std::to_string(j)] = f.joint_angles_rad(j);
         }
-        out += '}';
     }
-    out += '}';
-    return out;
+    return dump_json(out);
 }
 
 std::string frame_text(const v1::SkeletonFrame& f, const v1::Hello& hello, std::int64_t receive_us) {
@@ -189,38 +171,21 @@ int run_stats(PoseClient& client, bool json) {
         std::cerr << "mocap-client: " << error << "\n";
         return kExitConnection;
     }
-    using namespace mocap::client;
     if (json) {
-        std::string out = "{\"server_time_us\":";
-        json_int(out, stats.server_time_us());
-        out += ",\"counters\":{";
-        for (int i = 0; i < stats.counters_size(); ++i) {
-            if (i) out += ',';
-            json_string(out, stats.counters(i).name());
-            out += ':';
-            json_uint(out, stats.counters(i).value());
+        nlohmann::ordered_json out{{"server_time_us", stats.server_time_us()}};
+        nlohmann::ordered_json& counters = out["counters"] = nlohmann::ordered_json::object();
+        for (const auto& c : stats.counters())
+            counters[c.name()] = c.value();
+        nlohmann::ordered_json& latencies = out["latencies"] = nlohmann::ordered_json::array();
+        for (const auto& l : stats.latencies()) {
+            latencies.push_back({{"stage", l.stage()},
+                                 {"count", l.count()},
+                                 {"p50_us", l.p50_us()},
+                                 {"p90_us", l.p90_us()},
+                                 {"p99_us", l.p99_us()},
+                                 {"max_us", l.max_us()}});
         }
-        out += "},\"latencies\":[";
-        for (int i = 0; i < stats.latencies_size(); ++i) {
-            const auto& l = stats.latencies(i);
-            if (i) out += ',';
-            out += "{\"stage\":";
-            json_string(out, l.stage());
-            out += ",\"count\":";
-            json_uint(out, l.count());
-            for (const auto& [name, value] : {std::pair{"p50_us", l.p50_us()},
-                                              {"p90_us", l.p90_us()},
-                                              {"p99_us", l.p99_us()},
-                                              {"max_us", l.max_us()}}) {
-                out += ",\"";
-                out += name;
-                out += "\":";
-                json_number(out, value);
-            }
-            out += '}';
-        }
-        out += "]}";
-        std::cout << out << std::endl;
+        std::cout << dump_json(out) << std::endl;
         return 0;
     }
     std::printf("%s\n", client.hello().server_version().c_str());

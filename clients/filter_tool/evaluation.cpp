@@ -2,8 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <limits>
+#include <nlohmann/json.hpp>
 #include <numbers>
 
 namespace mocap::tools {
@@ -15,33 +14,6 @@ double rms_deg(double sum_sq_rad, std::size_t n) {
     return n == 0 ? 0.0 : std::sqrt(sum_sq_rad / static_cast<double>(n)) * kRadToDeg;
 }
 
-// JSON has no NaN/Inf; a number that is not finite is written as null.
-void append_number(std::string& out, const char* key, double v) {
-    char buf[96];
-    if (std::isfinite(v)) {
-        std::snprintf(buf, sizeof buf, "\"%s\":%.6g", key, v);
-    } else {
-        std::snprintf(buf, sizeof buf, "\"%s\":null", key);
-    }
-    out += buf;
-}
-
-void append_json_string(std::string& out, std::string_view s) {
-    out += '"';
-    for (const char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", static_cast<unsigned>(c));
-            out += buf;
-        } else {
-            out += c;
-        }
-    }
-    out += '"';
-}
 }  // namespace
 
 EvalResult evaluate(std::span<const EvalSample> samples, double convergence_threshold_deg) {
@@ -95,31 +67,23 @@ EvalResult evaluate(std::span<const EvalSample> samples, double convergence_thre
 }
 
 std::string eval_json(const EvalResult& r, std::string_view filter_name) {
-    std::string out = "{";
-    append_number(out, "rmse_total_deg", r.rmse_total_deg);
-    out += ',';
-    append_number(out, "rmse_heading_deg", r.rmse_heading_deg);
-    out += ',';
-    append_number(out, "rmse_inclination_deg", r.rmse_inclination_deg);
-    out += ',';
-    append_number(out, "rmse_roll_deg", r.rmse_roll_deg);
-    out += ',';
-    append_number(out, "rmse_pitch_deg", r.rmse_pitch_deg);
-    out += ',';
-    append_number(out, "rmse_yaw_deg", r.rmse_yaw_deg);
-    out += ',';
-    append_number(out, "max_total_deg", r.max_total_deg);
-    out += ",\"samples\":" + std::to_string(r.samples) + ',';
-    append_number(out, "convergence_time_s",
-                  r.convergence_time_s ? *r.convergence_time_s : std::numeric_limits<double>::quiet_NaN());
-    out += ',';
-    append_number(out, "first_below_s", r.first_below_s ? *r.first_below_s : std::numeric_limits<double>::quiet_NaN());
-    out += ',';
-    append_number(out, "convergence_threshold_deg", r.convergence_threshold_deg);
-    out += ",\"filter\":";
-    append_json_string(out, filter_name);
-    out += '}';
-    return out;
+    // JSON has no NaN/Inf: nlohmann writes a non-finite number as null, as it does an
+    // absent optional.
+    auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); };
+    const nlohmann::ordered_json j{{"rmse_total_deg", r.rmse_total_deg},
+                                   {"rmse_heading_deg", r.rmse_heading_deg},
+                                   {"rmse_inclination_deg", r.rmse_inclination_deg},
+                                   {"rmse_roll_deg", r.rmse_roll_deg},
+                                   {"rmse_pitch_deg", r.rmse_pitch_deg},
+                                   {"rmse_yaw_deg", r.rmse_yaw_deg},
+                                   {"max_total_deg", r.max_total_deg},
+                                   {"samples", r.samples},
+                                   {"convergence_time_s", opt(r.convergence_time_s)},
+                                   {"first_below_s", opt(r.first_below_s)},
+                                   {"convergence_threshold_deg", r.convergence_threshold_deg},
+                                   {"filter", filter_name}};
+    // The filter name comes from the command line: invalid UTF-8 becomes U+FFFD.
+    return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace mocap::tools
