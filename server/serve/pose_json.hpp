@@ -5,8 +5,9 @@
 // with 5; a non-finite value is written as null (JSON has no NaN). The viewer
 // (clients/viewer/viewer.js) and the tests parse these texts.
 //
-// Thread-safety: pure functions. Cost: encode_frame_json runs once per published frame
-// (shared by every viewer), so it appends into one reserved string.
+// Written with nlohmann::json. Thread-safety: pure functions. Cost: encode_frame_json runs
+// once per published frame (shared by every viewer): ~9 µs CPU for 15 segments, no more
+// than the hand-written writer it replaced (docs/performance.md).
 #pragma once
 
 #include <cstdint>

@@ -1,11 +1,15 @@
 // The WebSocket frame JSON, encoded once per published frame (http_server.hpp): the
-// product's writer (serve/pose_json.cpp) against the same message built as an
-// nlohmann::ordered_json and dumped, side by side on the same frame in one run, so the
-// choice in pose_json.cpp rests on a measurement (docs/performance.md has the numbers).
+// product's encoder (serve/pose_json.cpp, nlohmann::json) against the hand-written fmt
+// writer it replaced, side by side on the same frame in one run, so the choice rests on a
+// measurement (docs/performance.md has the numbers).
 // Run: build/tests/bench/pose_json_bench
 #include <benchmark/benchmark.h>
 
+#include <spdlog/fmt/fmt.h>
+
+#include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <nlohmann/json.hpp>
 
 #include "serve/pose_json.hpp"
@@ -32,38 +36,46 @@ struct Sample {
     }
 };
 
-double round_to(double v, double scale) {
-    return std::isfinite(v) ? std::round(v * scale) / scale : v;
+// The writer the product used before nlohmann (fmt, fixed decimals), kept as the baseline:
+// 4 decimals for metres, 5 for quaternions, null for a non-finite value.
+void append_number(std::string& out, double v, int decimals) {
+    if (!std::isfinite(v)) {
+        out += "null";
+        return;
+    }
+    fmt::format_to(std::back_inserter(out), "{:.{}f}", v, decimals);
 }
 
-// The same message, the same rounding (4 decimals for metres, 5 for quaternions).
-std::string frame_json_nlohmann(const SubjectFrame& frame, const SkeletonPose& pose, std::int64_t encoded_us) {
+std::string frame_json_fmt(const SubjectFrame& frame, const SkeletonPose& pose, std::int64_t encoded_us) {
     const std::size_t n = std::min<std::size_t>(frame.segment_count, pose.segment_count);
+    std::string out;
+    out.reserve(256 + n * 96);
     const StageTimes& t = frame.times;
-    nlohmann::ordered_json j{{"type", "frame"},
-                             {"subject", frame.subject_id},
-                             {"sync", frame.sync},
-                             {"sample_us", frame.sample_us},
-                             {"stamps",
-                              {{"sink_send_us", t.sink_send_us},
-                               {"received_us", t.received_us},
-                               {"filtered_us", t.filtered_us},
-                               {"assembled_us", t.assembled_us},
-                               {"encoded_us", encoded_us}}}};
-    nlohmann::ordered_json pos = nlohmann::ordered_json::array();
-    nlohmann::ordered_json q = nlohmann::ordered_json::array();
-    nlohmann::ordered_json flags = nlohmann::ordered_json::array();
+    fmt::format_to(std::back_inserter(out),
+                   R"({{"type":"frame","subject":{},"sync":{},"sample_us":{},"stamps":{{"sink_send_us":{},)"
+                   R"("received_us":{},"filtered_us":{},"assembled_us":{},"encoded_us":{}}},"pos":[)",
+                   frame.subject_id, frame.sync, frame.sample_us, t.sink_send_us, t.received_us, t.filtered_us,
+                   t.assembled_us, encoded_us);
     for (std::size_t i = 0; i < n; ++i) {
-        for (std::size_t k = 0; k < 3; ++k)
-            pos.push_back(round_to(pose.position_m[i][k], 1e4));
-        for (std::size_t k = 0; k < 4; ++k)
-            q.push_back(round_to(pose.q_world_segment_wxyz[i][k], 1e5));
-        flags.push_back(static_cast<unsigned>(frame.segments[i].flags | pose.extra_flags[i]));
+        for (std::size_t k = 0; k < 3; ++k) {
+            if (i + k) out += ',';
+            append_number(out, pose.position_m[i][k], 4);
+        }
     }
-    j["pos"] = std::move(pos);
-    j["q"] = std::move(q);
-    j["flags"] = std::move(flags);
-    return j.dump();
+    out += R"(],"q":[)";
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t k = 0; k < 4; ++k) {
+            if (i + k) out += ',';
+            append_number(out, pose.q_world_segment_wxyz[i][k], 5);
+        }
+    }
+    out += R"(],"flags":[)";
+    for (std::size_t i = 0; i < n; ++i) {
+        fmt::format_to(std::back_inserter(out), "{}{}", i ? "," : "",
+                       static_cast<unsigned>(frame.segments[i].flags | pose.extra_flags[i]));
+    }
+    out += "]}";
+    return out;
 }
 
 template <class Encode>
@@ -71,7 +83,7 @@ void run(benchmark::State& state, Encode encode) {
     Sample s(static_cast<std::uint16_t>(state.range(0)));
     // Both texts describe the same frame (checked once, outside the timed loop).
     if (nlohmann::json::parse(encode_frame_json(s.frame, s.pose, 7)) !=
-        nlohmann::json::parse(frame_json_nlohmann(s.frame, s.pose, 7))) {
+        nlohmann::json::parse(frame_json_fmt(s.frame, s.pose, 7))) {
         state.SkipWithError("the two encoders disagree");
         return;
     }
@@ -86,13 +98,13 @@ void run(benchmark::State& state, Encode encode) {
     state.counters["bytes"] = static_cast<double>(bytes);
 }
 
-void BM_FrameJson_Lean(benchmark::State& state) {
-    run(state, encode_frame_json);
+void BM_FrameJson_BeforeFmt(benchmark::State& state) {
+    run(state, frame_json_fmt);
 }
 void BM_FrameJson_Nlohmann(benchmark::State& state) {
-    run(state, frame_json_nlohmann);
+    run(state, encode_frame_json);
 }
-BENCHMARK(BM_FrameJson_Lean)->Arg(15)->Arg(32);
+BENCHMARK(BM_FrameJson_BeforeFmt)->Arg(15)->Arg(32);
 BENCHMARK(BM_FrameJson_Nlohmann)->Arg(15)->Arg(32);
 
 }  // namespace
