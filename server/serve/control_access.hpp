@@ -9,8 +9,9 @@
 //   4. token differs (compared in constant time) -> refused ("bad token")
 //
 // The address rule comes before the token check so a remote peer learns nothing about
-// the token. Counters only go up (house style 5); each owner exposes them under its own
-// prefix (serve.control_*, http.control_*), names that dashboards depend on.
+// the token. Counters only go up (docs/style.md, "Counters only go up"); each owner exposes
+// them under its own prefix (serve.control_*, http.control_*), names that dashboards
+// depend on.
 #pragma once
 
 #include <atomic>
