@@ -1,9 +1,9 @@
 // replay.hpp — `mocapd --replay FILE...`: re-runs a raw recording (serve/raw_recorder.hpp)
-// through the same pipeline stages as live — the configured filter per segment
-// (FilterProcessor), the per-subject assembler (SubjectAssembler with the configured
-// deadline) and the skeleton solver (PoseSolver: calibration, smoothing, kinematics, joint
-// angles) — and writes the same outputs: a BVH file through the same BvhRecorder and
-// encoder as the live recorder, and the joint-angle CSV.
+// through the same Pipeline as live (pipeline/pipeline.hpp, driven synchronously): the same
+// node routing, the configured filter per segment, the per-subject assembler with the
+// configured deadline and the skeleton solver (calibration, smoothing, kinematics, joint
+// angles) — and writes its outputs through the same registry (daemon/outputs.hpp): a BVH
+// file through the same recorder and encoder as the live recorder, and the joint-angle CSV.
 //
 // Determinism: one thread, samples in file order, and the assembler's clock is the
 // recorded received_us of each sample (the daemon's wall clock when it was decoded), so
@@ -22,17 +22,9 @@
 #include <vector>
 
 #include "daemon/config.hpp"
-#include "daemon/pose_solver.hpp"
-#include "serve/bvh_frame_encoder.hpp"
 #include "skeleton/calibration.hpp"
 
 namespace mocap::daemon {
-
-/// BVH unit, rotation order and frame time from [outputs].
-serve::BvhOutputOptions bvh_options_from_config(const DaemonConfig& config);
-
-/// Skeleton solver options from [skeleton] (max_subjects is left at its default).
-PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config);
 
 struct ReplayCalibration {
     double at_s = 0.0;  ///< seconds after the first sample's t_us
@@ -57,7 +49,7 @@ struct ReplayOptions {
 
 struct ReplayResult {
     std::uint64_t samples = 0;
-    std::uint64_t samples_unknown_node = 0;  ///< node not in the model, or subject out of range
+    std::uint64_t samples_unknown_node = 0;  ///< node not in the model, or subject not configured
     std::uint64_t samples_rejected = 0;      ///< the filter refused them (non-finite input)
     std::uint64_t frames = 0;                ///< subject frames solved
     std::uint64_t bvh_frames = 0;

@@ -16,7 +16,7 @@
 #include "core/segment_processor.hpp"
 #include "filter/orientation_filter.hpp"
 
-namespace mocap::daemon {
+namespace mocap::pipeline {
 
 class FilterProcessor final : public SegmentProcessor {
 public:
@@ -34,4 +34,4 @@ private:
     std::atomic<bool> reset_{false};
 };
 
-}  // namespace mocap::daemon
+}  // namespace mocap::pipeline

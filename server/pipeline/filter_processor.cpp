@@ -1,8 +1,8 @@
-#include "daemon/filter_processor.hpp"
+#include "pipeline/filter_processor.hpp"
 
 #include <cmath>
 
-namespace mocap::daemon {
+namespace mocap::pipeline {
 namespace {
 
 bool finite(const Vec3d& v) {
@@ -30,4 +30,4 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
     return true;
 }
 
-}  // namespace mocap::daemon
+}  // namespace mocap::pipeline

@@ -1,0 +1,296 @@
+#include "daemon/outputs.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <limits>
+
+#include "daemon/pipeline_config.hpp"
+#include "serve/angles_csv.hpp"
+#include "serve/bvh_server.hpp"
+#include "serve/raw_recorder.hpp"
+
+namespace mocap::daemon {
+
+namespace {
+
+void append_group(std::vector<CounterValue>& out, const CounterGroup& g) {
+    for (const auto& c : g.snapshot())
+        out.push_back({g.component() + "." + c.name, c.value});
+}
+
+/// Live BVH text over TCP (serve/bvh_server.hpp), [outputs].bvh_live.
+class BvhLiveOutput final : public pipeline::Output {
+public:
+    BvhLiveOutput(const serve::BvhServerConfig& config, const skeleton::BodyModel& model,
+                  const serve::BvhOutputOptions& options)
+        : encoder_(model, options), server_(config, encoder_) {}
+    [[nodiscard]] std::string_view name() const override { return "bvh_live"; }
+    bool start(std::string* error) override { return server_.start(*error); }
+    bool stop(std::string* /*error*/) override {
+        server_.stop();
+        return true;
+    }
+    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+        server_.publish(frame, pose);
+    }
+    void append_counters(std::vector<CounterValue>& out) const override {
+        for (const auto& c : server_.counters().snapshot())
+            out.push_back({c.name, c.value});  // already "bvh_live.<name>"
+    }
+    void append_gauges(std::vector<pipeline::OutputGauge>& out) const override {
+        out.push_back(
+            {"bvh_live_clients", "Live BVH clients connected now", static_cast<double>(server_.client_count())});
+    }
+    [[nodiscard]] std::uint16_t port() const override { return server_.port(); }
+
+private:
+    serve::BvhFrameEncoder encoder_;
+    serve::BvhServer server_;
+};
+
+/// Every received sample to rotating raw files (serve/raw_recorder.hpp), [outputs].raw_record.
+class RawRecorderOutput final : public pipeline::Output {
+public:
+    RawRecorderOutput(const serve::RawRecorderConfig& config, const Clock& clock) : recorder_(config, clock) {}
+    [[nodiscard]] std::string_view name() const override { return "raw_record"; }
+    bool start(std::string* error) override { return recorder_.start(error); }
+    bool stop(std::string* /*error*/) override {
+        recorder_.stop();  // ingest, its producer, has stopped
+        return true;
+    }
+    void on_frame(const SubjectFrame& /*frame*/, const pipeline::SkeletonPose& /*pose*/) override {}
+    [[nodiscard]] bool wants_samples() const override { return true; }
+    void on_sample(const SegmentSample& sample) override { recorder_.push(sample); }
+    void append_counters(std::vector<CounterValue>& out) const override { append_group(out, recorder_.counters()); }
+
+private:
+    serve::RawRecorder recorder_;
+};
+
+/// Viewer page, WebSocket poses, /metrics, /healthz, control over HTTP (serve/http_server.hpp),
+/// [http]. An aid, not the pose service: a taken port is logged and the endpoint stays off.
+class HttpOutput final : public pipeline::Output {
+public:
+    explicit HttpOutput(std::unique_ptr<serve::HttpServer> server) : server_(std::move(server)) {}
+    [[nodiscard]] std::string_view name() const override { return "http"; }
+    bool start(std::string* /*error*/) override {
+        std::string http_error;
+        if (!server_->start(http_error)) {
+            spdlog::error("{}; the viewer, /metrics and /healthz are off", http_error);
+            off_ = true;
+        }
+        return true;
+    }
+    bool stop(std::string* /*error*/) override {
+        server_->stop();
+        return true;
+    }
+    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+        if (!off_) server_->publish(frame, pose);
+    }
+    [[nodiscard]] std::uint16_t port() const override { return off_ ? 0 : server_->port(); }
+    [[nodiscard]] std::int64_t last_frame_us() const override { return off_ ? 0 : server_->last_frame_us(); }
+
+private:
+    std::unique_ptr<serve::HttpServer> server_;
+    bool off_ = false;  // set once in start(), before frames flow
+};
+
+/// Joint angles, one CSV row per frame (serve/angles_csv.hpp): replay's --angles-out.
+class AnglesCsvOutput final : public pipeline::Output {
+public:
+    AnglesCsvOutput(std::string path, std::vector<std::string> angle_names)
+        : path_(std::move(path)), angle_names_(std::move(angle_names)) {}
+    [[nodiscard]] std::string_view name() const override { return "angles_csv"; }
+    bool start(std::string* error) override {
+        file_.reset(std::fopen(path_.c_str(), "wx"));
+        if (!file_) {
+            *error = "cannot create " + path_ + " (it must not exist)";
+            return false;
+        }
+        const std::string header = serve::angles_csv_header(angle_names_);
+        (void)std::fwrite(header.data(), 1, header.size(), file_.get());  // checked in stop()
+        return true;
+    }
+    bool stop(std::string* error) override {
+        // fflush alone misses a write that failed earlier (ENOSPC while a full buffer went
+        // out): the stream's error flag keeps it.
+        if (file_ && (std::fflush(file_.get()) != 0 || std::ferror(file_.get()) != 0)) {
+            *error = "write " + path_ + " failed";
+            return false;
+        }
+        return true;
+    }
+    void on_frame(const SubjectFrame& f, const pipeline::SkeletonPose& p) override {
+        row_.clear();
+        serve::append_angles_csv_row(f.subject_id, f.sync, f.sample_us, p.joint_angles_rad.data(), p.joint_angle_count,
+                                     row_);
+        // A failed write sets the stream's error flag, checked once in stop().
+        (void)std::fwrite(row_.data(), 1, row_.size(), file_.get());
+    }
+
+private:
+    std::string path_;
+    std::vector<std::string> angle_names_;
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_{nullptr, &std::fclose};
+    std::string row_;
+};
+
+std::vector<std::string> joint_angle_names(const pipeline::Pipeline& p) {
+    std::vector<std::string> names;
+    for (const auto& j : p.solver().joints()) {
+        for (const char* axis : {"flexion", "abduction", "rotation"})
+            names.push_back(j.name + "." + axis);
+    }
+    return names;
+}
+
+// --- factories: each reads its config section and returns the output or nothing ---
+
+std::unique_ptr<pipeline::Output> make_pose_service(const OutputContext& ctx) {
+    if (ctx.replay) return nullptr;
+    const DaemonConfig& c = ctx.config;
+    serve::ServeConfig sc;
+    sc.bind_address = c.pose_listen.host;
+    sc.port = c.pose_listen.port;
+    sc.max_clients = c.max_clients;
+    sc.queue_frames = c.client_queue_frames;
+    sc.subscribe_timeout_ms = static_cast<std::uint32_t>(c.handshake_timeout_s * 1000.0);
+    sc.max_client_message_bytes = c.max_message_bytes;
+    sc.max_client_messages_per_s = c.max_client_messages_per_s;
+    sc.client_message_burst = c.client_message_burst;
+    sc.control_token = c.control_token;
+    sc.control_loopback_only = c.control_loopback_only;
+    sc.io_threads = c.serve_threads;
+    sc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
+    sc.server_version = "mocapd";
+
+    serve::ServeDescription desc;
+    for (const auto& s : ctx.pipeline.model().segments) {
+        desc.segments.push_back({s.name,
+                                 s.parent,
+                                 {s.offset_m.x(), s.offset_m.y(), s.offset_m.z()},
+                                 static_cast<std::uint32_t>(std::max(0, s.node_id))});
+    }
+    desc.joint_angle_names = joint_angle_names(ctx.pipeline);
+    for (std::uint32_t id : ctx.pipeline.subjects())
+        desc.subjects.push_back({id, "subject-" + std::to_string(id)});
+    return std::make_unique<PoseServiceOutput>(sc, ctx.control, desc);
+}
+
+std::unique_ptr<pipeline::Output> make_bvh_live(const OutputContext& ctx) {
+    if (ctx.replay || !ctx.config.bvh_live) return nullptr;
+    serve::BvhServerConfig bc;
+    bc.bind_address = ctx.config.bvh_listen.host;
+    bc.port = ctx.config.bvh_listen.port;
+    bc.max_clients = ctx.config.bvh_max_clients;
+    bc.queue_frames = ctx.config.client_queue_frames;
+    bc.subject = ctx.config.bvh_subject;
+    return std::make_unique<BvhLiveOutput>(bc, ctx.pipeline.model(), bvh_options_from_config(ctx.config));
+}
+
+std::unique_ptr<pipeline::Output> make_bvh_recorder(const OutputContext& ctx) {
+    serve::BvhRecorderConfig rc;
+    rc.directory = ctx.config.record_dir;
+    rc.subject = ctx.config.bvh_subject;
+    rc.flush_interval_s = ctx.config.record_flush_interval_s;
+    std::string start_path;
+    if (ctx.replay) {
+        if (ctx.replay->bvh_out.empty()) return nullptr;
+        if (ctx.replay->bvh_subject != 0) rc.subject = ctx.replay->bvh_subject;
+        rc.max_buffer_bytes = std::numeric_limits<std::size_t>::max();  // never drop: the file must be complete
+        start_path = ctx.replay->bvh_out;
+    }
+    return std::make_unique<BvhRecorderOutput>(rc, ctx.pipeline.model(), bvh_options_from_config(ctx.config),
+                                               std::move(start_path));
+}
+
+std::unique_ptr<pipeline::Output> make_raw_recorder(const OutputContext& ctx) {
+    if (ctx.replay || !ctx.config.raw_record) return nullptr;
+    serve::RawRecorderConfig rrc;
+    rrc.directory = ctx.config.record_dir;
+    rrc.flush_interval_s = ctx.config.record_flush_interval_s;
+    rrc.rotate_bytes = static_cast<std::uint64_t>(ctx.config.raw_rotate_mb * 1024.0 * 1024.0);
+    rrc.rotate_s = ctx.config.raw_rotate_s;
+    rrc.ring_capacity = ctx.config.raw_ring_capacity;
+    return std::make_unique<RawRecorderOutput>(rrc, ctx.clock);
+}
+
+std::unique_ptr<pipeline::Output> make_angles_csv(const OutputContext& ctx) {
+    if (!ctx.replay || ctx.replay->angles_out.empty()) return nullptr;
+    return std::make_unique<AnglesCsvOutput>(ctx.replay->angles_out, joint_angle_names(ctx.pipeline));
+}
+
+std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
+    if (ctx.replay || !ctx.config.http_enabled) return nullptr;
+    serve::HttpServerConfig hc;
+    hc.bind_address = ctx.config.http_listen.host;
+    hc.port = ctx.config.http_listen.port;
+    hc.max_clients = ctx.config.http_max_clients;
+    hc.ws_queue_frames = ctx.config.http_ws_queue_frames;
+    hc.control_token = ctx.config.control_token;
+    hc.control_loopback_only = ctx.config.control_loopback_only;
+    hc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
+    serve::HttpDescription hd;
+    for (const auto& seg : ctx.pipeline.model().segments)
+        hd.segments.push_back({seg.name, seg.parent, {seg.end_m.x(), seg.end_m.y(), seg.end_m.z()}});
+    hd.subjects = ctx.pipeline.subjects();
+    serve::HttpHandlers hh;
+    hh.control = ctx.control;
+    hh.metrics = ctx.metrics;
+    hh.health = ctx.health;
+    return std::make_unique<HttpOutput>(
+        std::make_unique<serve::HttpServer>(std::move(hc), std::move(hd), std::move(hh)));
+}
+
+// The registry: one line per output, in the order they receive frames.
+constexpr OutputEntry kOutputs[] = {
+    {"pose", &make_pose_service},        // [pose] protobuf pose service (always on live)
+    {"bvh_live", &make_bvh_live},        // [outputs].bvh_live
+    {"bvh_record", &make_bvh_recorder},  // [outputs].record_dir (live, by control); --bvh-out (replay)
+    {"raw_record", &make_raw_recorder},  // [outputs].raw_record
+    {"angles_csv", &make_angles_csv},    // --angles-out (replay)
+    {"http", &make_http},                // [http].enabled
+};
+
+}  // namespace
+
+PoseServiceOutput::PoseServiceOutput(const serve::ServeConfig& config, const serve::ControlHandlers& handlers,
+                                     const serve::ServeDescription& description)
+    : server_(config, handlers) {
+    server_.set_description(description);
+}
+
+void PoseServiceOutput::append_gauges(std::vector<pipeline::OutputGauge>& out) const {
+    out.push_back({"pose_clients", "Protobuf pose clients connected now", static_cast<double>(server_.client_count())});
+}
+
+BvhRecorderOutput::BvhRecorderOutput(const serve::BvhRecorderConfig& config, const skeleton::BodyModel& model,
+                                     const serve::BvhOutputOptions& options, std::string start_path)
+    : encoder_(model, options), recorder_(config, encoder_), start_path_(std::move(start_path)) {}
+
+bool BvhRecorderOutput::start(std::string* error) {
+    return start_path_.empty() || recorder_.start(start_path_, error);
+}
+
+bool BvhRecorderOutput::stop(std::string* error) {
+    if (!recorder_.recording()) return true;
+    return recorder_.stop(error, &frames_written_);  // patches the frame count
+}
+
+void BvhRecorderOutput::append_counters(std::vector<CounterValue>& out) const {
+    append_group(out, recorder_.counters());
+}
+
+std::span<const OutputEntry> output_registry() {
+    return kOutputs;
+}
+
+void add_outputs(const OutputContext& context, pipeline::Pipeline& pipeline) {
+    for (const auto& entry : output_registry()) {
+        if (auto output = entry.make(context)) pipeline.add_output(std::move(output));
+    }
+}
+
+}  // namespace mocap::daemon

@@ -1,0 +1,106 @@
+// outputs.hpp — every output of mocapd (pipeline/output.hpp) and the one registry that
+// creates them from the config (docs/outputs.md, "Outputs").
+//
+// Adding an output: a class implementing pipeline::Output (here, or in serve/ when the
+// server class itself implements it), a config section read by its factory, and one line
+// in the registry table (outputs.cpp). The daemon and replay create outputs only through
+// make_outputs(), so neither changes.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/clock.hpp"
+#include "daemon/config.hpp"
+#include "daemon/replay.hpp"
+#include "pipeline/output.hpp"
+#include "pipeline/pipeline.hpp"
+#include "serve/bvh_frame_encoder.hpp"
+#include "serve/bvh_recorder.hpp"
+#include "serve/http_server.hpp"
+#include "serve/pose_server.hpp"
+
+namespace mocap::daemon {
+
+/// What a factory may read: the config, the built pipeline (model, subjects, joints), the
+/// clock, and the daemon's control and metrics callbacks for the network services.
+struct OutputContext {
+    const DaemonConfig& config;
+    const pipeline::Pipeline& pipeline;
+    const Clock& clock;
+    serve::ControlHandlers control;
+    std::function<serve::MetricsSnapshot()> metrics;
+    std::function<serve::HealthStatus()> health;
+    /// Non-null in `mocapd --replay`: only the file outputs its command line asks for.
+    const ReplayOptions* replay = nullptr;
+};
+
+/// Returns the output, or nullptr when its config section leaves it off.
+using OutputFactory = std::unique_ptr<pipeline::Output> (*)(const OutputContext& context);
+
+struct OutputEntry {
+    const char* name;
+    OutputFactory make;
+};
+
+/// The registry, in the order outputs receive frames.
+std::span<const OutputEntry> output_registry();
+
+/// Runs every factory of the registry; adds what they return to the pipeline.
+void add_outputs(const OutputContext& context, pipeline::Pipeline& pipeline);
+
+/// The protobuf pose service (serve/pose_server.hpp): also the control and Stats endpoint.
+class PoseServiceOutput final : public pipeline::Output {
+public:
+    PoseServiceOutput(const serve::ServeConfig& config, const serve::ControlHandlers& handlers,
+                      const serve::ServeDescription& description);
+    [[nodiscard]] std::string_view name() const override { return "pose"; }
+    bool start(std::string* error) override { return server_.start(*error); }
+    bool stop(std::string* /*error*/) override {
+        server_.stop();
+        return true;
+    }
+    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+        server_.publish(frame, pose);
+    }
+    void append_gauges(std::vector<pipeline::OutputGauge>& out) const override;
+    [[nodiscard]] std::uint16_t port() const override { return server_.port(); }
+    [[nodiscard]] const serve::PoseServer& server() const { return server_; }
+
+private:
+    serve::PoseServer server_;
+};
+
+/// BVH file recorder (serve/bvh_recorder.hpp): live, started and stopped by control
+/// requests; in replay, records the whole run to the --bvh-out file.
+class BvhRecorderOutput final : public pipeline::Output {
+public:
+    /// start_path: opened by start() (replay); "" = wait for start_recording().
+    BvhRecorderOutput(const serve::BvhRecorderConfig& config, const skeleton::BodyModel& model,
+                      const serve::BvhOutputOptions& options, std::string start_path);
+    [[nodiscard]] std::string_view name() const override { return "bvh_record"; }
+    bool start(std::string* error) override;
+    /// Finishes an open recording (patches its frame count).
+    bool stop(std::string* error) override;
+    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+        recorder_.publish(frame, pose);
+    }
+    void append_counters(std::vector<CounterValue>& out) const override;
+
+    /// Control requests (any thread).
+    bool start_recording(const std::string& path, std::string* error) { return recorder_.start(path, error); }
+    bool stop_recording(std::string* error) { return recorder_.stop(error); }
+    /// Frames in the file the last stop() finished.
+    [[nodiscard]] std::uint64_t frames_written() const { return frames_written_; }
+
+private:
+    serve::BvhFrameEncoder encoder_;
+    serve::BvhRecorder recorder_;
+    std::string start_path_;
+    std::uint64_t frames_written_ = 0;
+};
+
+}  // namespace mocap::daemon

@@ -1,0 +1,83 @@
+#include "daemon/pipeline_config.hpp"
+
+namespace mocap::daemon {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+}  // namespace
+
+std::optional<skeleton::BodyModel> body_model_from_config(const DaemonConfig& config, std::string* error) {
+    skeleton::BodyModel model;
+    if (config.segments.empty()) {
+        model = skeleton::default_body_model(1.75, config.filter_name);
+    } else {
+        for (const auto& sc : config.segments) {
+            skeleton::SegmentDef d;
+            d.name = sc.name;
+            d.parent = sc.parent.empty() ? -1 : model.index_of(sc.parent);
+            d.offset_m = {sc.offset_m[0], sc.offset_m[1], sc.offset_m[2]};
+            d.end_m = {sc.end_m[0], sc.end_m[1], sc.end_m[2]};
+            d.node_id = sc.node;
+            d.filter = sc.filter.empty() ? config.filter_name : sc.filter;
+            model.segments.push_back(std::move(d));
+        }
+        model.root_height_m = config.root_height_m;
+    }
+    const auto problems = skeleton::validate(model);
+    if (!problems.empty()) {
+        *error = "skeleton: " + problems.front();
+        return std::nullopt;
+    }
+    return model;
+}
+
+std::vector<std::uint32_t> subject_ids_from_config(const DaemonConfig& config) {
+    std::vector<std::uint32_t> ids;
+    for (std::uint32_t id = 1; id <= config.max_subjects; ++id)
+        ids.push_back(id);
+    for (const auto& can : config.socketcan) {
+        if (can.subject > config.max_subjects) ids.push_back(can.subject);
+    }
+    return ids;
+}
+
+serve::BvhOutputOptions bvh_options_from_config(const DaemonConfig& config) {
+    serve::BvhOutputOptions o;
+    o.write.units_per_m = config.bvh_units_per_m;
+    if (const auto order = skeleton::parse_rotation_order(config.bvh_rotation_order)) o.write.order = *order;
+    o.frame_time_s = config.bvh_frame_time_s;
+    return o;
+}
+
+PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config) {
+    PoseSolverOptions so;
+    so.calibration_s = config.calibration_s;
+    so.calibration_dir = config.calibration_dir;
+    so.calibration.heading_mode =
+        config.heading_align ? skeleton::HeadingMode::kAlignToForward : skeleton::HeadingMode::kKeepEarth;
+    so.calibration.facing_source =
+        config.facing_from_sensor ? skeleton::FacingSource::kFromSensorAxis : skeleton::FacingSource::kGiven;
+    so.calibration.facing_heading_rad = config.facing_heading_deg * kPi / 180.0;
+    so.calibration.facing_sensor_axis = {config.facing_sensor_axis[0], config.facing_sensor_axis[1],
+                                         config.facing_sensor_axis[2]};
+    so.smoothing.alpha = config.smoothing_alpha;
+    if (config.auto_calibrate == "t-pose") so.auto_calibrate = skeleton::CalibrationPose::kTPose;
+    if (config.auto_calibrate == "n-pose") so.auto_calibrate = skeleton::CalibrationPose::kNPose;
+    return so;
+}
+
+std::optional<pipeline::PipelineConfig> pipeline_config_from_config(const DaemonConfig& config, std::string* error) {
+    auto model = body_model_from_config(config, error);
+    if (!model) return std::nullopt;
+    pipeline::PipelineConfig pc;
+    pc.model = std::move(*model);
+    pc.subjects = subject_ids_from_config(config);
+    pc.filter_params = config.filter_params;
+    pc.workers = config.workers;
+    pc.ring_capacity = config.ring_capacity;
+    pc.assembler.deadline_us = static_cast<std::int64_t>(config.assembly_deadline_ms * 1000.0);
+    pc.solver = pose_solver_options_from_config(config);
+    return pc;
+}
+
+}  // namespace mocap::daemon

@@ -1,0 +1,33 @@
+// pipeline_config.hpp — the pipeline and its outputs, as the config file describes them:
+// one translation from DaemonConfig for the daemon and for replay.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "pipeline/pipeline.hpp"
+#include "serve/bvh_frame_encoder.hpp"
+#include "skeleton/body_model.hpp"
+
+namespace mocap::daemon {
+
+/// Builds the body model from the config (the built-in body when no segment is listed).
+/// Returns std::nullopt and sets *error if the model is invalid.
+std::optional<skeleton::BodyModel> body_model_from_config(const DaemonConfig& config, std::string* error);
+
+/// Subject ids: 1..[pipeline].max_subjects, then every SocketCAN subject above that.
+std::vector<std::uint32_t> subject_ids_from_config(const DaemonConfig& config);
+
+/// BVH unit, rotation order and frame time from [outputs].
+serve::BvhOutputOptions bvh_options_from_config(const DaemonConfig& config);
+
+/// Skeleton solver options from [skeleton] (max_subjects follows the subjects).
+PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config);
+
+/// Everything the pipeline needs; std::nullopt + *error for an invalid body model.
+std::optional<pipeline::PipelineConfig> pipeline_config_from_config(const DaemonConfig& config, std::string* error);
+
+}  // namespace mocap::daemon

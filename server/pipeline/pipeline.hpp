@@ -1,0 +1,159 @@
+// pipeline.hpp — the processing chain of mocapd, live and replayed:
+//     route (node -> segment) -> filter per (subject, segment) -> assembly per SYNC instant
+//     -> skeleton solve (PoseSolver) -> outputs (pipeline/output.hpp)
+// The daemon (server/daemon) owns threads, sockets, signals and systemd; replay owns the
+// file reading. Both drive this one class, so routing and filter construction exist once.
+//
+// Two ways to drive it:
+//   live         start_workers(); the ingest thread calls route() for every sample (and
+//                wake_workers() once per batch); a thread the daemon starts runs
+//                run_assembler() until request_assembler_stop(). Filters run on the worker
+//                pool (core/worker_pool.hpp), one worker per segment.
+//   synchronous  process() for every sample in order, with the caller's clock (replay: the
+//                recorded received_us), then flush(). Filters run inline on the caller's
+//                thread; a segment's samples are filtered in the same order as live.
+// Subjects: the configured ids; every subject has the same body model. Every filter is
+// created at construction, so nothing is allocated when a sink appears.
+//
+// Counters (component "route", written by the routing thread only): samples_routed,
+// samples_unknown_node, samples_rejected; the ingest latency histogram (sink_send_us ->
+// received_us).
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/clock.hpp"
+#include "core/counters.hpp"
+#include "core/latency_histogram.hpp"
+#include "core/subject_assembler.hpp"
+#include "core/worker_pool.hpp"
+#include "daemon/pose_solver.hpp"  // PoseSolver: moves to skeleton/ with the layering work
+#include "filter/filter_factory.hpp"
+#include "pipeline/filter_processor.hpp"
+#include "pipeline/output.hpp"
+#include "skeleton/body_model.hpp"
+
+namespace mocap::pipeline {
+
+using PoseSolver = daemon::PoseSolver;
+using PoseSolverOptions = daemon::PoseSolverOptions;
+
+struct PipelineConfig {
+    skeleton::BodyModel model;              ///< validated (skeleton::validate)
+    std::vector<std::uint32_t> subjects;    ///< subject ids, each once
+    filter::FilterParamList filter_params;  ///< applied to every segment's filter
+    std::uint32_t workers = 0;              ///< worker threads (live), 0 = hardware cores
+    std::uint32_t ring_capacity = 4096;     ///< worker pool rings (live)
+    AssemblerConfig assembler;
+    PoseSolverOptions solver;  ///< max_subjects is set from `subjects`
+};
+
+/// What happened to one sample in the synchronous mode.
+enum class RouteResult : std::uint8_t {
+    kProcessed,    ///< filtered and handed to the assembler
+    kUnknownNode,  ///< node not in the model, or subject not configured
+    kRejected,     ///< the filter refused it (non-finite input)
+};
+
+class Pipeline final {
+public:
+    /// Builds filters, solver and assemblers. nullptr + *error for a filter that cannot be
+    /// made (unknown name or parameter); the message names the segment.
+    static std::unique_ptr<Pipeline> create(PipelineConfig config, const Clock& clock, std::string* error);
+    ~Pipeline();
+
+    Pipeline(const Pipeline&) = delete;
+    Pipeline& operator=(const Pipeline&) = delete;
+
+    /// Set-up: outputs receive frames in the order they were added.
+    void add_output(std::unique_ptr<Output> output);
+    /// Set-up: starts every output in order; false + *error on the first failure.
+    bool start_outputs(std::string* error);
+    /// After the assembler stopped: stops every output; false + *error of the first failure
+    /// (every output is stopped regardless).
+    bool stop_outputs(std::string* error);
+
+    // --- live ---
+    /// Starts the worker threads (after every output started).
+    void start_workers();
+    /// Ingest thread only. Feeds the sample-outputs, then routes it to its segment's worker
+    /// without waking it. True when the sample was queued: the caller calls wake_workers()
+    /// once after the batch (one wake-up per worker, not one per sample).
+    bool route(const SegmentSample& sample);
+    /// Ingest thread only.
+    void wake_workers() { pool_->wake_workers(); }
+    /// The assembler thread: drains the workers, assembles, solves and publishes until
+    /// request_assembler_stop(); then emits what the workers still had and every open
+    /// instant. on_pass runs after every turn of the loop (at least every 50 ms): the
+    /// daemon's watchdog ping.
+    void run_assembler(const std::function<void()>& on_pass);
+    /// Any thread. Call after stop_workers() so the final drain sees every pose.
+    void request_assembler_stop() { assembler_stop_.store(true, std::memory_order_release); }
+    /// After ingest stopped: the workers finish what is queued and exit.
+    void stop_workers() { pool_->stop(); }
+
+    // --- synchronous ---
+    /// Routes, filters and assembles one sample at now_us (the caller's clock, never
+    /// decreasing). Outputs receive frames from inside this call.
+    RouteResult process(const SegmentSample& sample, std::int64_t now_us);
+    /// Emits every open instant.
+    void flush(std::int64_t now_us) { assemblers_->flush(now_us); }
+
+    // --- set-up results and stats (any thread) ---
+    [[nodiscard]] const skeleton::BodyModel& model() const { return config_.model; }
+    [[nodiscard]] const std::vector<std::uint32_t>& subjects() const { return config_.subjects; }
+    /// -1 = the node is not in the model. The one node -> segment table of live and replay.
+    [[nodiscard]] int segment_of(std::uint32_t node_id) const {
+        return node_id < node_to_segment_.size() ? node_to_segment_[node_id] : -1;
+    }
+    [[nodiscard]] PoseSolver& solver() { return *solver_; }
+    [[nodiscard]] const PoseSolver& solver() const { return *solver_; }
+    [[nodiscard]] const WorkerPool& pool() const { return *pool_; }
+    [[nodiscard]] const AssemblerSet& assemblers() const { return *assemblers_; }
+    [[nodiscard]] const CounterGroup& route_counters() const { return route_counters_; }
+    [[nodiscard]] LatencySnapshot ingest_latency() const { return ingest_latency_.snapshot(); }
+    [[nodiscard]] const std::vector<std::unique_ptr<Output>>& outputs() const { return outputs_; }
+    /// Wall clock µs of the first and the latest received sample (0 = none yet).
+    [[nodiscard]] std::int64_t first_sample_us() const { return first_sample_us_.load(std::memory_order_relaxed); }
+    [[nodiscard]] std::int64_t last_sample_us() const { return last_sample_us_.load(std::memory_order_relaxed); }
+    /// Clock µs of the assembler loop's last turn (start time before it runs).
+    [[nodiscard]] std::int64_t assembler_alive_us() const {
+        return assembler_alive_us_.load(std::memory_order_relaxed);
+    }
+
+private:
+    Pipeline(PipelineConfig config, const Clock& clock);
+    bool build(std::string* error);
+    void note_sample(const SegmentSample& sample);
+    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+
+    PipelineConfig config_;
+    const Clock& clock_;
+    // Node ids are one byte on the wire: 256 entries cover every node.
+    std::array<std::int16_t, 256> node_to_segment_{};
+
+    std::vector<std::unique_ptr<FilterProcessor>> processors_;  // subject-major, segment-minor
+    std::unique_ptr<WorkerPool> pool_;
+    std::unique_ptr<PoseSolver> solver_;
+    std::unique_ptr<AssemblerSet> assemblers_;
+    std::vector<std::unique_ptr<Output>> outputs_;
+    std::vector<Output*> sample_outputs_;  // wants_samples(), fixed before samples flow
+
+    std::atomic<bool> assembler_stop_{false};
+    std::atomic<std::int64_t> assembler_alive_us_{0};
+    std::atomic<std::int64_t> first_sample_us_{0};  // routing thread
+    std::atomic<std::int64_t> last_sample_us_{0};   // routing thread
+
+    // Written by the routing thread only.
+    SingleWriterLatencyHistogram ingest_latency_;  // sink_send_us -> received_us
+    SingleWriterCounter unknown_nodes_, samples_routed_, samples_rejected_;
+    CounterGroup route_counters_{"route"};
+};
+
+}  // namespace mocap::pipeline

@@ -1,0 +1,154 @@
+#include "pipeline/pipeline.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+namespace mocap::pipeline {
+namespace {
+
+class FixedClock final : public Clock {
+public:
+    [[nodiscard]] std::int64_t now_us() const noexcept override { return 1'000'000; }
+};
+
+/// Records what the pipeline hands an output.
+class RecordingOutput final : public Output {
+public:
+    struct Seen {
+        std::uint32_t subject = 0;
+        std::uint64_t sync = 0;
+        std::uint16_t segments = 0;
+        std::array<double, 4> q0{};
+        std::uint16_t angles = 0;
+    };
+    std::vector<Seen> frames;
+    int started = 0, stopped = 0;
+
+    [[nodiscard]] std::string_view name() const override { return "test"; }
+    bool start(std::string* /*error*/) override { return ++started, true; }
+    bool stop(std::string* /*error*/) override { return ++stopped, true; }
+    void on_frame(const SubjectFrame& f, const SkeletonPose& p) override {
+        frames.push_back(
+            {f.subject_id, f.sync, f.segment_count, f.segments[0].q_earth_sensor_wxyz, p.joint_angle_count});
+    }
+};
+
+PipelineConfig two_subjects(std::string filter = "mahony") {
+    PipelineConfig c;
+    c.model = skeleton::default_body_model(1.75, filter);
+    c.subjects = {1, 2};
+    c.assembler.deadline_us = 20'000;
+    return c;
+}
+
+SegmentSample raw_sample(std::uint32_t subject, std::uint8_t node, std::uint64_t sync, double gyro_z) {
+    SegmentSample s;
+    s.subject_id = subject;
+    s.node_id = node;
+    s.sync = sync;
+    s.imu.t_us = static_cast<std::int64_t>(sync) * 10'000;
+    s.imu.gyro_rad_s = {0.0, 0.0, gyro_z};
+    s.imu.accel_m_s2 = {0.0, 0.0, 9.81};
+    s.times.received_us = s.imu.t_us;
+    return s;
+}
+
+std::uint64_t counter(const Pipeline& p, std::string_view name) {
+    return p.route_counters().value(name).value_or(~0ull);
+}
+
+TEST(Pipeline, NodeTableCoversEveryWireNodeId) {
+    FixedClock clock;
+    std::string error;
+    auto c = two_subjects();
+    c.model.segments[3].node_id = 100;  // above the 64 entries the daemon's table once had
+    auto p = Pipeline::create(std::move(c), clock, &error);
+    ASSERT_TRUE(p) << error;
+    EXPECT_EQ(p->segment_of(100), 3);
+    EXPECT_EQ(p->segment_of(1), 0);
+    EXPECT_EQ(p->segment_of(4), -1);  // node 4 was segment 3's default id
+    EXPECT_EQ(p->segment_of(255), -1);
+}
+
+TEST(Pipeline, UnknownNodesAndSubjectsAreCountedNotFiltered) {
+    FixedClock clock;
+    std::string error;
+    auto p = Pipeline::create(two_subjects(), clock, &error);
+    ASSERT_TRUE(p) << error;
+    auto out = std::make_unique<RecordingOutput>();
+    auto* seen = out.get();
+    p->add_output(std::move(out));
+    ASSERT_TRUE(p->start_outputs(&error)) << error;
+    EXPECT_EQ(p->process(raw_sample(1, 200, 1, 0.0), 10'000), RouteResult::kUnknownNode);  // node not in the model
+    EXPECT_EQ(p->process(raw_sample(3, 1, 1, 0.0), 10'000), RouteResult::kUnknownNode);    // subject not configured
+    EXPECT_EQ(p->process(raw_sample(0, 1, 1, 0.0), 10'000), RouteResult::kUnknownNode);
+    EXPECT_EQ(counter(*p, "samples_unknown_node"), 3u);
+    EXPECT_EQ(counter(*p, "samples_routed"), 0u);
+    p->flush(1'000'000);
+    EXPECT_TRUE(seen->frames.empty());
+}
+
+TEST(Pipeline, NonFiniteSamplesAreRejectedBeforeTheFilter) {
+    FixedClock clock;
+    std::string error;
+    auto p = Pipeline::create(two_subjects(), clock, &error);
+    ASSERT_TRUE(p) << error;
+    auto s = raw_sample(1, 1, 1, std::numeric_limits<double>::quiet_NaN());
+    EXPECT_EQ(p->process(s, 10'000), RouteResult::kRejected);
+    EXPECT_EQ(counter(*p, "samples_rejected"), 1u);
+}
+
+TEST(Pipeline, EachSubjectAndSegmentHasItsOwnFilter) {
+    FixedClock clock;
+    std::string error;
+    auto p = Pipeline::create(two_subjects(), clock, &error);
+    ASSERT_TRUE(p) << error;
+    auto out = std::make_unique<RecordingOutput>();
+    auto* seen = out.get();
+    p->add_output(std::move(out));
+    ASSERT_TRUE(p->start_outputs(&error)) << error;
+    const auto segments = static_cast<std::uint8_t>(p->model().size());
+    // Subject 1 turns about z, subject 2 stands still: their pelvis filters must differ,
+    // and every segment's sample reaches the frame of its own subject.
+    for (std::uint64_t sync = 1; sync <= 50; ++sync) {
+        const std::int64_t now = static_cast<std::int64_t>(sync) * 10'000;
+        for (std::uint8_t node = 1; node <= segments; ++node) {
+            ASSERT_EQ(p->process(raw_sample(1, node, sync, 1.0), now), RouteResult::kProcessed);
+            ASSERT_EQ(p->process(raw_sample(2, node, sync, 0.0), now), RouteResult::kProcessed);
+        }
+    }
+    p->flush(1'000'000);
+    EXPECT_EQ(counter(*p, "samples_routed"), 2u * 50u * segments);
+    ASSERT_EQ(seen->frames.size(), 100u);  // every instant of both subjects was complete
+    const auto last_of = [&](std::uint32_t subject) {
+        for (auto it = seen->frames.rbegin(); it != seen->frames.rend(); ++it) {
+            if (it->subject == subject) return *it;
+        }
+        return RecordingOutput::Seen{};
+    };
+    const auto turning = last_of(1), still = last_of(2);
+    EXPECT_EQ(turning.sync, 50u);
+    EXPECT_EQ(still.sync, 50u);
+    EXPECT_EQ(turning.segments, segments);
+    EXPECT_GT(turning.angles, 0u);
+    EXPECT_NEAR(still.q0[0], 1.0, 1e-6);       // no rotation: identity
+    EXPECT_LT(std::abs(turning.q0[0]), 0.99);  // ~0.5 rad about z: w ~ cos(0.25)
+    EXPECT_GT(std::abs(turning.q0[3]), 0.15);
+    ASSERT_TRUE(p->stop_outputs(&error)) << error;
+    EXPECT_EQ(seen->started, 1);
+    EXPECT_EQ(seen->stopped, 1);
+}
+
+TEST(Pipeline, UnknownFilterNamesTheSegment) {
+    FixedClock clock;
+    std::string error;
+    auto c = two_subjects();
+    c.model.segments[2].filter = "nope";
+    EXPECT_FALSE(Pipeline::create(std::move(c), clock, &error));
+    EXPECT_NE(error.find("filter for segment"), std::string::npos) << error;
+}
+
+}  // namespace
+}  // namespace mocap::pipeline
