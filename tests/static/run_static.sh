@@ -40,14 +40,20 @@ mkdir -p "$OUT/tidy"
 python3 - "$DB" "$ROOT" "$BUILD" "$FILTER" "$OUT" <<'PY'
 import json, os, re, sys
 db, root, build, pattern, out = sys.argv[1:]
-entries = []
-for e in json.load(open(db)):
+# A source compiled into several targets (the wire library's C files: the library, its
+# test variants, the 32-bit self-test) is analysed once, as the product library compiles it:
+# entries of targets defined under tests/ come last, and the first entry of each file wins.
+def test_target(e):
+    return os.path.relpath(e["directory"], build).split(os.sep)[0] == "tests"
+entries, seen = [], set()
+for e in sorted(json.load(open(db)), key=test_target):
     f = os.path.normpath(os.path.join(e["directory"], e["file"]))
     rel = os.path.relpath(f, root)
     if f.startswith(build + os.sep) or rel.split(os.sep)[0] not in ("server", "clients", "firmware"):
         continue
-    if f.endswith(".pb.cc") or not re.search(pattern, rel):
+    if f.endswith(".pb.cc") or not re.search(pattern, rel) or f in seen:
         continue
+    seen.add(f)
     entries.append(dict(e, file=f))
 with open(os.path.join(out, "compile_commands.json"), "w") as fh:
     json.dump(entries, fh, indent=1)
