@@ -21,6 +21,9 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 BUILD="${MOCAP_BUILD_DIR:-$ROOT/build}"
 JOBS="${MOCAP_JOBS:-$(nproc)}"
+# ccache (CMakeLists.txt uses it when installed) keys on paths relative to the clone, so two
+# clones of the same commit share their cache entries.
+export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$ROOT}"
 
 # Everything the build, the tests and the firmware cross-build need.
 PACKAGES=(
@@ -28,7 +31,7 @@ PACKAGES=(
   libeigen3-dev libboost-dev libspdlog-dev libprotobuf-dev protobuf-compiler
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib
-  clang-14 libclang-rt-14-dev clang-tidy-14 clang-format-14 cppcheck ccache nlohmann-json3-dev
+  clang-14 libclang-rt-14-dev clang-tidy-14 clang-format-14 cppcheck ccache lld nlohmann-json3-dev
   assimp-utils qemu-system-x86 qemu-user busybox-static cpio kmod
   blender nodejs
   python3-protobuf python3-numpy python3-matplotlib python3-pytest
