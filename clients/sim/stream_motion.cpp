@@ -234,7 +234,7 @@ void StreamMotion::pose(double t_s, double heading_rad, const Vec3& origin_m, Bo
     Vec3 root;
     orientations(t_s, heading_rad, origin_m, out.q_earth_segment, root);
     out.segment_count = model_.size();
-    skeleton::SkeletonPose fk;
+    skeleton::KinematicPose fk;
     skeleton::forward_kinematics(model_, std::span<const Quat>(out.q_earth_segment.data(), model_.size()), root, fk);
     for (std::size_t i = 0; i < model_.size(); ++i) {
         out.sensor_position_m[i] = 0.5 * (fk.joint_position_m[i] + fk.end_position_m[i]);

@@ -45,8 +45,7 @@ bool Daemon::start(std::string* error) {
     if (!pc) return false;
     pipeline_ = pipeline::Pipeline::create(std::move(*pc), clock_, error);
     if (!pipeline_) return false;
-    for (const auto& line : pipeline_->solver().load_calibrations())
-        spdlog::info("{}", line);
+    pipeline_->solver().load_calibrations();
 
     // Outputs (docs/outputs.md): every one comes from the registry in outputs.cpp.
     const OutputContext outputs{

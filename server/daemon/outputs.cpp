@@ -31,7 +31,7 @@ public:
         server_.stop();
         return true;
     }
-    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+    void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         server_.publish(frame, pose);
     }
     void append_counters(std::vector<CounterValue>& out) const override {
@@ -59,7 +59,7 @@ public:
         recorder_.stop();  // ingest, its producer, has stopped
         return true;
     }
-    void on_frame(const SubjectFrame& /*frame*/, const pipeline::SkeletonPose& /*pose*/) override {}
+    void on_frame(const SubjectFrame& /*frame*/, const skeleton::SkeletonPose& /*pose*/) override {}
     [[nodiscard]] bool wants_samples() const override { return true; }
     void on_sample(const SegmentSample& sample) override { recorder_.push(sample); }
     void append_counters(std::vector<CounterValue>& out) const override { append_group(out, recorder_.counters()); }
@@ -86,7 +86,7 @@ public:
         server_->stop();
         return true;
     }
-    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+    void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         if (!off_) server_->publish(frame, pose);
     }
     [[nodiscard]] std::uint16_t port() const override { return off_ ? 0 : server_->port(); }
@@ -122,7 +122,7 @@ public:
         }
         return true;
     }
-    void on_frame(const SubjectFrame& f, const pipeline::SkeletonPose& p) override {
+    void on_frame(const SubjectFrame& f, const skeleton::SkeletonPose& p) override {
         row_.clear();
         serve::append_angles_csv_row(f.subject_id, f.sync, f.sample_us, p.joint_angles_rad.data(), p.joint_angle_count,
                                      row_);

@@ -63,7 +63,7 @@ public:
         server_.stop();
         return true;
     }
-    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+    void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         server_.publish(frame, pose);
     }
     void append_gauges(std::vector<pipeline::OutputGauge>& out) const override;
@@ -85,7 +85,7 @@ public:
     bool start(std::string* error) override;
     /// Finishes an open recording (patches its frame count).
     bool stop(std::string* error) override;
-    void on_frame(const SubjectFrame& frame, const pipeline::SkeletonPose& pose) override {
+    void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         recorder_.publish(frame, pose);
     }
     void append_counters(std::vector<CounterValue>& out) const override;

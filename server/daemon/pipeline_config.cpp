@@ -1,5 +1,7 @@
 #include "daemon/pipeline_config.hpp"
 
+#include "daemon/calibration_files.hpp"
+
 namespace mocap::daemon {
 
 namespace {
@@ -49,10 +51,9 @@ serve::BvhOutputOptions bvh_options_from_config(const DaemonConfig& config) {
     return o;
 }
 
-PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config) {
-    PoseSolverOptions so;
+skeleton::PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config) {
+    skeleton::PoseSolverOptions so;
     so.calibration_s = config.calibration_s;
-    so.calibration_dir = config.calibration_dir;
     so.calibration.heading_mode =
         config.heading_align ? skeleton::HeadingMode::kAlignToForward : skeleton::HeadingMode::kKeepEarth;
     so.calibration.facing_source =
@@ -77,6 +78,8 @@ std::optional<pipeline::PipelineConfig> pipeline_config_from_config(const Daemon
     pc.ring_capacity = config.ring_capacity;
     pc.assembler.deadline_us = static_cast<std::int64_t>(config.assembly_deadline_ms * 1000.0);
     pc.solver = pose_solver_options_from_config(config);
+    pc.calibration_store = calibration_files(config.calibration_dir);
+    pc.solver_log = log_to_spdlog;
     return pc;
 }
 

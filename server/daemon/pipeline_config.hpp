@@ -25,7 +25,7 @@ std::vector<std::uint32_t> subject_ids_from_config(const DaemonConfig& config);
 serve::BvhOutputOptions bvh_options_from_config(const DaemonConfig& config);
 
 /// Skeleton solver options from [skeleton] (max_subjects follows the subjects).
-PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config);
+skeleton::PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config);
 
 /// Everything the pipeline needs; std::nullopt + *error for an invalid body model.
 std::optional<pipeline::PipelineConfig> pipeline_config_from_config(const DaemonConfig& config, std::string* error);

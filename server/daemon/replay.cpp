@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "core/parse_number.hpp"
+#include "daemon/calibration_files.hpp"
 #include "daemon/outputs.hpp"
 #include "daemon/pipeline_config.hpp"
 #include "daemon/wall_clock.hpp"
@@ -39,7 +40,7 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     *result = ReplayResult{};
     auto pc = pipeline_config_from_config(config, error);
     if (!pc) return false;
-    pc->solver.calibration_dir = options.calibration_dir;
+    pc->calibration_store = calibration_files(options.calibration_dir);
     // The pipeline's own clock is read only by the live stages (worker pool, assembler
     // thread); the synchronous mode runs on the recorded received_us below.
     const WallClock clock;
@@ -48,8 +49,7 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     // Outputs: the registry's file outputs, the same encoder and recorder as live.
     OutputContext outputs{config, *pipeline, clock, {}, {}, {}, &options};
     add_outputs(outputs, *pipeline);
-    for (const auto& line : pipeline->solver().load_calibrations())
-        spdlog::info("{}", line);
+    pipeline->solver().load_calibrations();
     if (!pipeline->start_outputs(error)) return false;
 
     std::vector<ReplayCalibration> pending = options.calibrate;

@@ -22,11 +22,9 @@
 #include "core/counters.hpp"
 #include "core/frame.hpp"
 #include "core/imu_sample.hpp"
-#include "serve/pose_frame.hpp"  // SkeletonPose: moves to skeleton/ with the layering work
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::pipeline {
-
-using SkeletonPose = serve::SkeletonPose;
 
 /// A gauge for /metrics: a value that goes up and down (clients connected now).
 struct OutputGauge {
@@ -51,7 +49,7 @@ public:
     virtual bool stop(std::string* error) = 0;
 
     /// Assembler thread: one solved frame. Valid only during the call.
-    virtual void on_frame(const SubjectFrame& frame, const SkeletonPose& pose) = 0;
+    virtual void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) = 0;
 
     /// Whether on_sample() wants every raw sample (the raw recorder); asked once at set-up.
     [[nodiscard]] virtual bool wants_samples() const { return false; }

@@ -53,11 +53,12 @@ bool Pipeline::build(std::string* error) {
         }
     }
 
-    PoseSolverOptions so = config_.solver;
+    skeleton::PoseSolverOptions so = config_.solver;
     so.max_subjects =
         config_.subjects.empty() ? 0 : *std::max_element(config_.subjects.begin(), config_.subjects.end());
-    solver_ = std::make_unique<PoseSolver>(model, so,
-                                           [this](const SubjectFrame& f, const SkeletonPose& p) { publish(f, p); });
+    solver_ = std::make_unique<skeleton::PoseSolver>(
+        model, so, [this](const SubjectFrame& f, const skeleton::SkeletonPose& p) { publish(f, p); },
+        std::move(config_.calibration_store), config_.solver_log);
     assemblers_ = std::make_unique<AssemblerSet>(config_.assembler, *solver_);
     for (std::uint32_t id : config_.subjects)
         assemblers_->add_subject(id, static_cast<std::uint16_t>(model.size()));
@@ -89,7 +90,7 @@ bool Pipeline::stop_outputs(std::string* error) {
     return ok;
 }
 
-void Pipeline::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
+void Pipeline::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
     for (auto& o : outputs_)
         o->on_frame(frame, pose);
 }

@@ -33,16 +33,14 @@
 #include "core/latency_histogram.hpp"
 #include "core/subject_assembler.hpp"
 #include "core/worker_pool.hpp"
-#include "daemon/pose_solver.hpp"  // PoseSolver: moves to skeleton/ with the layering work
 #include "filter/filter_factory.hpp"
 #include "pipeline/filter_processor.hpp"
 #include "pipeline/output.hpp"
 #include "skeleton/body_model.hpp"
+#include "skeleton/calibration_store.hpp"
+#include "skeleton/pose_solver.hpp"
 
 namespace mocap::pipeline {
-
-using PoseSolver = daemon::PoseSolver;
-using PoseSolverOptions = daemon::PoseSolverOptions;
 
 struct PipelineConfig {
     skeleton::BodyModel model;              ///< validated (skeleton::validate)
@@ -51,7 +49,11 @@ struct PipelineConfig {
     std::uint32_t workers = 0;              ///< worker threads (live), 0 = hardware cores
     std::uint32_t ring_capacity = 4096;     ///< worker pool rings (live)
     AssemblerConfig assembler;
-    PoseSolverOptions solver;  ///< max_subjects is set from `subjects`
+    skeleton::PoseSolverOptions solver;  ///< max_subjects is set from `subjects`
+    /// Where calibrations are loaded from and saved to (nullptr = nowhere), and where the
+    /// solver's log lines go (nullptr = nowhere): injected, the pipeline does no file I/O.
+    std::unique_ptr<skeleton::CalibrationStore> calibration_store;
+    skeleton::LogFn solver_log;
 };
 
 /// What happened to one sample in the synchronous mode.
@@ -112,8 +114,8 @@ public:
     [[nodiscard]] int segment_of(std::uint32_t node_id) const {
         return node_id < node_to_segment_.size() ? node_to_segment_[node_id] : -1;
     }
-    [[nodiscard]] PoseSolver& solver() { return *solver_; }
-    [[nodiscard]] const PoseSolver& solver() const { return *solver_; }
+    [[nodiscard]] skeleton::PoseSolver& solver() { return *solver_; }
+    [[nodiscard]] const skeleton::PoseSolver& solver() const { return *solver_; }
     [[nodiscard]] const WorkerPool& pool() const { return *pool_; }
     [[nodiscard]] const AssemblerSet& assemblers() const { return *assemblers_; }
     [[nodiscard]] const CounterGroup& route_counters() const { return route_counters_; }
@@ -131,7 +133,7 @@ private:
     Pipeline(PipelineConfig config, const Clock& clock);
     bool build(std::string* error);
     void note_sample(const SegmentSample& sample);
-    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+    void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     PipelineConfig config_;
     const Clock& clock_;
@@ -140,7 +142,7 @@ private:
 
     std::vector<std::unique_ptr<FilterProcessor>> processors_;  // subject-major, segment-minor
     std::unique_ptr<WorkerPool> pool_;
-    std::unique_ptr<PoseSolver> solver_;
+    std::unique_ptr<skeleton::PoseSolver> solver_;
     std::unique_ptr<AssemblerSet> assemblers_;
     std::vector<std::unique_ptr<Output>> outputs_;
     std::vector<Output*> sample_outputs_;  // wants_samples(), fixed before samples flow

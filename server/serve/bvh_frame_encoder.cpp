@@ -18,7 +18,7 @@ std::string BvhFrameEncoder::frame_time_line() const {
     return buf;
 }
 
-void BvhFrameEncoder::append_motion_line(const SkeletonPose& pose, std::string& out) const {
+void BvhFrameEncoder::append_motion_line(const skeleton::SkeletonPose& pose, std::string& out) const {
     const std::size_t n = model_.size();
     assert(pose.segment_count == n);
     std::array<skeleton::Quat, kMaxSegments> q;

@@ -1,12 +1,12 @@
 // bvh_frame_encoder.hpp — one body model's BVH text: the HIERARCHY once, one MOTION line
-// per SkeletonPose. Shared by the live BVH service, the BVH file recorder and replay, so
+// per skeleton::SkeletonPose. Shared by the live BVH service, the BVH file recorder and replay, so
 // every BVH mocapd writes is byte-for-byte the same encoding.
 //
 // Encoding (skeleton/bvh.hpp): joint names = segment names, OFFSETs and root position in
 // `units_per_m` (centimetres by default), the root with 6 channels, every other joint 3,
 // rotation order `order` (ZXY by default) for every joint, BVH Y-up axes, degrees.
 // A MOTION line holds values_per_frame() numbers: root position (the pose's root segment
-// origin, SkeletonPose::position_m[0]) then every joint's local rotation.
+// origin, skeleton::SkeletonPose::position_m[0]) then every joint's local rotation.
 //
 // Thread-safety: const after construction; any number of threads may encode at once.
 // Cost: one line is O(segments) trig plus fixed-point formatting (~2-4 µs for 15 segments);
@@ -17,9 +17,9 @@
 #include <string>
 
 #include "serve/bvh_text.hpp"
-#include "serve/pose_frame.hpp"
 #include "skeleton/body_model.hpp"
 #include "skeleton/bvh_write.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
 
@@ -44,7 +44,7 @@ public:
 
     /// Appends one '\n'-terminated MOTION line for `pose` (pose.segment_count must equal
     /// the model's segment count; asserted).
-    void append_motion_line(const SkeletonPose& pose, std::string& out) const;
+    void append_motion_line(const skeleton::SkeletonPose& pose, std::string& out) const;
 
 private:
     skeleton::BodyModel model_;

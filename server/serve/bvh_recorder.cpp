@@ -125,7 +125,7 @@ bool BvhRecorder::stop(std::string* error, std::uint64_t* frames) {
     return true;
 }
 
-void BvhRecorder::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
+void BvhRecorder::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
     if (!recording_.load(std::memory_order_acquire)) return;
     std::lock_guard lock(mutex_);
     if (subject_ == 0) subject_ = frame.subject_id;

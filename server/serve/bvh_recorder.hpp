@@ -28,7 +28,7 @@
 #include "core/counters.hpp"
 #include "core/frame.hpp"
 #include "serve/bvh_frame_encoder.hpp"
-#include "serve/pose_frame.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
 
@@ -55,7 +55,7 @@ public:
     bool stop(std::string* error, std::uint64_t* frames = nullptr);
 
     /// Assembler thread.
-    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+    void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     [[nodiscard]] bool recording() const { return recording_.load(std::memory_order_acquire); }
     /// Component "bvh_record": recordings_started, frames_recorded, frames_dropped,

@@ -179,7 +179,7 @@ void BvhServer::admit(asio::ip::tcp::socket socket) {
     s->start();
 }
 
-void BvhServer::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
+void BvhServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
     if (sessions_.open() == 0 || !serve_.running()) return;
     auto text = std::make_shared<std::string>();
     text->reserve(16 * encoder_.values_per_frame());

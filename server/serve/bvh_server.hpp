@@ -34,11 +34,11 @@
 #include "core/asio.hpp"
 #include "core/frame.hpp"
 #include "serve/bvh_frame_encoder.hpp"
-#include "serve/pose_frame.hpp"
 #include "serve/publish_backlog.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_thread.hpp"
 #include "serve/session_table.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
 
@@ -80,7 +80,7 @@ public:
     void stop();
 
     /// Any thread; never blocks on a client.
-    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+    void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     [[nodiscard]] std::uint16_t port() const { return serve_.port(); }
     [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }

@@ -111,7 +111,7 @@ std::string HttpServer::metrics_text() {
     return render_prometheus(m);
 }
 
-void HttpServer::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
+void HttpServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
     const std::int64_t now = now_us();
     last_frame_us_.store(now, std::memory_order_relaxed);
     {

@@ -52,13 +52,13 @@
 #include "core/asio.hpp"
 #include "core/frame.hpp"
 #include "serve/control_access.hpp"
-#include "serve/pose_frame.hpp"
 #include "serve/prometheus_text.hpp"
 #include "serve/publish_backlog.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_counters.hpp"
 #include "serve/serve_thread.hpp"
 #include "serve/session_table.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
 
@@ -134,7 +134,7 @@ public:
     void stop();
 
     /// Any thread; never blocks on a client. Also records the subject as active.
-    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+    void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     [[nodiscard]] std::uint16_t port() const { return serve_.port(); }
     [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }

@@ -42,7 +42,7 @@ PoseBroadcaster::PoseBroadcaster(const std::vector<asio::io_context*>& lanes, st
 
 PoseBroadcaster::~PoseBroadcaster() = default;
 
-void PoseBroadcaster::publish(const SubjectFrame& frame, const SkeletonPose& pose) {
+void PoseBroadcaster::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
     if (stopped_.load(std::memory_order_acquire)) return;
     counters_.frames_published.fetch_add(1, std::memory_order_relaxed);
     if (all_subject_users_.load(std::memory_order_relaxed) == 0 &&

@@ -28,8 +28,8 @@
 #include "core/asio.hpp"
 #include "core/frame.hpp"
 #include "serve/pose_encoder.hpp"
-#include "serve/pose_frame.hpp"
 #include "serve/serve_counters.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
 
@@ -54,7 +54,7 @@ public:
 
     /// Any thread. Encodes and queues `frame` for every lane; returns at once.
     /// Precondition: as PoseEncoder::encode_frame.
-    void publish(const SubjectFrame& frame, const SkeletonPose& pose);
+    void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     /// After stop(), publish() is a no-op (used while the server shuts down).
     void stop() { stopped_.store(true, std::memory_order_release); }

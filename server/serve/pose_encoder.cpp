@@ -17,8 +17,8 @@ SharedBytes encode_server_message(const v1::ServerMessage& message) {
 PoseEncoder::PoseEncoder() : message_(std::make_unique<v1::ServerMessage>()) {}
 PoseEncoder::~PoseEncoder() = default;
 
-SharedBytes PoseEncoder::encode_frame(const SubjectFrame& frame, const SkeletonPose& pose, std::uint32_t fields,
-                                      std::int64_t encoded_us) {
+SharedBytes PoseEncoder::encode_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose,
+                                      std::uint32_t fields, std::int64_t encoded_us) {
     fields = normalize_fields(fields);
     const std::uint32_t n = frame.segment_count;
     assert(n <= kMaxSegments);
@@ -69,7 +69,7 @@ SharedBytes PoseEncoder::encode_frame(const SubjectFrame& frame, const SkeletonP
     if (fields & kFieldJointAngles) {
         auto* dst = out->mutable_joint_angles_rad();
         const std::uint32_t count = pose.joint_angle_count;
-        assert(count <= kMaxJointAngles);
+        assert(count <= skeleton::kMaxJointAngles);
         dst->Reserve(static_cast<int>(count));
         for (std::uint32_t i = 0; i < count; ++i) {
             dst->AddAlreadyReserved(static_cast<float>(pose.joint_angles_rad[i]));

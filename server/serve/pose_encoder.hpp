@@ -16,7 +16,7 @@
 #include <string>
 
 #include "core/frame.hpp"
-#include "serve/pose_frame.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::v1 {
 class ServerMessage;
@@ -58,7 +58,7 @@ public:
     /// stage stamps come from frame.times except encoded_us, given here (wall µs).
     /// Precondition (asserted): pose.segment_count == frame.segment_count when
     /// orientations, positions or joint angles are selected.
-    SharedBytes encode_frame(const SubjectFrame& frame, const SkeletonPose& pose, std::uint32_t fields,
+    SharedBytes encode_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose, std::uint32_t fields,
                              std::int64_t encoded_us);
 
 private:

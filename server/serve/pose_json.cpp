@@ -43,7 +43,7 @@ std::string encode_hello_json(const HttpDescription& description, const HelloJso
     return dump(hello);
 }
 
-std::string encode_frame_json(const SubjectFrame& frame, const SkeletonPose& pose, std::int64_t encoded_us) {
+std::string encode_frame_json(const SubjectFrame& frame, const skeleton::SkeletonPose& pose, std::int64_t encoded_us) {
     // Built as a json value and dumped: measured no slower than the hand-written fmt writer
     // it replaced (pose_json_bench, docs/performance.md "WebSocket frame JSON").
     const std::size_t n = std::min<std::size_t>(frame.segment_count, pose.segment_count);

@@ -15,8 +15,8 @@
 #include <vector>
 
 #include "core/frame.hpp"
-#include "serve/pose_frame.hpp"
 #include "serve/serve_config.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
 
@@ -33,7 +33,7 @@ struct HelloJsonFields {
 std::string encode_hello_json(const HttpDescription& description, const HelloJsonFields& fields);
 
 /// {"type":"frame",...} for min(frame, pose) segments; encoded_us = wall clock now.
-std::string encode_frame_json(const SubjectFrame& frame, const SkeletonPose& pose, std::int64_t encoded_us);
+std::string encode_frame_json(const SubjectFrame& frame, const skeleton::SkeletonPose& pose, std::int64_t encoded_us);
 
 /// {"type":"drops",...}: frames dropped for this viewer since the last frame it got.
 std::string encode_drops_json(std::uint64_t dropped, std::uint64_t dropped_total);

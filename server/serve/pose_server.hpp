@@ -34,9 +34,9 @@
 #include "core/frame.hpp"
 #include "serve/client_session.hpp"
 #include "serve/pose_broadcaster.hpp"
-#include "serve/pose_frame.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_counters.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
 
@@ -62,7 +62,7 @@ public:
     [[nodiscard]] std::uint16_t port() const { return bound_port_.load(); }
 
     /// Any thread; see PoseBroadcaster::publish.
-    void publish(const SubjectFrame& frame, const SkeletonPose& pose) { broadcaster_->publish(frame, pose); }
+    void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) { broadcaster_->publish(frame, pose); }
 
     /// Connected clients (including ones still handshaking).
     [[nodiscard]] std::size_t client_count() const { return active_clients_.load(); }

@@ -12,7 +12,7 @@ Vec3 root_position(const BodyModel& model) {
 }
 
 void forward_kinematics(const BodyModel& model, std::span<const Quat> q_world_segment, const Vec3& root_position_m,
-                        SkeletonPose& out) {
+                        KinematicPose& out) {
     const std::size_t n = std::min(model.size(), kMaxSegments);
     assert(q_world_segment.size() >= n);
     out.segment_count = n;

@@ -20,7 +20,7 @@
 
 namespace mocap::skeleton {
 
-struct SkeletonPose {
+struct KinematicPose {
     std::size_t segment_count = 0;
     std::array<Quat, kMaxSegments> q_world_segment = identity_quats();
     std::array<Vec3, kMaxSegments> joint_position_m = zero_vec3s();  ///< proximal joint of each segment
@@ -32,6 +32,6 @@ Vec3 root_position(const BodyModel& model);
 
 /// Fills `out` for a valid model; q_world_segment must hold model.size() orientations.
 void forward_kinematics(const BodyModel& model, std::span<const Quat> q_world_segment, const Vec3& root_position_m,
-                        SkeletonPose& out);
+                        KinematicPose& out);
 
 }  // namespace mocap::skeleton

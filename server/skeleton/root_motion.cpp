@@ -16,7 +16,7 @@ void FootContactRootTracker::reset(const Vec3& root_position_m) {
     contact_ = -1;
 }
 
-Vec3 FootContactRootTracker::candidate(const BodyModel& model, const SkeletonPose& pose, int c) const {
+Vec3 FootContactRootTracker::candidate(const BodyModel& model, const KinematicPose& pose, int c) const {
     const auto foot = static_cast<std::size_t>(feet_[static_cast<std::size_t>(c / 3)]);
     switch (c % 3) {
         case 0:
@@ -31,7 +31,7 @@ Vec3 FootContactRootTracker::candidate(const BodyModel& model, const SkeletonPos
     }
 }
 
-Vec3 FootContactRootTracker::update(const BodyModel& model, std::span<const Quat> q_world_segment, SkeletonPose& out) {
+Vec3 FootContactRootTracker::update(const BodyModel& model, std::span<const Quat> q_world_segment, KinematicPose& out) {
     forward_kinematics(model, q_world_segment, root_m_, out);
     if (foot_count_ == 0) return root_m_;
     const int candidates = static_cast<int>(foot_count_) * 3;

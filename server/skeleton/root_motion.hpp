@@ -45,13 +45,13 @@ public:
 
     /// Solves one frame: fills `out` (forward kinematics at the new root) and returns the
     /// new root position (metres, world axes).
-    Vec3 update(const BodyModel& model, std::span<const Quat> q_world_segment, SkeletonPose& out);
+    Vec3 update(const BodyModel& model, std::span<const Quat> q_world_segment, KinematicPose& out);
 
     /// Index of the current contact candidate (foot * 3 + {0 toe, 1 heel, 2 ankle}), -1 none.
     int contact() const { return contact_; }
 
 private:
-    Vec3 candidate(const BodyModel& model, const SkeletonPose& pose, int c) const;
+    Vec3 candidate(const BodyModel& model, const KinematicPose& pose, int c) const;
 
     RootMotionParams params_;
     std::array<int, 2> feet_{-1, -1};

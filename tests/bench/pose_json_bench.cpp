@@ -19,7 +19,7 @@ namespace {
 
 struct Sample {
     SubjectFrame frame;
-    SkeletonPose pose;
+    skeleton::SkeletonPose pose;
     explicit Sample(std::uint16_t segments) {
         frame.subject_id = 3;
         frame.sync = 123456;
@@ -46,7 +46,7 @@ void append_number(std::string& out, double v, int decimals) {
     fmt::format_to(std::back_inserter(out), "{:.{}f}", v, decimals);
 }
 
-std::string frame_json_fmt(const SubjectFrame& frame, const SkeletonPose& pose, std::int64_t encoded_us) {
+std::string frame_json_fmt(const SubjectFrame& frame, const skeleton::SkeletonPose& pose, std::int64_t encoded_us) {
     const std::size_t n = std::min<std::size_t>(frame.segment_count, pose.segment_count);
     std::string out;
     out.reserve(256 + n * 96);

@@ -29,7 +29,7 @@ public:
     [[nodiscard]] std::string_view name() const override { return "test"; }
     bool start(std::string* /*error*/) override { return ++started, true; }
     bool stop(std::string* /*error*/) override { return ++stopped, true; }
-    void on_frame(const SubjectFrame& f, const SkeletonPose& p) override {
+    void on_frame(const SubjectFrame& f, const skeleton::SkeletonPose& p) override {
         frames.push_back(
             {f.subject_id, f.sync, f.segment_count, f.segments[0].q_earth_sensor_wxyz, p.joint_angle_count});
     }

@@ -9,8 +9,8 @@
 
 #include "core/frame.hpp"
 #include "serve/bvh_frame_encoder.hpp"
-#include "serve/pose_frame.hpp"
 #include "skeleton/body_model.hpp"
+#include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve::test {
 
@@ -20,13 +20,13 @@ inline BvhFrameEncoder default_encoder() {
 
 /// Frame k of a subject: every segment turned k degrees about z, root 1 m up.
 inline void make_pose(std::uint32_t subject, std::uint64_t k, std::uint16_t segments, SubjectFrame& f,
-                      SkeletonPose& p) {
+                      skeleton::SkeletonPose& p) {
     f = SubjectFrame{};
     f.subject_id = subject;
     f.sync = k;
     f.sample_us = static_cast<std::int64_t>(k) * 10'000;
     f.segment_count = segments;
-    p = SkeletonPose{};
+    p = skeleton::SkeletonPose{};
     p.segment_count = segments;
     const double half = 0.5 * static_cast<double>(k) * 3.14159265358979323846 / 180.0;
     for (std::size_t i = 0; i < segments; ++i)

@@ -32,7 +32,7 @@ struct TempDir {
 void publish_frames(BvhRecorder& r, const BvhFrameEncoder& e, std::uint32_t subject, std::uint64_t from,
                     std::uint64_t count) {
     SubjectFrame f;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     for (std::uint64_t k = from; k < from + count; ++k) {
         test::make_pose(subject, k, static_cast<std::uint16_t>(e.model().size()), f, p);
         r.publish(f, p);
@@ -131,7 +131,7 @@ TEST(BvhRepair, RejectsAMalformedLineInTheMiddle) {
     const auto encoder = test::default_encoder();
     std::string text = encoder.hierarchy() + "MOTION\nFrames: 3\nFrame Time: 0.01\n";
     SubjectFrame f;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     for (std::uint64_t k = 0; k < 3; ++k) {
         test::make_pose(1, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
         encoder.append_motion_line(p, text);

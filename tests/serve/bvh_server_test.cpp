@@ -93,7 +93,7 @@ TEST(BvhServer, GreetingIsHierarchyMotionFrameTimeThenOneLinePerFrame) {
     ASSERT_TRUE(conn.ok());
     ASSERT_TRUE(wait_clients(server, 1));
     SubjectFrame f;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     for (std::uint64_t k = 0; k < 5; ++k) {
         test::make_pose(3, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
         server.publish(f, p);
@@ -125,7 +125,7 @@ TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
     ASSERT_TRUE(wait_clients(server, 1));
     const auto n = static_cast<std::uint16_t>(encoder.model().size());
     SubjectFrame f;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     std::string expect_7, expect_2;
     for (std::uint64_t k = 0; k < 4; ++k) {
         test::make_pose(7, k, n, f, p);
@@ -161,7 +161,7 @@ TEST(BvhServer, AClientThatHalfClosesAfterChoosingASubjectStillReceives) {
     conn.half_close();
     std::this_thread::sleep_for(50ms);
     SubjectFrame f;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     std::string expect;
     for (std::uint64_t k = 0; k < 3; ++k) {
         test::make_pose(4, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
@@ -178,7 +178,7 @@ TEST(BvhServer, NoClientNoEncodingAndStopClosesClients) {
     const auto encoder = test::default_encoder();
     auto server = started(encoder);
     SubjectFrame f;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     test::make_pose(1, 1, static_cast<std::uint16_t>(encoder.model().size()), f, p);
     server->publish(f, p);
     EXPECT_EQ(server->counters().frames_published.load(), 0u);
@@ -196,7 +196,7 @@ TEST(BvhServer, LaggingClientLosesOldestLinesNotThePipeline) {
     Conn conn(server.port());  // never reads until the end
     ASSERT_TRUE(wait_clients(server, 1));
     SubjectFrame f;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     // If publish() waited for the client, this loop would never end (the client never reads).
     for (std::uint64_t k = 0; k < 20000; ++k) {
         test::make_pose(1, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);

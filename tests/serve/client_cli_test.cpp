@@ -61,7 +61,7 @@ protected:
                 f.sync = sync;
                 f.segment_count = 2;
                 f.times.sink_send_us = client::wall_clock_us();
-                SkeletonPose p;
+                skeleton::SkeletonPose p;
                 p.segment_count = 2;
                 p.q_world_segment_wxyz[1] = {0.0, 1.0, 0.0, 0.0};
                 p.position_m[1] = {0.0, 0.0, 0.5};

@@ -65,8 +65,8 @@ SubjectFrame frame(std::uint32_t subject, std::uint64_t sync) {
     return f;
 }
 
-SkeletonPose pose(double x) {
-    SkeletonPose p;
+skeleton::SkeletonPose pose(double x) {
+    skeleton::SkeletonPose p;
     p.segment_count = 2;
     p.position_m[0] = {x, 0, 1};
     p.position_m[1] = {x, 0, 1.2};
@@ -178,7 +178,7 @@ TEST(HttpServer, StalledBrowserDropsOldestAndOthersKeepUp) {
     // its queue drops.
     SubjectFrame big_frame = frame(1, 0);
     big_frame.segment_count = kMaxSegments;
-    SkeletonPose big = pose(1.0);
+    skeleton::SkeletonPose big = pose(1.0);
     big.segment_count = kMaxSegments;
     constexpr int kFrames = 6000;
     int received = 0;

@@ -47,7 +47,7 @@ TEST(LoadClient, CountsFramesGapsAndLatency) {
         f.sync = sync;
         f.segment_count = 1;
         f.times.sink_send_us = client::wall_clock_us();
-        SkeletonPose p;
+        skeleton::SkeletonPose p;
         p.segment_count = 1;
         server.publish(f, p);
         f.subject_id = 4;  // not subscribed: must not be counted

@@ -13,7 +13,7 @@ void BM_EncodeFrame(benchmark::State& state) {
     const auto segments = static_cast<std::uint16_t>(state.range(0));
     const auto fields = static_cast<std::uint32_t>(state.range(1));
     SubjectFrame frame;
-    SkeletonPose pose;
+    skeleton::SkeletonPose pose;
     frame.segment_count = pose.segment_count = segments;
     for (std::uint16_t i = 0; i < segments; ++i) {
         const double a = 0.1 * i;

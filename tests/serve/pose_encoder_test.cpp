@@ -13,7 +13,7 @@ namespace {
 
 struct Sample {
     SubjectFrame frame;
-    SkeletonPose pose;
+    skeleton::SkeletonPose pose;
 };
 
 Sample make_sample(std::uint16_t segments) {
@@ -111,7 +111,7 @@ TEST(PoseEncoder, FieldSelectionLeavesOtherArraysEmpty) {
 
 TEST(PoseEncoder, RawOnlyNeedsNoSkeletonPose) {
     Sample s = make_sample(3);
-    s.pose = SkeletonPose{};  // no calibrated pose yet
+    s.pose = skeleton::SkeletonPose{};  // no calibrated pose yet
     PoseEncoder encoder;
     const v1::SkeletonFrame f = parse(encoder.encode_frame(s.frame, s.pose, kFieldRaw, 5)).frame();
     EXPECT_EQ(f.q_earth_sensor_wxyz_size(), 12);

@@ -51,7 +51,7 @@ void publish(PoseServer& server, std::uint32_t subject, std::uint64_t sync) {
     f.sample_us = static_cast<std::int64_t>(sync) * 10'000;
     f.times.sink_send_us = client::wall_clock_us();
     f.segment_count = 3;
-    SkeletonPose p;
+    skeleton::SkeletonPose p;
     p.segment_count = 3;
     for (std::size_t i = 0; i < 3; ++i) {
         f.segments[i].flags = 0;

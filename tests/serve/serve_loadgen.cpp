@@ -56,7 +56,7 @@ int main(int argc, char** argv) {
     const auto start = std::chrono::steady_clock::now();
     const auto end = start + std::chrono::duration<double>(duration_s);
     SubjectFrame frame;
-    serve::SkeletonPose pose;
+    skeleton::SkeletonPose pose;
     frame.segment_count = pose.segment_count = segments;
     double publish_s = 0;
     for (std::uint64_t tick = 1;; ++tick) {

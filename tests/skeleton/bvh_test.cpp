@@ -608,7 +608,7 @@ TEST(Bvh, ModelFromClipReproducesLimbPositions) {
     std::vector<Vec3> pj(mc.clip.joints.size());
     auto qs = identity_quats();
     auto ps = zero_vec3s();
-    SkeletonPose pose;
+    KinematicPose pose;
     double worst_leg_m = 0;
     double worst_arm_m = 0;
     const auto at = [&](std::string_view seg) {

@@ -12,7 +12,7 @@ std::size_t idx(const BodyModel& m, std::string_view n) {
 TEST(ForwardKinematics, TPoseGeometry) {
     const BodyModel m = default_body_model(1.75);
     const auto q = identity_quats();
-    SkeletonPose pose;
+    KinematicPose pose;
     forward_kinematics(m, q, root_position(m), pose);
     EXPECT_EQ(pose.segment_count, 15u);
     // Arm span: hand tip to hand tip = the sum of the lateral offsets on both sides.
@@ -41,7 +41,7 @@ TEST(ForwardKinematics, RotationsMoveTheChain) {
     const Quat flex = Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()));
     q[idx(m, seg::kLeftCalf)] = flex;
     q[idx(m, seg::kLeftFoot)] = flex;
-    SkeletonPose pose;
+    KinematicPose pose;
     const Vec3 root(1.0, 2.0, 0.9);
     forward_kinematics(m, q, root, pose);
     const Vec3 knee = pose.joint_position_m[idx(m, seg::kLeftCalf)];
@@ -56,7 +56,7 @@ TEST(ForwardKinematics, RotationsMoveTheChain) {
     const Quat yaw = Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()));
     for (std::size_t i = 0; i < m.size(); ++i)
         turned[i] = yaw;
-    SkeletonPose a, b;
+    KinematicPose a, b;
     forward_kinematics(m, identity_quats(), root, a);
     forward_kinematics(m, turned, root, b);
     for (std::size_t i = 0; i < m.size(); ++i) {

@@ -13,7 +13,7 @@ namespace {
 TEST(RootMotion, StandingStillStaysPutOnTheFloor) {
     const BodyModel m = default_body_model();
     FootContactRootTracker t(m);
-    SkeletonPose pose;
+    KinematicPose pose;
     const auto q = identity_quats();
     for (int f = 0; f < 100; ++f)
         t.update(m, q, pose);
@@ -24,7 +24,7 @@ TEST(RootMotion, StandingStillStaysPutOnTheFloor) {
 TEST(RootMotion, KneeBendLowersThePelvis) {
     const BodyModel m = default_body_model();
     FootContactRootTracker t(m);
-    SkeletonPose pose;
+    KinematicPose pose;
     auto q = identity_quats();
     // Squat-like: thighs forward 40°, calves upright, feet flat: the pelvis drops.
     const Quat thigh(Eigen::AngleAxisd(-40 * M_PI / 180, Vec3::UnitY()));
@@ -56,7 +56,7 @@ std::pair<Vec3, Vec3> cmu_walk_travel(bool clip_dimensions) {
     auto qs = identity_quats();
     auto ps = zero_vec3s();
     FootContactRootTracker t(m);
-    SkeletonPose pose;
+    KinematicPose pose;
     Vec3 truth0 = Vec3::Zero(), est0 = Vec3::Zero(), truth1 = Vec3::Zero(), est1 = Vec3::Zero();
     for (std::size_t fr = 0; fr < clip.frame_count; ++fr) {
         bvh_global_pose(clip, clip.frame(fr), 1.0, qj, pj);

@@ -1,8 +1,9 @@
-// pose_frame.hpp — what the daemon hands to the pose service for one subject frame,
-// next to the assembler's SubjectFrame: the calibrated skeleton pose.
+// skeleton_pose.hpp — what the skeleton solver (pose_solver.hpp) hands to the outputs for
+// one subject frame, next to the assembler's SubjectFrame: the calibrated skeleton pose.
 //
 // The skeleton component computes these values; the serve component only encodes them,
-// so it does not depend on the body model. Plain value type, no heap (docs/style.md, "Hot path never allocates").
+// so it needs this header but not the body model. Plain value type, no heap (docs/style.md,
+// "Hot path never allocates").
 #pragma once
 
 #include <array>
@@ -11,7 +12,7 @@
 #include "core/frame.hpp"
 #include "core/imu_sample.hpp"
 
-namespace mocap::serve {
+namespace mocap::skeleton {
 
 /// Most joint-angle values one frame may carry (three per segment).
 inline constexpr std::size_t kMaxJointAngles = 3 * kMaxSegments;
@@ -41,4 +42,4 @@ struct SkeletonPose {
     std::array<double, kMaxJointAngles> joint_angles_rad{};
 };
 
-}  // namespace mocap::serve
+}  // namespace mocap::skeleton

@@ -1,60 +1,61 @@
-#include "daemon/pose_solver.hpp"
+#include "skeleton/pose_solver.hpp"
 
-#include <spdlog/spdlog.h>
-
-#include <filesystem>
-#include <fstream>
-#include <sstream>
+#include <charconv>
 
 #include "skeleton/forward_kinematics.hpp"
 
-namespace mocap::daemon {
+namespace mocap::skeleton {
 
-namespace fs = std::filesystem;
-using skeleton::Quat;
+namespace {
 
-PoseSolver::PoseSolver(skeleton::BodyModel model, PoseSolverOptions options, PublishFn publish)
+std::string subject_text(std::uint32_t subject_id) {
+    return "subject " + std::to_string(subject_id) + ": ";
+}
+
+/// Shortest text that reads back as the same double ("1", "0.5"), as the log always showed.
+std::string number_text(double v) {
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, r.ptr);
+}
+
+}  // namespace
+
+PoseSolver::PoseSolver(BodyModel model, PoseSolverOptions options, PublishFn publish,
+                       std::unique_ptr<CalibrationStore> store, LogFn log)
     : model_(std::move(model)),
       options_(std::move(options)),
       publish_(std::move(publish)),
-      joints_(skeleton::default_joint_specs(model_)),
+      store_(std::move(store)),
+      log_(std::move(log)),
+      joints_(default_joint_specs(model_)),
       subjects_(options_.max_subjects + 1) {
     for (auto& s : subjects_)
-        s.smoother = skeleton::PoseSmoother(options_.smoothing);
+        s.smoother = PoseSmoother(options_.smoothing);
     group_.add("frames_solved", frames_solved_);
     group_.add("calibrations_ok", calibrations_ok_);
     group_.add("calibrations_failed", calibrations_failed_);
     group_.add("auto_calibration_retries", auto_calibration_retries_);
 }
 
-std::string PoseSolver::calibration_path(std::uint32_t subject_id) const {
-    return (fs::path(options_.calibration_dir) / ("calibration-subject-" + std::to_string(subject_id) + ".toml"))
-        .string();
-}
-
-std::vector<std::string> PoseSolver::load_calibrations() {
-    std::vector<std::string> log;
-    if (options_.calibration_dir.empty()) return log;
+std::size_t PoseSolver::load_calibrations() {
+    if (!store_) return 0;
+    std::size_t loaded = 0;
     for (std::uint32_t id = 1; id < subjects_.size(); ++id) {
-        const std::string path = calibration_path(id);
-        std::error_code ec;
-        if (!fs::exists(path, ec)) continue;
-        std::ifstream in(path);
-        std::stringstream text;
-        text << in.rdbuf();
-        auto r = skeleton::parse_calibration(model_, text.str());
-        if (r) {
-            subjects_[id].calibration = *r.calibration;
+        StoredCalibration stored = store_->load(model_, id);
+        if (stored.calibration) {
+            subjects_[id].calibration = *stored.calibration;
             subjects_[id].root.emplace(model_);
-            log.push_back("subject " + std::to_string(id) + ": calibration loaded from " + path);
-        } else {
-            log.push_back("subject " + std::to_string(id) + ": ignoring " + path + ": " + r.error);
+            ++loaded;
+            log(LogLevel::kInfo, subject_text(id) + "calibration loaded from " + stored.where);
+        } else if (!stored.error.empty()) {
+            log(LogLevel::kInfo, subject_text(id) + "ignoring " + stored.where + ": " + stored.error);
         }
     }
-    return log;
+    return loaded;
 }
 
-std::string PoseSolver::request_calibration(std::uint32_t subject_id, skeleton::CalibrationPose pose) {
+std::string PoseSolver::request_calibration(std::uint32_t subject_id, CalibrationPose pose) {
     if (subject_id == 0 || subject_id >= subjects_.size()) {
         return "unknown subject " + std::to_string(subject_id);
     }
@@ -74,8 +75,8 @@ void PoseSolver::take_requests() {
         s.auto_pending = false;
         s.collect_start_us = -1;
         s.pose = pose;
-        spdlog::info("subject {}: calibration ({}) started: stand still for {} s", id, skeleton::to_string(pose),
-                     options_.calibration_s);
+        log(LogLevel::kInfo, subject_text(id) + "calibration (" + std::string(to_string(pose)) +
+                                 ") started: stand still for " + number_text(options_.calibration_s) + " s");
     }
     requests_.clear();
     has_requests_.store(false, std::memory_order_relaxed);
@@ -90,47 +91,34 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
     const double elapsed_s = static_cast<double>(frame.sample_us - s.collect_start_us) * 1e-6;
     if (elapsed_s < options_.calibration_s) return;
     s.collecting = false;
-    skeleton::CalibrationOptions opt = options_.calibration;
+    CalibrationOptions opt = options_.calibration;
     opt.pose = s.pose;
-    auto result = skeleton::calibrate(model_, s.collector, opt);
+    auto result = calibrate(model_, s.collector, opt);
     if (!result) {
         if (s.auto_run) {  // the subject moved: try the next still period
             auto_calibration_retries_.add();
-            spdlog::debug("subject {}: automatic calibration restarts: {}", subject_id, result.error);
+            log(LogLevel::kDebug, subject_text(subject_id) + "automatic calibration restarts: " + result.error);
             return;
         }
         calibrations_failed_.add();
-        spdlog::warn("subject {}: calibration failed: {}", subject_id, result.error);
+        log(LogLevel::kWarn, subject_text(subject_id) + "calibration failed: " + result.error);
         return;
     }
     if (s.auto_run) {
         s.auto_pending = false;
-        spdlog::info(
-            "subject {}: calibrated automatically from its first still period ({} assumed); "
-            "send a calibrate request to redo it",
-            subject_id, skeleton::to_string(s.pose));
+        log(LogLevel::kInfo, subject_text(subject_id) + "calibrated automatically from its first still period (" +
+                                 std::string(to_string(s.pose)) + " assumed); send a calibrate request to redo it");
     }
     s.calibration = *result.calibration;
     s.smoother.reset();
     s.root.emplace(model_);
-    s.root->reset(skeleton::root_position(model_));
+    s.root->reset(root_position(model_));
     calibrations_ok_.add();
-    spdlog::info("subject {}: calibrated ({})", subject_id, skeleton::to_string(s.pose));
-    if (options_.calibration_dir.empty()) return;
-    // Rare (one per calibration), small: written here rather than handing it to a thread.
-    const std::string path = calibration_path(subject_id);
-    const std::string tmp = path + ".tmp";
-    {
-        std::ofstream out(tmp, std::ios::trunc);
-        out << skeleton::serialize_calibration(model_, *s.calibration);
-        if (!out) {
-            spdlog::error("subject {}: cannot write {}", subject_id, tmp);
-            return;
-        }
-    }
-    std::error_code ec;
-    fs::rename(tmp, path, ec);  // atomic replace: a crash never leaves half a file
-    if (ec) spdlog::error("subject {}: cannot save calibration to {}: {}", subject_id, path, ec.message());
+    log(LogLevel::kInfo, subject_text(subject_id) + "calibrated (" + std::string(to_string(s.pose)) + ")");
+    if (!store_) return;
+    // Rare (one per calibration), small: saved here rather than handing it to a thread.
+    const std::string error = store_->save(model_, subject_id, *s.calibration);
+    if (!error.empty()) log(LogLevel::kError, subject_text(subject_id) + error);
 }
 
 void PoseSolver::on_frame(const SubjectFrame& frame) {
@@ -139,7 +127,7 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
     Subject& s = subjects_[frame.subject_id];
     const std::size_t n = std::min<std::size_t>(frame.segment_count, model_.size());
 
-    std::array<Quat, kMaxSegments> q_earth_sensor = skeleton::identity_quats();
+    std::array<Quat, kMaxSegments> q_earth_sensor = identity_quats();
     for (std::size_t i = 0; i < n; ++i) {
         const auto& q = frame.segments[i].q_earth_sensor_wxyz;
         q_earth_sensor[i] = Quat(q[0], q[1], q[2], q[3]);
@@ -158,14 +146,14 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
     std::array<Quat, kMaxSegments> q_world = q_earth_sensor;
     const std::span<const Quat> sensors(q_earth_sensor.data(), n);
     const std::span<Quat> world(q_world.data(), n);
-    if (s.calibration) skeleton::apply_calibration(model_, *s.calibration, sensors, world);
+    if (s.calibration) apply_calibration(model_, *s.calibration, sensors, world);
     s.smoother.apply(frame.sample_us, world);
 
-    skeleton::SkeletonPose fk;
+    KinematicPose fk;
     if (s.root) {
         s.root->update(model_, world, fk);
     } else {
-        skeleton::forward_kinematics(model_, world, skeleton::root_position(model_), fk);
+        forward_kinematics(model_, world, root_position(model_), fk);
     }
 
     out_.segment_count = static_cast<std::uint16_t>(n);
@@ -176,9 +164,9 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
         out_.position_m[i] = {p.x(), p.y(), p.z()};
         out_.extra_flags[i] = s.calibration && s.calibration->calibrated[i] ? kSegmentCalibrated : 0;
     }
-    std::array<skeleton::JointAngles, kMaxSegments> angles{};
-    skeleton::compute_joint_angles(joints_, std::span<const Quat>(q_world.data(), n),
-                                   std::span<skeleton::JointAngles>(angles.data(), joints_.size()));
+    std::array<JointAngles, kMaxSegments> angles{};
+    compute_joint_angles(joints_, std::span<const Quat>(q_world.data(), n),
+                         std::span<JointAngles>(angles.data(), joints_.size()));
     out_.joint_angle_count = static_cast<std::uint16_t>(3 * joints_.size());
     for (std::size_t j = 0; j < joints_.size(); ++j) {
         out_.joint_angles_rad[3 * j] = angles[j].flexion_rad;
@@ -189,4 +177,4 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
     publish_(frame, out_);
 }
 
-}  // namespace mocap::daemon
+}  // namespace mocap::skeleton

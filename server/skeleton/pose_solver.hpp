@@ -1,0 +1,127 @@
+// pose_solver.hpp — the assembler's FrameSink: turns each subject's filtered sensor
+// orientations into the calibrated skeleton pose and hands it to the outputs (PublishFn).
+//
+// Per frame: q_earth_sensor of every segment -> (calibration) q_world_segment -> optional
+// Slerp smoothing -> forward kinematics (positions; once calibrated the root travels by
+// foot contacts, skeleton/root_motion.hpp, otherwise it stays at its T-pose height) ->
+// joint angles -> publish.
+// A subject without a calibration is served with its raw sensor orientations (flags lack
+// kSegmentCalibrated), so poses stream from the first sample.
+//
+// Automatic calibration (options.auto_calibrate): a subject that has no calibration is
+// calibrated from its first still period of calibration_s (after 0.5 s of data, so filters
+// have settled), assuming the configured pose; while it moves, collection restarts. Any
+// calibrate command replaces it.
+// Calibration on command: request_calibration() (any thread, e.g. a control request) asks
+// the subject to stand still in a T- or N-pose; the solver collects calibration_s of
+// frames (sample time, not wall time), calibrates (skeleton/calibration.hpp), and on success
+// applies it at once and saves it to the injected CalibrationStore (calibration_store.hpp;
+// the daemon's keeps <calibration_dir>/calibration-subject-<id>.toml), which
+// load_calibrations() reads again at start. A subject that moved (spread above the limit) or
+// a segment without data fails the calibration; the old one stays. Results are counted and
+// logged through the injected LogFn: this layer does no file I/O and has no logger.
+//
+// Threading: on_frame() runs on the assembler thread; request_calibration() on any thread
+// (a mutex guards the request hand-over only). The store and the log are called on the
+// thread of load_calibrations() and on_frame().
+// Cost per frame: O(segments) quaternion math, no allocation (except in the rare frame that
+// completes a calibration: log text, store).
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/counters.hpp"
+#include "core/subject_assembler.hpp"
+#include "skeleton/body_model.hpp"
+#include "skeleton/calibration.hpp"
+#include "skeleton/calibration_store.hpp"
+#include "skeleton/joint_angles.hpp"
+#include "skeleton/pose_smoother.hpp"
+#include "skeleton/root_motion.hpp"
+#include "skeleton/skeleton_pose.hpp"
+
+namespace mocap::skeleton {
+
+struct PoseSolverOptions {
+    std::uint32_t max_subjects = 64;   ///< subject ids 1..max_subjects
+    double calibration_s = 1.0;        ///< still period collected per calibration
+    CalibrationOptions calibration{};  ///< pose is set per request
+    PoseSmootherParams smoothing{};
+    /// Calibrate a subject without a calibration from its first still period, assuming
+    /// this pose (nullopt = only on command).
+    std::optional<CalibrationPose> auto_calibrate;
+};
+
+using PublishFn = std::function<void(const SubjectFrame&, const SkeletonPose&)>;
+
+enum class LogLevel : std::uint8_t { kDebug, kInfo, kWarn, kError };
+/// One finished log line ("subject 3: calibrated (t-pose)"); the caller adds time and level.
+using LogFn = std::function<void(LogLevel, const std::string&)>;
+
+class PoseSolver final : public FrameSink {
+public:
+    /// store: nullptr = calibrations are neither loaded nor saved. log: nullptr = silent.
+    PoseSolver(BodyModel model, PoseSolverOptions options, PublishFn publish,
+               std::unique_ptr<CalibrationStore> store = nullptr, LogFn log = nullptr);
+
+    /// Loads every subject's saved calibration from the store (set-up, before frames flow)
+    /// and logs what it found. Returns how many were loaded.
+    std::size_t load_calibrations();
+
+    void on_frame(const SubjectFrame& frame) override;
+
+    /// Any thread. Starts collecting a still period for the subject; returns an error text
+    /// for an unknown subject (empty = accepted).
+    std::string request_calibration(std::uint32_t subject_id, CalibrationPose pose);
+
+    [[nodiscard]] const BodyModel& model() const { return model_; }
+    [[nodiscard]] const std::vector<JointSpec>& joints() const { return joints_; }
+    /// Component "skeleton": frames_solved, calibrations_ok, calibrations_failed,
+    /// auto_calibration_retries (automatic attempts restarted because the subject moved).
+    [[nodiscard]] const CounterGroup& counters() const { return group_; }
+
+private:
+    struct Subject {
+        std::optional<Calibration> calibration;
+        PoseSmoother smoother;
+        CalibrationCollector collector;
+        bool collecting = false;
+        std::int64_t collect_start_us = -1;
+        CalibrationPose pose = CalibrationPose::kTPose;
+        std::optional<FootContactRootTracker> root;  // travel once calibrated
+        bool auto_pending = true;                    // no calibration yet: calibrate from the first still period
+        bool auto_run = false;                       // the collection in progress is the automatic one
+        std::int64_t first_us = -1;                  // sample time of the subject's first frame
+    };
+
+    void take_requests();
+    void collect(Subject& s, std::uint32_t subject_id, const SubjectFrame& frame,
+                 const std::array<Quat, kMaxSegments>& q_earth_sensor);
+    void log(LogLevel level, const std::string& line) const {
+        if (log_) log_(level, line);
+    }
+
+    BodyModel model_;
+    PoseSolverOptions options_;
+    PublishFn publish_;
+    std::unique_ptr<CalibrationStore> store_;
+    LogFn log_;
+    std::vector<JointSpec> joints_;
+    std::vector<Subject> subjects_;  // index = subject id
+    SkeletonPose out_{};
+
+    std::mutex requests_mutex_;
+    std::vector<std::pair<std::uint32_t, CalibrationPose>> requests_;
+    std::atomic<bool> has_requests_{false};
+
+    Counter frames_solved_, calibrations_ok_, calibrations_failed_, auto_calibration_retries_;
+    CounterGroup group_{"skeleton"};
+};
+
+}  // namespace mocap::skeleton
