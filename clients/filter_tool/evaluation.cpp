@@ -26,21 +26,21 @@ EvalResult evaluate(std::span<const EvalSample> samples, double convergence_thre
     for (std::size_t i = 0; i < samples.size(); ++i) {
         const EvalSample& s = samples[i];
         if (!s.has_reference) continue;
-        const Quat q_err = filter::mul(s.q_est, filter::conj(s.q_ref));
-        const double total = filter::error_total_rad(q_err);
+        const Quat q_err = math::mul(s.q_est, math::conj(s.q_ref));
+        const double total = math::error_total_rad(q_err);
         if (total >= threshold_rad) {
             last_above = i;
         } else if (!r.first_below_s) {
             r.first_below_s = s.t_s - samples.front().t_s;
         }
         if (!s.evaluated) continue;
-        const filter::EulerZyx e = filter::to_euler_zyx(s.q_est);
-        const filter::EulerZyx f = filter::to_euler_zyx(s.q_ref);
-        const double heading = filter::error_heading_rad(q_err);
-        const double incl = filter::error_inclination_rad(q_err);
-        const double d_roll = filter::wrap_pi(e.roll_rad - f.roll_rad);
-        const double d_pitch = filter::wrap_pi(e.pitch_rad - f.pitch_rad);
-        const double d_yaw = filter::wrap_pi(e.yaw_rad - f.yaw_rad);
+        const math::EulerZyx e = math::to_euler_zyx(s.q_est);
+        const math::EulerZyx f = math::to_euler_zyx(s.q_ref);
+        const double heading = math::error_heading_rad(q_err);
+        const double incl = math::error_inclination_rad(q_err);
+        const double d_roll = math::wrap_pi(e.roll_rad - f.roll_rad);
+        const double d_pitch = math::wrap_pi(e.pitch_rad - f.pitch_rad);
+        const double d_yaw = math::wrap_pi(e.yaw_rad - f.yaw_rad);
         s_total += total * total;
         s_heading += heading * heading;
         s_incl += incl * incl;

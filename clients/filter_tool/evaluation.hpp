@@ -15,11 +15,11 @@
 #include <string>
 #include <string_view>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 namespace mocap::tools {
 
-using filter::Quat;
+using math::Quat;
 
 /// One compared instant.
 struct EvalSample {

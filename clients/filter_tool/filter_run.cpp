@@ -10,7 +10,7 @@ std::optional<EarthFrame> parse_earth_frame(std::string_view name) {
 
 Quat from_enu(const Quat& q_enu_sensor, EarthFrame frame) {
     // q_enu_ned is its own inverse, so the same product converts in both directions.
-    return frame == EarthFrame::ned ? filter::mul(filter::q_enu_ned(), q_enu_sensor) : q_enu_sensor;
+    return frame == EarthFrame::ned ? math::mul(math::q_enu_ned(), q_enu_sensor) : q_enu_sensor;
 }
 
 RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, const RunOptions& options) {
@@ -21,7 +21,7 @@ RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, c
     const std::int64_t t0_us = recording.rows.empty() ? 0 : recording.rows.front().sample.t_us;
     for (const RecordingRow& row : recording.rows) {
         f.update(row.sample);
-        const Quat q = filter::canonical(from_enu(f.orientation(), options.frame));
+        const Quat q = math::canonical(from_enu(f.orientation(), options.frame));
         out.estimates.push_back({row.sample.t_us, q});
         EvalSample s;
         s.t_s = static_cast<double>(row.sample.t_us - t0_us) * 1e-6;

@@ -21,11 +21,11 @@
 #include <vector>
 
 #include "core/imu_sample.hpp"
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 namespace mocap::tools {
 
-using filter::Quat;
+using math::Quat;
 
 struct RecordingRow {
     ImuSample sample;

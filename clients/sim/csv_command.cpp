@@ -35,7 +35,7 @@ tools::Recording to_recording(const Scenario& scenario, bool ned) {
     for (const ScenarioRow& row : scenario.rows) {
         tools::RecordingRow r;
         r.sample = row.sample;
-        r.q_ref = filter::canonical(tools::from_enu(row.q_earth_sensor, frame));
+        r.q_ref = math::canonical(tools::from_enu(row.q_earth_sensor, frame));
         r.ref_valid = true;
         r.movement = row.moving;
         rec.rows.push_back(r);

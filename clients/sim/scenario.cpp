@@ -141,7 +141,7 @@ Vec3 plan_rate_rad_s(const MotionPlan& plan, double t_s, const Quat& q_earth_sen
         // A limb returns toward its neutral pose: with u_b = earth up seen in the sensor
         // frame, ω = k (z × u_b) turns the sensor's z axis toward up without bounding
         // heading. It keeps long recordings away from permanent gimbal-lock poses.
-        const Vec3 up_sensor = filter::rotate(filter::conj(q_earth_sensor), Vec3::UnitZ());
+        const Vec3 up_sensor = math::rotate(math::conj(q_earth_sensor), Vec3::UnitZ());
         w += kRestoreGain * Vec3::UnitZ().cross(up_sensor);
         return e * w;
     }
@@ -265,11 +265,11 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
     // fourati: the paper's q(0) = identity in NED, i.e. the sensor axes on north/east/down;
     // in ENU that is q_enu_ned. Otherwise: any heading, a tilt of up to 28° (±0.35 rad about east
     // and north).
-    Quat q = filter::q_enu_ned();
+    Quat q = math::q_enu_ned();
     if (!fourati) {
         const double yaw = start_rng.uniform(-kPi, kPi);
         const Vec3 tilt(start_rng.uniform(-0.35, 0.35), start_rng.uniform(-0.35, 0.35), 0.0);
-        q = (Quat(Eigen::AngleAxisd(yaw, Vec3::UnitZ())) * filter::quat_from_rotvec(tilt)).normalized();
+        q = (Quat(Eigen::AngleAxisd(yaw, Vec3::UnitZ())) * math::quat_from_rotvec(tilt)).normalized();
     }
 
     const double dt = 1.0 / spec.rate_hz;
@@ -280,27 +280,27 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
         // The rate over (t - dt, t], evaluated at the midpoint (state from the interval start).
         const double t_mid = t - 0.5 * dt;
         const Vec3 w = fourati ? fourati_rate_rad_s(t_mid) : plan_rate_rad_s(plan, t_mid, q);
-        if (k > 0) q = (q * filter::quat_from_rotvec(w * dt)).normalized();
+        if (k > 0) q = (q * math::quat_from_rotvec(w * dt)).normalized();
 
         ScenarioRow row;
-        row.q_earth_sensor = filter::canonical(q);
+        row.q_earth_sensor = math::canonical(q);
         row.moving = fourati || plan_moving(plan, t, dt);
         row.gyro_true_rad_s = w;
         row.lin_acc_earth_m_s2 = fourati ? Vec3::Zero() : plan_lin_acc_m_s2(plan, t);
         row.mag_earth_ut = spec.mag_field_ut + disturbance.at(t);
 
-        const Quat q_sensor_earth = filter::conj(q);
+        const Quat q_sensor_earth = math::conj(q);
         const double ns = options.noise_scale;
         const Vec3 gyro = w + sc.gyro_bias_rad_s + noise_vec(noise_rng, ns * spec.gyro_noise_rad_s);
-        const Vec3 accel = filter::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
+        const Vec3 accel = math::rotate(q_sensor_earth, row.lin_acc_earth_m_s2 + spec.gravity_up_m_s2) +
                            noise_vec(noise_rng, ns * spec.accel_noise_m_s2);
-        const Vec3 mag = filter::rotate(q_sensor_earth, row.mag_earth_ut) +
+        const Vec3 mag = math::rotate(q_sensor_earth, row.mag_earth_ut) +
                          noise_vec(noise_rng, ns * options.mag_noise_scale * spec.mag_noise_ut);
 
         row.sample.t_us = std::llround(t * 1e6);
-        row.sample.gyro_rad_s = filter::to_array(gyro);
-        row.sample.accel_m_s2 = filter::to_array(accel);
-        row.sample.mag_ut = filter::to_array(mag);
+        row.sample.gyro_rad_s = math::to_array(gyro);
+        row.sample.accel_m_s2 = math::to_array(accel);
+        row.sample.mag_ut = math::to_array(mag);
         sc.rows.push_back(row);
     }
     return sc;

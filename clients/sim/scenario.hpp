@@ -31,12 +31,12 @@
 #include <vector>
 
 #include "core/imu_sample.hpp"
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 namespace mocap::sim {
 
-using filter::Quat;
-using filter::Vec3;
+using math::Quat;
+using math::Vec3;
 
 enum class ScenarioKind { fourati, realistic, magnetic };
 

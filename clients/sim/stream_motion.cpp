@@ -10,7 +10,7 @@
 #include <numbers>
 #include <sstream>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 #include "skeleton/forward_kinematics.hpp"
 
 namespace mocap::sim {
@@ -44,7 +44,7 @@ double smoothstep_integral(double u) {
 }
 
 double heading_of(const Quat& q) {
-    const Vec3 x = filter::rotate(q, Vec3::UnitX());
+    const Vec3 x = math::rotate(q, Vec3::UnitX());
     return std::atan2(x.y(), x.x());
 }
 
@@ -141,7 +141,7 @@ void StreamMotion::clip_at(double clip_t_s, std::array<Quat, kMaxSegments>& q, V
     clip_frame(f0, q, &root);
     clip_frame(f0 + 1, q1, &r1);
     for (std::size_t i = 0; i < mapping_.segment_count; ++i)
-        q[i] = filter::slerp(q[i], q1[i], a);
+        q[i] = math::slerp(q[i], q1[i], a);
     root = (1.0 - a) * root + a * r1;
 }
 
@@ -159,7 +159,7 @@ void StreamMotion::clip_orientations(double t_s, std::array<Quat, kMaxSegments>&
         clip_at(tau + P, q_end, root_end);
         const double a = tau / kLoopFadeS;
         for (std::size_t i = 0; i < mapping_.segment_count; ++i)
-            q[i] = filter::slerp(q_end[i], q[i], a);
+            q[i] = math::slerp(q_end[i], q[i], a);
         root = (1.0 - a) * (root_end - clip_loop_shift_m_) + a * root;
     }
     root += loops * clip_loop_shift_m_;
@@ -169,7 +169,7 @@ void StreamMotion::clip_orientations(double t_s, std::array<Quat, kMaxSegments>&
     const Vec3 t_pose_root(clip_root0_m_.x(), clip_root0_m_.y(), model_.root_height_m);
     const Vec3 clip_root(root.x(), root.y(), model_.root_height_m + (root.z() - clip_root0_m_.z()));
     for (std::size_t i = 0; i < mapping_.segment_count; ++i)
-        q[i] = filter::slerp(facing, q[i], w);
+        q[i] = math::slerp(facing, q[i], w);
     root = (1.0 - w) * t_pose_root + w * clip_root - Vec3(clip_root0_m_.x(), clip_root0_m_.y(), 0.0);
 }
 
@@ -227,7 +227,7 @@ void StreamMotion::orientations(double t_s, double heading_rad, const Vec3& orig
     const Quat turn = rot_z(heading_rad);
     for (std::size_t i = 0; i < model_.size(); ++i)
         q_earth_segment[i] = (turn * q_earth_segment[i]).normalized();
-    root_m = origin_m + filter::rotate(turn, root_m);
+    root_m = origin_m + math::rotate(turn, root_m);
 }
 
 void StreamMotion::pose(double t_s, double heading_rad, const Vec3& origin_m, BodyPose& out) const {

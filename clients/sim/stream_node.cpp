@@ -53,10 +53,10 @@ NodeSensorNoise stream_node_noise(double scale) {
 
 SensorReading ideal_reading(const Quat& q_prev, const Quat& q, double dt_s, const Vec3& lin_acc_earth_m_s2) {
     SensorReading r;
-    r.gyro_rad_s = 2.0 * filter::quat_log(filter::canonical(filter::conj(q_prev) * q)) / dt_s;
-    const Quat q_sensor_earth = filter::conj(q);
-    r.accel_m_s2 = filter::rotate(q_sensor_earth, lin_acc_earth_m_s2 + Vec3(0.0, 0.0, MW_STANDARD_GRAVITY_M_S2));
-    r.mag_ut = filter::rotate(q_sensor_earth, stream_mag_earth_ut());
+    r.gyro_rad_s = 2.0 * math::quat_log(math::canonical(math::conj(q_prev) * q)) / dt_s;
+    const Quat q_sensor_earth = math::conj(q);
+    r.accel_m_s2 = math::rotate(q_sensor_earth, lin_acc_earth_m_s2 + Vec3(0.0, 0.0, MW_STANDARD_GRAVITY_M_S2));
+    r.mag_ut = math::rotate(q_sensor_earth, stream_mag_earth_ut());
     return r;
 }
 
@@ -70,7 +70,7 @@ SimulatedNode::SimulatedNode(std::uint8_t node_id, bool root, std::uint64_t seed
         axis = Vec3(mount.normal(), mount.normal(), mount.normal());
         axis = axis.norm() > 1e-9 ? Vec3(axis.normalized()) : Vec3(Vec3::UnitZ());
     }
-    q_segment_sensor_ = filter::quat_from_rotvec(angle * axis);
+    q_segment_sensor_ = math::quat_from_rotvec(angle * axis);
     for (int i = 0; i < 3; ++i) {
         gyro_bias_rad_s_[i] = mount.sign() * mount.uniform(0.25, 1.0) * noise_.gyro_bias_max_rad_s;
     }
@@ -100,7 +100,7 @@ int SimulatedNode::raw_frames(const Quat& q_earth_segment_prev, const Quat& q_ea
 }
 
 int SimulatedNode::attitude_frame(const Quat& q_earth_segment, std::uint32_t counter, mw_can_frame out[1]) {
-    const Quat q = q_earth_segment * q_segment_sensor_ * filter::quat_from_rotvec(noise(noise_.attitude_rad));
+    const Quat q = q_earth_segment * q_segment_sensor_ * math::quat_from_rotvec(noise(noise_.attitude_rad));
     mw_attitude att{};
     att.node_id = node_id_;
     att.q[0] = static_cast<float>(q.w());

@@ -22,14 +22,14 @@
 
 #include <cstdint>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 #include "mocap_wire/mw_can.h"
 #include "sim/sim_rng.hpp"
 
 namespace mocap::sim {
 
-using filter::Quat;
-using filter::Vec3;
+using math::Quat;
+using math::Vec3;
 
 /// Earth field used by the simulator: 50 µT, dip 60° (ENU: north and down).
 Vec3 stream_mag_earth_ut();

@@ -19,21 +19,21 @@
 
 #include <string_view>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 namespace mocap::filter {
 
 /// Unit field direction in ENU for an inclination (dip) below the horizon, rad.
-Vec3 field_direction_enu(double dip_rad);
+math::Vec3 field_direction_enu(double dip_rad);
 
 /// The reference for a pair measured at its own dip, (0, cos dip, −sin dip) with
 /// sin dip = −â·m̂, without trigonometric calls. Returns false if either vector is zero or
 /// the pair is parallel (no horizontal component).
-bool own_dip_field_direction(const Vec3& accel, const Vec3& mag, Vec3& h_ref_enu);
+bool own_dip_field_direction(const math::Vec3& accel, const math::Vec3& mag, math::Vec3& h_ref_enu);
 
 /// Dip of a measured accel/mag pair (angle of the field below the plane normal to the
 /// specific force), rad; NaN if either vector is zero.
-double measured_dip_rad(const Vec3& accel, const Vec3& mag);
+double measured_dip_rad(const math::Vec3& accel, const math::Vec3& mag);
 
 enum class AttitudeStatus {
     ok,
@@ -45,7 +45,7 @@ enum class AttitudeStatus {
 std::string_view to_string(AttitudeStatus s);
 
 struct AttitudeSolution {
-    Quat q_earth_sensor = Quat::Identity();  ///< valid only if ok(); w >= 0
+    math::Quat q_earth_sensor = math::Quat::Identity();  ///< valid only if ok(); w >= 0
     AttitudeStatus status = AttitudeStatus::ok;
     int iterations = 0;     ///< LMA iterations used (0 for TRIAD)
     double residual = 0.0;  ///< |ε| of the stacked unit-vector residual at the result
@@ -63,10 +63,11 @@ struct LmaParams {
 
 /// Levenberg–Marquardt from `q_start` (identity, the previous estimate, or solve_triad's
 /// result). h_ref_enu must be a unit vector not parallel to up.
-AttitudeSolution solve_lma(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu, const Quat& q_start,
-                           const LmaParams& p = {});
+AttitudeSolution solve_lma(const math::Vec3& accel, const math::Vec3& mag, const math::Vec3& h_ref_enu,
+                           const math::Quat& q_start, const LmaParams& p = {});
 
 /// TRIAD closed form. Only the horizontal direction of h_ref_enu matters.
-AttitudeSolution solve_triad(const Vec3& accel, const Vec3& mag, const Vec3& h_ref_enu, const LmaParams& p = {});
+AttitudeSolution solve_triad(const math::Vec3& accel, const math::Vec3& mag, const math::Vec3& h_ref_enu,
+                             const LmaParams& p = {});
 
 }  // namespace mocap::filter

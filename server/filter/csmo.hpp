@@ -68,11 +68,11 @@ struct CsmoParams {
 
 /// Observable state; reset() returns it to the Params' initial estimate.
 struct CsmoState {
-    Quat q_earth_sensor = Quat::Identity();   ///< current estimate
-    Quat q_measured = Quat::Identity();       ///< last accepted q_m (LMA)
-    Vec3 q_error_vec = Vec3::Zero();          ///< vector part of the last q_e
-    bool initialised = false;                 ///< the first sample has been seen
-    std::uint64_t rejected_measurements = 0;  ///< samples whose accel/mag gave no q_m
+    math::Quat q_earth_sensor = math::Quat::Identity();  ///< current estimate
+    math::Quat q_measured = math::Quat::Identity();      ///< last accepted q_m (LMA)
+    math::Vec3 q_error_vec = math::Vec3::Zero();         ///< vector part of the last q_e
+    bool initialised = false;                            ///< the first sample has been seen
+    std::uint64_t rejected_measurements = 0;             ///< samples whose accel/mag gave no q_m
 };
 
 class Csmo final : public OrientationFilter {
@@ -80,7 +80,7 @@ public:
     explicit Csmo(const CsmoParams& params = {});
 
     void update(const ImuSample& sample) override;
-    [[nodiscard]] Quat orientation() const override { return state_.q_earth_sensor; }
+    [[nodiscard]] math::Quat orientation() const override { return state_.q_earth_sensor; }
     void reset() override;
     [[nodiscard]] std::string_view name() const override { return "csmo"; }
     [[nodiscard]] std::uint64_t gaps() const override { return clock_.gaps(); }
@@ -88,17 +88,17 @@ public:
     [[nodiscard]] const CsmoParams& params() const { return params_; }
     [[nodiscard]] const CsmoState& state() const { return state_; }
     /// Overrides the current estimate (e.g. from a calibration); keeps the time base.
-    void set_orientation(const Quat& q_earth_sensor);
+    void set_orientation(const math::Quat& q_earth_sensor);
 
 private:
     // Returns false if the sample's accel/mag give no measurement.
-    bool measure(const ImuSample& sample, const Quat& start, Quat& q_m) const;
+    bool measure(const ImuSample& sample, const math::Quat& start, math::Quat& q_m) const;
 
     CsmoParams params_;
     LmaParams lma_;
-    Vec3 k_switch_, k_linear_;
-    bool fixed_dip_;    // dip_deg finite
-    Vec3 h_ref_fixed_;  // reference field for a fixed dip
+    math::Vec3 k_switch_, k_linear_;
+    bool fixed_dip_;          // dip_deg finite
+    math::Vec3 h_ref_fixed_;  // reference field for a fixed dip
     CsmoState state_;
     SampleClock clock_;
 };

@@ -12,25 +12,25 @@ namespace {
 // (d: earth reference, s: measurement, both unit). Expanding ½|f|² gives
 // ½|d|²|q|⁴ − ⟨d, q ⊗ s ⊗ q*⟩ + const, whose gradient is 2|q|²q + 2 d ⊗ q ⊗ s; this is the
 // same vector as the paper's hand-expanded Jacobian products, in a form valid for any d.
-Vec4 alignment_gradient(const Quat& q, const Vec3& d, const Vec3& s) {
-    const Quat dq = Quat(0.0, d.x(), d.y(), d.z()) * q * Quat(0.0, s.x(), s.y(), s.z());
-    return 2.0 * q.squaredNorm() * to_wxyz(q) + 2.0 * to_wxyz(dq);
+math::Vec4 alignment_gradient(const math::Quat& q, const math::Vec3& d, const math::Vec3& s) {
+    const math::Quat dq = math::Quat(0.0, d.x(), d.y(), d.z()) * q * math::Quat(0.0, s.x(), s.y(), s.z());
+    return 2.0 * q.squaredNorm() * math::to_wxyz(q) + 2.0 * math::to_wxyz(dq);
 }
 
 }  // namespace
 
-Quat q_enu_nwu() {
-    return Quat(std::numbers::sqrt2 / 2.0, 0.0, 0.0, std::numbers::sqrt2 / 2.0);
+math::Quat q_enu_nwu() {
+    return math::Quat(std::numbers::sqrt2 / 2.0, 0.0, 0.0, std::numbers::sqrt2 / 2.0);
 }
 
-Quat nwu_initial_attitude(const MargReading& r, bool from_reading) {
-    const Quat q_enu_sensor =
-        from_reading && r.accel_ok ? attitude_from_accel_mag(r.accel_m_s2, r.mag_ut, r.mag_ok) : Quat::Identity();
+math::Quat nwu_initial_attitude(const MargReading& r, bool from_reading) {
+    const math::Quat q_enu_sensor =
+        from_reading && r.accel_ok ? attitude_from_accel_mag(r.accel_m_s2, r.mag_ut, r.mag_ok) : math::Quat::Identity();
     return q_enu_nwu().conjugate() * q_enu_sensor;
 }
 
-Vec3 nwu_field_reference(const Quat& q_nwu_sensor, const Vec3& mag_unit) {
-    const Vec3 h = rotate(q_nwu_sensor, mag_unit);
+math::Vec3 nwu_field_reference(const math::Quat& q_nwu_sensor, const math::Vec3& mag_unit) {
+    const math::Vec3 h = math::rotate(q_nwu_sensor, mag_unit);
     return {std::hypot(h.x(), h.y()), 0.0, h.z()};
 }
 
@@ -61,22 +61,22 @@ void MadgwickFilter::update(const ImuSample& sample) {
     }
     if (dt <= 0.0) return;
 
-    Quat& q = st.q_nwu_sensor;
-    const Vec3 w = to_vec3(sample.gyro_rad_s);
-    Vec4 q_dot = 0.5 * to_wxyz(q * Quat(0.0, w.x(), w.y(), w.z()));
+    math::Quat& q = st.q_nwu_sensor;
+    const math::Vec3 w = math::to_vec3(sample.gyro_rad_s);
+    math::Vec4 q_dot = 0.5 * math::to_wxyz(q * math::Quat(0.0, w.x(), w.y(), w.z()));
     if (m.accel_ok) {
-        Vec4 grad = alignment_gradient(q, Vec3::UnitZ(), m.accel_m_s2.normalized());
+        math::Vec4 grad = alignment_gradient(q, math::Vec3::UnitZ(), m.accel_m_s2.normalized());
         if (m.mag_ok) {
-            const Vec3 mag = m.mag_ut.normalized();
+            const math::Vec3 mag = m.mag_ut.normalized();
             grad += alignment_gradient(q, nwu_field_reference(q, mag), mag);
         }
         const double n = grad.norm();
         if (n > 0.0) q_dot -= params_.beta * grad / n;
     }
-    q = from_wxyz(to_wxyz(q) + q_dot * dt).normalized();
+    q = math::from_wxyz(math::to_wxyz(q) + q_dot * dt).normalized();
 }
 
-Quat MadgwickFilter::orientation() const {
+math::Quat MadgwickFilter::orientation() const {
     return (q_enu_nwu() * state_.q_nwu_sensor).normalized();
 }
 

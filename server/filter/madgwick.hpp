@@ -21,16 +21,16 @@ namespace mocap::filter {
 
 /// q_enu_nwu: +90° about z, from the published baselines' north-west-up earth frame
 /// (x = magnetic north, z up) to ENU. Shared with mahony.cpp.
-Quat q_enu_nwu();
+math::Quat q_enu_nwu();
 
 struct MargReading;
 /// The baselines' start: q_nwu_sensor from the closed-form attitude of one reading if
 /// wanted and possible, else the ENU identity.
-Quat nwu_initial_attitude(const MargReading& reading, bool from_reading);
+math::Quat nwu_initial_attitude(const MargReading& reading, bool from_reading);
 
 /// The published algorithms' earth-field reference b = [|h_xy|, 0, h_z], h the unit field
 /// mag_unit rotated into the NWU frame by q_nwu_sensor.
-Vec3 nwu_field_reference(const Quat& q_nwu_sensor, const Vec3& mag_unit);
+math::Vec3 nwu_field_reference(const math::Quat& q_nwu_sensor, const math::Vec3& mag_unit);
 
 struct MadgwickParams {
     double beta = 0.041;                 ///< key "beta": gradient step gain, rad/s (the paper's MARG value
@@ -44,10 +44,10 @@ struct MadgwickParams {
 };
 
 struct MadgwickState {
-    Quat q_nwu_sensor = Quat::Identity();  ///< estimate in the algorithm's north-west-up frame
-                                           ///< (reset() sets the ENU identity)
-    bool initialised = false;              ///< attitude taken from a first sample
-    SampleClock clock = SampleClock(0.5);  ///< time base (max step set from Params)
+    math::Quat q_nwu_sensor = math::Quat::Identity();  ///< estimate in the algorithm's north-west-up frame
+                                                       ///< (reset() sets the ENU identity)
+    bool initialised = false;                          ///< attitude taken from a first sample
+    SampleClock clock = SampleClock(0.5);              ///< time base (max step set from Params)
 };
 
 class MadgwickFilter final : public OrientationFilter {
@@ -55,7 +55,7 @@ public:
     explicit MadgwickFilter(const MadgwickParams& params = {});
 
     void update(const ImuSample& sample) override;
-    [[nodiscard]] Quat orientation() const override;
+    [[nodiscard]] math::Quat orientation() const override;
     void reset() override;
     [[nodiscard]] std::string_view name() const override { return "madgwick"; }
     [[nodiscard]] std::uint64_t gaps() const override { return state_.clock.gaps(); }

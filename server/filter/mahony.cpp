@@ -33,14 +33,14 @@ void MahonyFilter::update(const ImuSample& sample) {
     }
     if (dt <= 0.0) return;
 
-    Quat& q = st.q_nwu_sensor;
-    Vec3 w = to_vec3(sample.gyro_rad_s);
+    math::Quat& q = st.q_nwu_sensor;
+    math::Vec3 w = math::to_vec3(sample.gyro_rad_s);
     if (m.accel_ok) {
         // Measured × predicted direction, in sensor axes.
-        Vec3 e = m.accel_m_s2.normalized().cross(rotate(q.conjugate(), Vec3::UnitZ()));
+        math::Vec3 e = m.accel_m_s2.normalized().cross(math::rotate(q.conjugate(), math::Vec3::UnitZ()));
         if (m.mag_ok) {
-            const Vec3 mag = m.mag_ut.normalized();
-            e += mag.cross(rotate(q.conjugate(), nwu_field_reference(q, mag)));
+            const math::Vec3 mag = m.mag_ut.normalized();
+            e += mag.cross(math::rotate(q.conjugate(), nwu_field_reference(q, mag)));
         }
         if (params_.ki > 0.0) {
             const double c = params_.bias_clip_rad_s;
@@ -52,10 +52,10 @@ void MahonyFilter::update(const ImuSample& sample) {
     } else {
         w += st.integral_rad_s;
     }
-    q = (q * quat_from_rotvec(w * dt)).normalized();
+    q = (q * math::quat_from_rotvec(w * dt)).normalized();
 }
 
-Quat MahonyFilter::orientation() const {
+math::Quat MahonyFilter::orientation() const {
     return (q_enu_nwu() * state_.q_nwu_sensor).normalized();
 }
 

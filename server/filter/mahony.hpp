@@ -32,9 +32,9 @@ struct MahonyParams {
 };
 
 struct MahonyState {
-    Quat q_nwu_sensor = Quat::Identity();  ///< estimate in the algorithm's north-west-up frame
-                                           ///< (reset() sets the ENU identity)
-    Vec3 integral_rad_s = Vec3::Zero();    ///< integral feedback (= minus the gyro bias estimate)
+    math::Quat q_nwu_sensor = math::Quat::Identity();  ///< estimate in the algorithm's north-west-up frame
+                                                       ///< (reset() sets the ENU identity)
+    math::Vec3 integral_rad_s = math::Vec3::Zero();    ///< integral feedback (= minus the gyro bias estimate)
     bool initialised = false;
     SampleClock clock = SampleClock(0.5);  ///< time base (max step set from Params)
 };
@@ -44,8 +44,8 @@ public:
     explicit MahonyFilter(const MahonyParams& params = {});
 
     void update(const ImuSample& sample) override;
-    [[nodiscard]] Quat orientation() const override;
-    [[nodiscard]] Vec3 gyro_bias_rad_s() const override { return -state_.integral_rad_s; }
+    [[nodiscard]] math::Quat orientation() const override;
+    [[nodiscard]] math::Vec3 gyro_bias_rad_s() const override { return -state_.integral_rad_s; }
     void reset() override;
     [[nodiscard]] std::string_view name() const override { return "mahony"; }
     [[nodiscard]] std::uint64_t gaps() const override { return state_.clock.gaps(); }

@@ -54,7 +54,7 @@ void low_pass(LowPassState<N>& s, const double* x, const LowPassCoeffs& c, doubl
     }
 }
 
-Vec3 out3(const LowPassState<3>& s) {
+math::Vec3 out3(const LowPassState<3>& s) {
     return {s.out[0], s.out[1], s.out[2]};
 }
 
@@ -65,18 +65,18 @@ double gain_from_tau(double tau_s, double ts_s) {
 }
 
 // Shortest rotation taking the unit vector u onto earth z (no rotation about z).
-Quat tilt_to_vertical(const Vec3& u) {
+math::Quat tilt_to_vertical(const math::Vec3& u) {
     const double qw = std::sqrt((u.z() + 1.0) / 2.0);
-    if (qw > 1e-6) return Quat(qw, 0.5 * u.y() / qw, -0.5 * u.x() / qw, 0.0);
-    return Quat(0.0, 1.0, 0.0, 0.0);  // u points down: any horizontal axis, 180°
+    if (qw > 1e-6) return math::Quat(qw, 0.5 * u.y() / qw, -0.5 * u.x() / qw, 0.0);
+    return math::Quat(0.0, 1.0, 0.0, 0.0);  // u points down: any horizontal axis, 180°
 }
 
 }  // namespace
 
-Quat attitude_from_accel_mag(const Vec3& accel_m_s2, const Vec3& mag_ut, bool use_mag) {
+math::Quat attitude_from_accel_mag(const math::Vec3& accel_m_s2, const math::Vec3& mag_ut, bool use_mag) {
     if (use_mag) {
         // Only the horizontal direction of the reference matters to TRIAD: north.
-        const AttitudeSolution sol = solve_triad(accel_m_s2, mag_ut, Vec3::UnitY());
+        const AttitudeSolution sol = solve_triad(accel_m_s2, mag_ut, math::Vec3::UnitY());
         if (sol.ok()) return sol.q_earth_sensor;
     }
     // Shortest rotation taking the measured up direction to earth z: zero heading.
@@ -85,8 +85,8 @@ Quat attitude_from_accel_mag(const Vec3& accel_m_s2, const Vec3& mag_ut, bool us
 
 MargReading read_marg(const ImuSample& sample) {
     MargReading r;
-    r.accel_m_s2 = to_vec3(sample.accel_m_s2);
-    r.mag_ut = to_vec3(sample.mag_ut);
+    r.accel_m_s2 = math::to_vec3(sample.accel_m_s2);
+    r.mag_ut = math::to_vec3(sample.mag_ut);
     r.accel_ok = r.accel_m_s2.squaredNorm() > 0.0 && r.accel_m_s2.allFinite();
     r.mag_ok = sample.has_mag() && r.mag_ut.squaredNorm() > 0.0 && r.mag_ut.allFinite();
     return r;
@@ -132,7 +132,7 @@ void MocapFilter::reset() {
     state_ = MocapFilterState{};
     state_.clock = SampleClock(params_.max_step_s);
     const double p0 = std::pow(params_.bias_sigma_init_deg_s * 100.0, 2);
-    state_.bias_p = p0 * Mat3::Identity();
+    state_.bias_p = p0 * math::Mat3::Identity();
     state_.tau_acc_eff_s = params_.tau_acc_s;
     state_.tau_mag_eff_s = params_.tau_mag_s;
 }
@@ -201,7 +201,7 @@ void MocapFilter::update(const ImuSample& sample) {
             s.ts_lp_s += 0.01 * (dt - s.ts_lp_s);
             if (std::abs(s.ts_lp_s - s.ts_s) > 0.02 * s.ts_s) compute_coeffs(s.ts_lp_s);
         }
-        update_gyro(to_vec3(sample.gyro_rad_s), dt);
+        update_gyro(math::to_vec3(sample.gyro_rad_s), dt);
         adapt_time_constants();
     }
     const MargReading m = read_marg(sample);
@@ -217,11 +217,11 @@ void MocapFilter::update(const ImuSample& sample) {
     }
 }
 
-void MocapFilter::update_gyro(const Vec3& gyro, double dt_s) {
+void MocapFilter::update_gyro(const math::Vec3& gyro, double dt_s) {
     MocapFilterState& s = state_;
     if (params_.rest_bias || params_.mag_guard) {
         low_pass(s.rest_gyro_lp, gyro.data(), rest_lp_, params_.rest_filter_tau_s, s.ts_s);
-        const Vec3 lp = out3(s.rest_gyro_lp);
+        const math::Vec3 lp = out3(s.rest_gyro_lp);
         const double th = params_.rest_th_gyro_deg_s * kDeg;
         const double clip = params_.bias_clip_deg_s * kDeg;
         if ((gyro - lp).squaredNorm() >= th * th || lp.cwiseAbs().maxCoeff() > clip) {
@@ -234,7 +234,7 @@ void MocapFilter::update_gyro(const Vec3& gyro, double dt_s) {
     // 300 s, so the floor comes from the quietest stretch of the last minutes and minutes of
     // vigorous motion (whose second differences are large at 100 Hz) do not raise it much.
     if (s.gyro_history >= 2) {
-        const Vec3 d2 = gyro - 2.0 * s.gyro_prev[0] + s.gyro_prev[1];
+        const math::Vec3 d2 = gyro - 2.0 * s.gyro_prev[0] + s.gyro_prev[1];
         const double v = d2.squaredNorm() / 18.0;  // per axis: 3 axes × 6σ²
         ++s.gyro_noise_count;
         const double k_fast = std::max(k_noise_fast_, 1.0 / static_cast<double>(s.gyro_noise_count));
@@ -251,11 +251,11 @@ void MocapFilter::update_gyro(const Vec3& gyro, double dt_s) {
     s.gyro_prev[0] = gyro;
     s.gyro_history = std::min(s.gyro_history + 1, 2);
 
-    const Vec3 w = gyro - s.bias_rad_s;
-    s.q_i_sensor = (s.q_i_sensor * quat_from_rotvec(w * dt_s)).normalized();
+    const math::Vec3 w = gyro - s.bias_rad_s;
+    s.q_i_sensor = (s.q_i_sensor * math::quat_from_rotvec(w * dt_s)).normalized();
 }
 
-void MocapFilter::update_acc(const Vec3& acc) {
+void MocapFilter::update_acc(const math::Vec3& acc) {
     MocapFilterState& s = state_;
     if (params_.rest_bias && s.ts_s > 0.0) {
         low_pass(s.rest_acc_lp, acc.data(), rest_lp_, params_.rest_filter_tau_s, s.ts_s);
@@ -270,9 +270,9 @@ void MocapFilter::update_acc(const Vec3& acc) {
     }
     // Low-pass in the almost-inertial frame: while the sensor turns, linear acceleration
     // averages out there, gravity does not.
-    const Vec3 acc_i = rotate(s.q_i_sensor, acc);
+    const math::Vec3 acc_i = math::rotate(s.q_i_sensor, acc);
     low_pass(s.acc_lp, acc_i.data(), acc_lp_, s.tau_acc_eff_s, s.ts_s);
-    const Vec3 acc_e = rotate(s.q_e6_i, out3(s.acc_lp)).normalized();
+    const math::Vec3 acc_e = math::rotate(s.q_e6_i, out3(s.acc_lp)).normalized();
 
     // Rotate the filtered vector onto the vertical (inclination only, no heading change).
     s.q_e6_i = (tilt_to_vertical(acc_e) * s.q_e6_i).normalized();
@@ -280,7 +280,7 @@ void MocapFilter::update_acc(const Vec3& acc) {
     if (s.ts_s > 0.0 && (params_.rest_bias || params_.motion_bias)) update_bias(acc_e);
 }
 
-void MocapFilter::update_bias(const Vec3& acc_e) {
+void MocapFilter::update_bias(const math::Vec3& acc_e) {
     MocapFilterState& s = state_;
     const MocapFilterParams& p = params_;
     const double clip = p.bias_clip_deg_s * kDeg;
@@ -298,13 +298,13 @@ void MocapFilter::update_bias(const Vec3& acc_e) {
         if (s.bias_p(i, i) < bias_p0_) s.bias_p(i, i) += bias_v_;
     }
 
-    Vec3 e;
-    Mat3 h;
-    Vec3 w;
+    math::Vec3 e;
+    math::Mat3 h;
+    math::Vec3 w;
     if (s.rest_detected && p.rest_bias) {
         e = out3(s.rest_gyro_lp) - s.bias_rad_s;
-        h = Mat3::Identity();
-        w = Vec3::Constant(bias_rest_w_);
+        h = math::Mat3::Identity();
+        w = math::Vec3::Constant(bias_rest_w_);
     } else if (p.motion_bias) {
         // The accelerometer's correction this step is the rotation vector (acc_e.y, -acc_e.x)
         // in earth axes; in steady state it cancels R·(bias error)·ts.
@@ -312,24 +312,24 @@ void MocapFilter::update_bias(const Vec3& acc_e) {
         e.x() = -acc_e.y() / s.ts_s + s.bias_b_lp.out[0] - h.row(0).dot(s.bias_rad_s);
         e.y() = acc_e.x() / s.ts_s + s.bias_b_lp.out[1] - h.row(1).dot(s.bias_rad_s);
         e.z() = -h.row(2).dot(s.bias_rad_s);
-        w = Vec3(bias_motion_w_, bias_motion_w_, bias_vertical_w_);
+        w = math::Vec3(bias_motion_w_, bias_motion_w_, bias_vertical_w_);
     } else {
         return;
     }
     e = e.cwiseMax(-clip).cwiseMin(clip);
-    const Mat3 ph = s.bias_p * h.transpose();
-    const Mat3 k = ph * (Mat3(w.asDiagonal()) + h * ph).inverse();
+    const math::Mat3 ph = s.bias_p * h.transpose();
+    const math::Mat3 k = ph * (math::Mat3(w.asDiagonal()) + h * ph).inverse();
     s.bias_rad_s += k * e;
     s.bias_p -= k * h * s.bias_p;
     s.bias_rad_s = s.bias_rad_s.cwiseMax(-clip).cwiseMin(clip);
 }
 
-void MocapFilter::update_mag_guard(const Vec3& mag_e) {
+void MocapFilter::update_mag_guard(const math::Vec3& mag_e) {
     MocapFilterState& s = state_;
     const MocapFilterParams& p = params_;
     low_pass(s.mag_lp, mag_e.data(), mag_current_lp_, p.mag_current_tau_s, s.ts_s);
     if (s.ts_s == 0.0) return;  // timers need the sample period
-    const Vec3 m = out3(s.mag_lp);
+    const math::Vec3 m = out3(s.mag_lp);
     ++s.mag_stat_count;
     const double k_noise = std::max(k_mag_noise_, 1.0 / static_cast<double>(s.mag_stat_count));
     s.mag_noise_var += k_noise * ((mag_e - m).squaredNorm() / 3.0 - s.mag_noise_var);
@@ -417,8 +417,8 @@ void MocapFilter::update_heading_guard() {
     MocapFilterState& s = state_;
     const MocapFilterParams& p = params_;
     if (p.mag_heading_th_deg <= 0.0 || s.ts_s == 0.0 || s.mag_stat_count == 0) return;
-    const double d = wrap_pi(s.last_mag_disagreement_rad - s.mag_dis_lp_rad);
-    s.mag_dis_lp_rad = wrap_pi(s.mag_dis_lp_rad + k_dis_ * d);
+    const double d = math::wrap_pi(s.last_mag_disagreement_rad - s.mag_dis_lp_rad);
+    s.mag_dis_lp_rad = math::wrap_pi(s.mag_dis_lp_rad + k_dis_ * d);
     const double k_noise = std::max(k_mag_noise_, 1.0 / static_cast<double>(s.mag_stat_count));
     s.mag_dis_var += k_noise * (d * d - s.mag_dis_var);
     const double lp_sigma = std::sqrt(s.mag_dis_var * 0.5 * s.ts_s / p.mag_heading_tau_s);
@@ -443,23 +443,23 @@ void MocapFilter::update_heading_guard() {
     }
 }
 
-void MocapFilter::update_mag(const Vec3& mag) {
+void MocapFilter::update_mag(const math::Vec3& mag) {
     MocapFilterState& s = state_;
     const MocapFilterParams& p = params_;
-    const Vec3 mag_e = rotate(s.q_e6_i * s.q_i_sensor, mag);
+    const math::Vec3 mag_e = math::rotate(s.q_e6_i * s.q_i_sensor, mag);
     if (p.mag_guard) update_mag_guard(mag_e);
 
     // Heading disagreement from the horizontal component only, measured as the cross
     // product with the expected direction over the mean horizontal field strength. Unlike
     // the angle of each reading, this is unbiased under noise as large as the field itself
     // (the per-reading angle wraps around and pulls the average towards zero).
-    const Vec3 h(mag_e.x(), mag_e.y(), 0.0);
+    const math::Vec3 h(mag_e.x(), mag_e.y(), 0.0);
     const double u_x = std::sin(s.delta_rad), u_y = std::cos(s.delta_rad);
     const double h_ref = s.mag_horizontal_lp.norm();
     const double dot = h.x() * u_x + h.y() * u_y;
     s.last_mag_disagreement_rad = dot > 0.0 && h_ref > 0.0 ? std::clamp((h.x() * u_y - h.y() * u_x) / h_ref,
                                                                         -0.5 * std::numbers::pi, 0.5 * std::numbers::pi)
-                                                           : wrap_pi(std::atan2(h.x(), h.y()) - s.delta_rad);
+                                                           : math::wrap_pi(std::atan2(h.x(), h.y()) - s.delta_rad);
     if (p.mag_guard) update_heading_guard();
     double k = k_mag_;
     if (p.mag_guard && s.ts_s > 0.0) {
@@ -490,15 +490,15 @@ void MocapFilter::update_mag(const Vec3& mag) {
         return;
     }
     s.mag_horizontal_lp += k_mag_ * (h - s.mag_horizontal_lp);
-    s.delta_rad = wrap_pi(s.delta_rad + k * s.last_mag_disagreement_rad);
+    s.delta_rad = math::wrap_pi(s.delta_rad + k * s.last_mag_disagreement_rad);
 }
 
-Quat MocapFilter::orientation_6d() const {
+math::Quat MocapFilter::orientation_6d() const {
     return (state_.q_e6_i * state_.q_i_sensor).normalized();
 }
 
-Quat MocapFilter::orientation() const {
-    const Quat rz(std::cos(0.5 * state_.delta_rad), 0.0, 0.0, std::sin(0.5 * state_.delta_rad));
+math::Quat MocapFilter::orientation() const {
+    const math::Quat rz(std::cos(0.5 * state_.delta_rad), 0.0, 0.0, std::sin(0.5 * state_.delta_rad));
     return (rz * orientation_6d()).normalized();
 }
 

@@ -62,13 +62,13 @@ namespace mocap::filter {
 /// the inclination exactly, the magnetometer's component perpendicular to it fixes the
 /// heading (TRIAD with the accelerometer as primary vector). Without the magnetometer (or
 /// when it is parallel to gravity) the heading is zero. accel must be non-zero.
-Quat attitude_from_accel_mag(const Vec3& accel_m_s2, const Vec3& mag_ut, bool use_mag);
+math::Quat attitude_from_accel_mag(const math::Vec3& accel_m_s2, const math::Vec3& mag_ut, bool use_mag);
 
 /// One sample's accelerometer and magnetometer with their usability: non-zero and finite,
 /// and for the magnetometer also present (no kImuNoMag flag). Shared by the filters here.
 struct MargReading {
-    Vec3 accel_m_s2 = Vec3::Zero();
-    Vec3 mag_ut = Vec3::Zero();
+    math::Vec3 accel_m_s2 = math::Vec3::Zero();
+    math::Vec3 mag_ut = math::Vec3::Zero();
     bool accel_ok = false;
     bool mag_ok = false;
 };
@@ -149,12 +149,12 @@ struct LowPassState {
 };
 
 struct MocapFilterState {
-    Quat q_i_sensor = Quat::Identity();  ///< gyro strapdown (almost inertial frame I)
-    Quat q_e6_i = Quat::Identity();      ///< inclination correction (I -> 6D earth frame)
-    double delta_rad = 0.0;              ///< heading correction about the vertical
-    Vec3 bias_rad_s = Vec3::Zero();      ///< gyro bias estimate, sensor frame
-    Mat3 bias_p = Mat3::Zero();          ///< bias covariance, (0.01 °/s)²
-    bool initialised = false;            ///< first sample seen
+    math::Quat q_i_sensor = math::Quat::Identity();  ///< gyro strapdown (almost inertial frame I)
+    math::Quat q_e6_i = math::Quat::Identity();      ///< inclination correction (I -> 6D earth frame)
+    double delta_rad = 0.0;                          ///< heading correction about the vertical
+    math::Vec3 bias_rad_s = math::Vec3::Zero();      ///< gyro bias estimate, sensor frame
+    math::Mat3 bias_p = math::Mat3::Zero();          ///< bias covariance, (0.01 °/s)²
+    bool initialised = false;                        ///< first sample seen
 
     double ts_s = 0.0;           ///< sample period the coefficients were computed for (0: unknown)
     double ts_lp_s = 0.0;        ///< smoothed measured sample period
@@ -162,7 +162,7 @@ struct MocapFilterState {
     double tau_mag_eff_s = 0.0;  ///< tau_mag_s in use
 
     // Gyro white-noise floor (second differences)
-    std::array<Vec3, 2> gyro_prev{Vec3::Zero(), Vec3::Zero()};
+    std::array<math::Vec3, 2> gyro_prev{math::Vec3::Zero(), math::Vec3::Zero()};
     int gyro_history = 0;
     std::uint64_t gyro_noise_count = 0;
     double gyro_noise_var_lp = 0.0;     ///< per-axis noise variance, low-passed over 1 s, (rad/s)²
@@ -201,8 +201,8 @@ struct MocapFilterState {
     bool mag_disturbed = true;  ///< norm / dip off the reference (true until one exists)
     double k_mag_init = 1.0;    ///< initial-convergence gain 1/N (0 when done)
     double last_mag_disagreement_rad = 0.0;
-    Vec3 mag_horizontal_lp = Vec3::Zero();  ///< horizontal field in the 6D earth frame, averaged
-                                            ///< over tau_mag_s (vector mean at the start)
+    math::Vec3 mag_horizontal_lp = math::Vec3::Zero();  ///< horizontal field in the 6D earth frame, averaged
+                                                        ///< over tau_mag_s (vector mean at the start)
 
     // Counters (only go up until reset())
     std::uint64_t samples = 0;
@@ -220,8 +220,8 @@ public:
     explicit MocapFilter(const MocapFilterParams& params = {});
 
     void update(const ImuSample& sample) override;
-    [[nodiscard]] Quat orientation() const override;
-    [[nodiscard]] Vec3 gyro_bias_rad_s() const override { return state_.bias_rad_s; }
+    [[nodiscard]] math::Quat orientation() const override;
+    [[nodiscard]] math::Vec3 gyro_bias_rad_s() const override { return state_.bias_rad_s; }
     void reset() override;
     [[nodiscard]] std::string_view name() const override { return "mocap"; }
     [[nodiscard]] std::uint64_t gaps() const override { return state_.clock.gaps(); }
@@ -229,17 +229,17 @@ public:
     [[nodiscard]] const MocapFilterParams& params() const { return params_; }
     [[nodiscard]] const MocapFilterState& state() const { return state_; }
     /// Inclination-only estimate q_E'_sensor (no heading correction).
-    [[nodiscard]] Quat orientation_6d() const;
+    [[nodiscard]] math::Quat orientation_6d() const;
     /// True while magnetometer readings are being rejected or down-weighted.
     [[nodiscard]] bool mag_rejected() const { return state_.mag_disturbed || state_.mag_heading_disturbed; }
 
 private:
     void compute_coeffs(double ts_s);
-    void update_gyro(const Vec3& gyro, double dt_s);
-    void update_acc(const Vec3& acc);
-    void update_mag(const Vec3& mag);
-    void update_mag_guard(const Vec3& mag_earth);
-    void update_bias(const Vec3& acc_earth_unit);
+    void update_gyro(const math::Vec3& gyro, double dt_s);
+    void update_acc(const math::Vec3& acc);
+    void update_mag(const math::Vec3& mag);
+    void update_mag_guard(const math::Vec3& mag_earth);
+    void update_bias(const math::Vec3& acc_earth_unit);
     void update_heading_guard();
     void adapt_time_constants();
     void accept_candidate_field();

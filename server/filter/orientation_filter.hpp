@@ -12,7 +12,7 @@
 #include <string_view>
 
 #include "core/imu_sample.hpp"
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 namespace mocap::filter {
 
@@ -27,10 +27,10 @@ public:
     virtual void update(const ImuSample& sample) = 0;
 
     /// Current estimate q_earth_sensor (ENU), unit norm.
-    [[nodiscard]] virtual Quat orientation() const = 0;
+    [[nodiscard]] virtual math::Quat orientation() const = 0;
 
     /// Current gyroscope bias estimate, rad/s, sensor frame (zero if not estimated).
-    [[nodiscard]] virtual Vec3 gyro_bias_rad_s() const { return Vec3::Zero(); }
+    [[nodiscard]] virtual math::Vec3 gyro_bias_rad_s() const { return math::Vec3::Zero(); }
 
     /// Returns the filter to its freshly constructed state (Params kept).
     virtual void reset() = 0;

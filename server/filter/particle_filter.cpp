@@ -6,7 +6,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "filter/markley_average.hpp"
+#include "math/markley_average.hpp"
 
 namespace mocap::filter {
 
@@ -156,24 +156,24 @@ void ParticleFilter::reset() {
     std::fill(w_.begin(), w_.end(), 1.0 / n_);
 }
 
-Quat ParticleFilter::particle(int i) const {
-    return Quat(qw_[i], qx_[i], qy_[i], qz_[i]);
+math::Quat ParticleFilter::particle(int i) const {
+    return math::Quat(qw_[i], qx_[i], qy_[i], qz_[i]);
 }
-Vec3 ParticleFilter::particle_bias(int i) const {
+math::Vec3 ParticleFilter::particle_bias(int i) const {
     return {bx_[i], by_[i], bz_[i]};
 }
 double ParticleFilter::weight(int i) const {
     return w_[i];
 }
 
-bool ParticleFilter::measure(const ImuSample& sample, Quat& q_m) const {
+bool ParticleFilter::measure(const ImuSample& sample, math::Quat& q_m) const {
     if (!sample.has_mag()) return false;
-    const Vec3 a = to_vec3(sample.accel_m_s2), m = to_vec3(sample.mag_ut);
+    const math::Vec3 a = math::to_vec3(sample.accel_m_s2), m = math::to_vec3(sample.mag_ut);
     if (!(std::abs(a.norm() / params_.gravity_m_s2 - 1.0) <= params_.accel_gate)) return false;
     AttitudeSolution s;
     if (std::isfinite(params_.dip_deg)) {
         s = solve_lma(a, m, field_direction_enu(params_.dip_deg * kDegToRad),
-                      state_.initialised ? state_.q_earth_sensor : Quat::Identity(), lma_);
+                      state_.initialised ? state_.q_earth_sensor : math::Quat::Identity(), lma_);
     } else {
         // Only the horizontal direction of the reference matters to TRIAD.
         s = solve_triad(a, m, field_direction_enu(0.0), lma_);
@@ -183,7 +183,7 @@ bool ParticleFilter::measure(const ImuSample& sample, Quat& q_m) const {
     return true;
 }
 
-void ParticleFilter::initialise(const Quat& q_m) {
+void ParticleFilter::initialise(const math::Quat& q_m) {
     const double st = 0.5 * params_.init_tilt_rad, sh = 0.5 * params_.init_heading_rad;
     fill_noise();
     const double* z = noise_.data();
@@ -191,7 +191,7 @@ void ParticleFilter::initialise(const Quat& q_m) {
         double dw, s;
         const double dx = st * z[i], dy = st * z[n_ + i], dz = sh * z[2 * n_ + i];
         small_exp(dx, dy, dz, dw, s);
-        const Quat q = (Quat(dw, s * dx, s * dy, s * dz) * q_m).normalized();
+        const math::Quat q = (math::Quat(dw, s * dx, s * dy, s * dz) * q_m).normalized();
         qw_[i] = q.w();
         qx_[i] = q.x();
         qy_[i] = q.y();
@@ -203,12 +203,12 @@ void ParticleFilter::initialise(const Quat& q_m) {
     }
     state_.initialised = true;
     state_.q_measured = q_m;
-    state_.q_earth_sensor = canonical(q_m);
+    state_.q_earth_sensor = math::canonical(q_m);
     estimate();
     state_.n_eff = n_;
 }
 
-void ParticleFilter::predict(const Vec3& gyro, double dt) {
+void ParticleFilter::predict(const math::Vec3& gyro, double dt) {
     const double h = 0.5 * dt;
     const double gs = params_.gyro_noise_rad_s * h;
     const double bs = params_.bias_walk_rad_s2 * std::sqrt(dt);
@@ -267,7 +267,7 @@ void ParticleFilter::predict(const Vec3& gyro, double dt) {
     }
 }
 
-bool ParticleFilter::weigh(const Quat& q_m) {
+bool ParticleFilter::weigh(const math::Quat& q_m) {
     // e = q_i ⊗ q_m*: its vector part is sin(θ/2)·axis in the earth frame; z is heading.
     const double pw = q_m.w(), px = -q_m.x(), py = -q_m.y(), pz = -q_m.z();
     // ½ (2v)² / σ² = 2 v² / σ²
@@ -301,7 +301,7 @@ bool ParticleFilter::weigh(const Quat& q_m) {
 }
 
 void ParticleFilter::estimate() {
-    QuatAccumulator acc;
+    math::QuatAccumulator acc;
     acc.add(qw_.data(), qx_.data(), qy_.data(), qz_.data(), w_.data(), n_);
     double bx = 0.0, by = 0.0, bz = 0.0;
     for (int i = 0; i < n_; ++i) {
@@ -310,7 +310,7 @@ void ParticleFilter::estimate() {
         bz += w_[i] * bz_[i];
     }
     state_.q_earth_sensor = acc.mean(state_.q_earth_sensor);
-    state_.gyro_bias_rad_s = Vec3(bx, by, bz);
+    state_.gyro_bias_rad_s = math::Vec3(bx, by, bz);
 }
 
 void ParticleFilter::resample() {
@@ -345,10 +345,10 @@ void ParticleFilter::resample() {
 void ParticleFilter::regularise() {
     // Spread of the resampled cloud around the estimate (sensor-frame small angles), and
     // of the bias particles around their mean.
-    const Quat& m = state_.q_earth_sensor;
+    const math::Quat& m = state_.q_earth_sensor;
     const double mw = m.w(), mx = -m.x(), my = -m.y(), mz = -m.z();  // m*
     double e2 = 0.0;
-    Vec3 bsum = Vec3::Zero(), b2 = Vec3::Zero();
+    math::Vec3 bsum = math::Vec3::Zero(), b2 = math::Vec3::Zero();
     for (int i = 0; i < n_; ++i) {
         const double qw = qw_[i], qx = qx_[i], qy = qy_[i], qz = qz_[i];
         // vec(m* ⊗ q_i)
@@ -356,7 +356,7 @@ void ParticleFilter::regularise() {
         const double ey = mw * qy - mx * qz + my * qw + mz * qx;
         const double ez = mw * qz + mx * qy - my * qx + mz * qw;
         e2 += ex * ex + ey * ey + ez * ez;
-        const Vec3 b(bx_[i], by_[i], bz_[i]);
+        const math::Vec3 b(bx_[i], by_[i], bz_[i]);
         bsum += b;
         b2 += b.cwiseAbs2();
     }
@@ -364,12 +364,12 @@ void ParticleFilter::regularise() {
     // Per-axis σ of the angle: (2 sin(θ/2))² ≈ θ², averaged over 3 axes.
     const double spread = std::sqrt(4.0 * e2 * inv_n / 3.0);
     const double sq = 0.5 * std::max(params_.min_jitter_rad, params_.reg_h * spread);
-    const Vec3 bmean = bsum * inv_n;
-    const Vec3 bstd = (b2 * inv_n - bmean.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
+    const math::Vec3 bmean = bsum * inv_n;
+    const math::Vec3 bstd = (b2 * inv_n - bmean.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
     const double a = std::clamp(params_.bias_shrink, 0.0, 1.0);
     const double kj = std::sqrt(std::max(0.0, 1.0 - a * a));
-    const Vec3 sb = (kj * bstd).cwiseMax(params_.min_bias_jitter_rad_s);
-    const Vec3 pull = (1.0 - a) * bmean;
+    const math::Vec3 sb = (kj * bstd).cwiseMax(params_.min_bias_jitter_rad_s);
+    const math::Vec3 pull = (1.0 - a) * bmean;
     fill_noise();
     const double* z = noise_.data();
     for (int i = 0; i < n_; ++i) {
@@ -390,12 +390,12 @@ void ParticleFilter::regularise() {
 
 void ParticleFilter::update(const ImuSample& sample) {
     const double dt = clock_.step_s(sample.t_us);
-    const Vec3 gyro = to_vec3(sample.gyro_rad_s);
+    const math::Vec3 gyro = math::to_vec3(sample.gyro_rad_s);
     if (!gyro.allFinite()) {
         ++state_.rejected_measurements;
         return;
     }
-    Quat q_m;
+    math::Quat q_m;
     const bool have_m = measure(sample, q_m);
     if (!state_.initialised) {
         if (have_m)

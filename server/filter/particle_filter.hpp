@@ -69,14 +69,14 @@ struct ParticleFilterParams {
 
 /// Observable state (besides the particles themselves).
 struct ParticleFilterState {
-    Quat q_earth_sensor = Quat::Identity();   ///< Markley average of the particles
-    Vec3 gyro_bias_rad_s = Vec3::Zero();      ///< weighted mean bias
-    Quat q_measured = Quat::Identity();       ///< last accepted q_m
-    double n_eff = 0.0;                       ///< effective sample size after the last update
-    bool initialised = false;                 ///< particles drawn around a first q_m
-    std::uint64_t resamples = 0;              ///< resampling steps done
-    std::uint64_t rejected_measurements = 0;  ///< samples without a usable q_m
-    std::uint64_t reinitialisations = 0;      ///< weight collapse (all ~0): redrawn around q_m
+    math::Quat q_earth_sensor = math::Quat::Identity();  ///< Markley average of the particles
+    math::Vec3 gyro_bias_rad_s = math::Vec3::Zero();     ///< weighted mean bias
+    math::Quat q_measured = math::Quat::Identity();      ///< last accepted q_m
+    double n_eff = 0.0;                                  ///< effective sample size after the last update
+    bool initialised = false;                            ///< particles drawn around a first q_m
+    std::uint64_t resamples = 0;                         ///< resampling steps done
+    std::uint64_t rejected_measurements = 0;             ///< samples without a usable q_m
+    std::uint64_t reinitialisations = 0;                 ///< weight collapse (all ~0): redrawn around q_m
 };
 
 class ParticleFilter final : public OrientationFilter {
@@ -84,8 +84,8 @@ public:
     explicit ParticleFilter(const ParticleFilterParams& params = {});
 
     void update(const ImuSample& sample) override;
-    [[nodiscard]] Quat orientation() const override { return state_.q_earth_sensor; }
-    [[nodiscard]] Vec3 gyro_bias_rad_s() const override { return state_.gyro_bias_rad_s; }
+    [[nodiscard]] math::Quat orientation() const override { return state_.q_earth_sensor; }
+    [[nodiscard]] math::Vec3 gyro_bias_rad_s() const override { return state_.gyro_bias_rad_s; }
     void reset() override;
     [[nodiscard]] std::string_view name() const override { return "pf"; }
     [[nodiscard]] std::uint64_t gaps() const override { return clock_.gaps(); }
@@ -94,8 +94,8 @@ public:
     [[nodiscard]] const ParticleFilterState& state() const { return state_; }
     [[nodiscard]] int particle_count() const { return n_; }
     /// Particle i (0 <= i < particle_count()) and its normalised weight.
-    [[nodiscard]] Quat particle(int i) const;
-    [[nodiscard]] Vec3 particle_bias(int i) const;
+    [[nodiscard]] math::Quat particle(int i) const;
+    [[nodiscard]] math::Vec3 particle_bias(int i) const;
     [[nodiscard]] double weight(int i) const;
 
 private:
@@ -106,13 +106,13 @@ private:
     };
     // Fills noise_ with 6 planes of n_ standard normals (one table lookup each).
     void fill_noise();
-    void initialise(const Quat& q_m);
-    void predict(const Vec3& gyro, double dt);
-    bool weigh(const Quat& q_m);  // false: weights collapsed
+    void initialise(const math::Quat& q_m);
+    void predict(const math::Vec3& gyro, double dt);
+    bool weigh(const math::Quat& q_m);  // false: weights collapsed
     void resample();
     void regularise();
     void estimate();
-    bool measure(const ImuSample& sample, Quat& q_m) const;
+    bool measure(const ImuSample& sample, math::Quat& q_m) const;
 
     ParticleFilterParams params_;
     int n_;

@@ -25,7 +25,7 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
     const ImuSample& s = in.imu;
     if (!finite(s.gyro_rad_s) || !finite(s.accel_m_s2) || (s.has_mag() && !finite(s.mag_ut))) return false;
     filter_->update(s);
-    const filter::Quat q = filter_->orientation();
+    const math::Quat q = filter_->orientation();
     out.q_earth_sensor_wxyz = {q.w(), q.x(), q.y(), q.z()};
     return true;
 }

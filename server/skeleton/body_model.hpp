@@ -25,12 +25,12 @@
 #include <vector>
 
 #include "core/frame.hpp"
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 namespace mocap::skeleton {
 
-using filter::Quat;
-using filter::Vec3;
+using math::Quat;
+using math::Vec3;
 
 /// kMaxSegments identity quaternions (Eigen's default constructor leaves them unset).
 inline std::array<Quat, kMaxSegments> identity_quats() {

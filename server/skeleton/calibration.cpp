@@ -79,7 +79,7 @@ Quat CalibrationCollector::mean(std::size_t segment) const {
 double CalibrationCollector::spread_rad(std::size_t segment) const {
     const std::size_t n = count_[segment];
     if (n == 0) return 0.0;
-    const filter::Vec4 v = filter::to_wxyz(mean(segment));
+    const math::Vec4 v = math::to_wxyz(mean(segment));
     const double lambda = v.dot(acc_[segment].matrix() * v);
     const double s2 = std::clamp(1.0 - lambda / static_cast<double>(n), 0.0, 1.0);
     return 2.0 * std::asin(std::sqrt(s2));
@@ -158,7 +158,7 @@ CalibrationResult calibrate_from_means(const BodyModel& model, std::span<const Q
         if (!has_sample[i]) continue;
         const Quat expected = q_heading * pose[i].normalized();
         c.q_sensor_segment[i] =
-            filter::canonical((q_earth_sensor_mean[i].normalized().conjugate() * expected).normalized());
+            math::canonical((q_earth_sensor_mean[i].normalized().conjugate() * expected).normalized());
         c.calibrated[i] = true;
     }
     r.calibration = c;
@@ -358,7 +358,7 @@ CalibrationResult parse_calibration(const BodyModel& model, std::string_view tex
 bool StillnessDetector::update(std::int64_t t_us, const Quat& q_earth_sensor, double gyro_norm_rad_s) {
     const Quat q = q_earth_sensor.normalized();
     const bool restart = !started_ || t_us < last_us_ || gyro_norm_rad_s > params_.gyro_threshold_rad_s ||
-                         filter::angle_rad(anchor_.conjugate() * q) > params_.orientation_threshold_rad;
+                         math::angle_rad(anchor_.conjugate() * q) > params_.orientation_threshold_rad;
     if (restart) {
         anchor_ = q;
         since_us_ = t_us;

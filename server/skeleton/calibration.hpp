@@ -11,7 +11,7 @@
 // 0 = facing east, π/2 = facing north). The expected segment orientation is then
 //     q_earth_segment* = Rz(ψ) ⊗ q_body_segment(pose)
 // and with the averaged sensor orientation q̄_earth_sensor (Markley average over the still
-// period, filter/markley_average.hpp)
+// period, math/markley_average.hpp)
 //     q_sensor_segment = conj(q̄_earth_sensor) ⊗ q_earth_segment*.
 //
 // Poses (segment frames: body_model.hpp; x forward, y left, z up, identity in the T-pose):
@@ -45,13 +45,13 @@
 #include <string_view>
 
 #include "core/frame.hpp"
-#include "filter/markley_average.hpp"
+#include "math/markley_average.hpp"
 #include "skeleton/body_model.hpp"
 
 namespace mocap::skeleton {
 
-using filter::Quat;
-using filter::Vec3;
+using math::Quat;
+using math::Vec3;
 
 enum class CalibrationPose : std::uint8_t { kTPose, kNPose, kCustom };
 enum class HeadingMode : std::uint8_t { kAlignToForward, kKeepEarth };
@@ -92,7 +92,7 @@ public:
     double spread_rad(std::size_t segment) const;
 
 private:
-    std::array<filter::QuatAccumulator, kMaxSegments> acc_{};
+    std::array<math::QuatAccumulator, kMaxSegments> acc_{};
     std::array<std::size_t, kMaxSegments> count_{};
 };
 

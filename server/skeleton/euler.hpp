@@ -14,13 +14,13 @@
 #include <string>
 #include <string_view>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 namespace mocap::skeleton {
 
-using filter::Mat3;
-using filter::Quat;
-using filter::Vec3;
+using math::Mat3;
+using math::Quat;
+using math::Vec3;
 
 enum class Axis : std::uint8_t { kX = 0, kY = 1, kZ = 2 };
 

@@ -22,7 +22,7 @@ void PoseSmoother::apply(std::int64_t t_us, std::span<Quat> q_world_segment) {
     }
     alpha = std::clamp(alpha, 0.0, 1.0);
     for (std::size_t i = 0; i < q_world_segment.size(); ++i) {
-        state_[i] = alpha >= 1.0 ? q_world_segment[i] : filter::slerp(state_[i], q_world_segment[i], alpha);
+        state_[i] = alpha >= 1.0 ? q_world_segment[i] : math::slerp(state_[i], q_world_segment[i], alpha);
         q_world_segment[i] = state_[i];
     }
 }

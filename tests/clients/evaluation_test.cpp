@@ -12,7 +12,7 @@
 namespace mocap::tools {
 namespace {
 
-using filter::Vec3;
+using math::Vec3;
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
@@ -31,7 +31,7 @@ EvalSample sample(double t_s, const Quat& est, const Quat& ref, bool evaluated =
 
 TEST(Evaluation, PureHeadingError) {
     // 10° about the vertical: all of it is heading and yaw, none inclination/roll/pitch.
-    const Quat ref = filter::from_euler_zyx({0.0, 0.0, 30.0 * kDeg});
+    const Quat ref = math::from_euler_zyx({0.0, 0.0, 30.0 * kDeg});
     const Quat est = about(Vec3::UnitZ(), 10.0) * ref;
     const std::vector<EvalSample> s = {sample(0.0, est, ref)};
     const EvalResult r = evaluate(s);
@@ -72,8 +72,8 @@ TEST(Evaluation, CombinedErrorSplitsIntoHeadingAndInclination) {
 }
 
 TEST(Evaluation, YawErrorIsWrapped) {
-    const Quat ref = filter::from_euler_zyx({0.0, 0.0, -179.0 * kDeg});
-    const Quat est = filter::from_euler_zyx({0.0, 0.0, 179.0 * kDeg});
+    const Quat ref = math::from_euler_zyx({0.0, 0.0, -179.0 * kDeg});
+    const Quat est = math::from_euler_zyx({0.0, 0.0, 179.0 * kDeg});
     const std::vector<EvalSample> s = {sample(0.0, est, ref)};
     EXPECT_NEAR(evaluate(s).rmse_yaw_deg, 2.0, 1e-9);
 }
@@ -170,7 +170,7 @@ TEST(FilterRun, SkipWindowMovementMaskAndNedOutput) {
     for (int i = 0; i < 10; ++i) {
         RecordingRow row;
         row.sample.t_us = 2'000'000 + i * 1'000'000;  // t = 2 .. 11 s
-        row.q_ref = filter::q_enu_ned();              // NED reference of an ENU-identity sensor
+        row.q_ref = math::q_enu_ned();                // NED reference of an ENU-identity sensor
         row.ref_valid = true;
         row.movement = i != 7;
         rec.rows.push_back(row);
@@ -186,7 +186,7 @@ TEST(FilterRun, SkipWindowMovementMaskAndNedOutput) {
     EXPECT_NEAR(evaluate(enu.compared).rmse_total_deg, 180.0, 1e-6);
     const RunOutput ned = run_filter(f, rec, {EarthFrame::ned, 0.0});
     EXPECT_NEAR(evaluate(ned.compared).rmse_total_deg, 0.0, 1e-6);
-    EXPECT_NEAR(filter::angle_rad(ned.estimates[0].q * filter::conj(filter::q_enu_ned())), 0.0, 1e-12);
+    EXPECT_NEAR(math::angle_rad(ned.estimates[0].q * math::conj(math::q_enu_ned())), 0.0, 1e-12);
     EXPECT_EQ(evaluate(ned.compared).samples, 9u);
 }
 

@@ -52,7 +52,7 @@ TEST(RecordingCsv, RoundTripOfASimulatedRecording) {
         expect_close(a.sample.gyro_rad_s, b.sample.gyro_rad_s);
         expect_close(a.sample.accel_m_s2, b.sample.accel_m_s2);
         expect_close(a.sample.mag_ut, b.sample.mag_ut);
-        ASSERT_LT(filter::angle_rad(a.q_ref * filter::conj(b.q_ref)), 1e-10);
+        ASSERT_LT(math::angle_rad(a.q_ref * math::conj(b.q_ref)), 1e-10);
         ASSERT_TRUE(a.ref_valid);
         ASSERT_EQ(a.movement, b.movement);
         ASSERT_TRUE(a.sample.has_mag());

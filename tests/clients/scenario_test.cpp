@@ -9,8 +9,8 @@
 namespace mocap::sim {
 namespace {
 
-using filter::Quat;
-using filter::Vec3;
+using math::Quat;
+using math::Vec3;
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr ScenarioKind kAllKinds[] = {ScenarioKind::fourati, ScenarioKind::realistic, ScenarioKind::magnetic};
@@ -61,12 +61,12 @@ TEST(Scenario, LengthRateAndTimestamps) {
 // The paper starts from q(0) = identity in NED: the sensor axes on north, east, down.
 TEST(Scenario, FouratiStartsAlignedWithNed) {
     const Scenario f = make_scenario(ScenarioKind::fourati, 3);
-    const Quat q_ned_sensor = filter::q_enu_ned() * f.rows.front().q_earth_sensor;
-    EXPECT_LT(filter::angle_rad(q_ned_sensor), 1e-12);
+    const Quat q_ned_sensor = math::q_enu_ned() * f.rows.front().q_earth_sensor;
+    EXPECT_LT(math::angle_rad(q_ned_sensor), 1e-12);
     // Bounded Euler trajectory in NED: roll ±40°, pitch ±30°, yaw ±90° (within 1°).
     double max_roll = 0, max_pitch = 0, max_yaw = 0;
     for (const ScenarioRow& row : f.rows) {
-        const auto e = filter::to_euler_zyx(filter::q_enu_ned() * row.q_earth_sensor);
+        const auto e = math::to_euler_zyx(math::q_enu_ned() * row.q_earth_sensor);
         max_roll = std::max(max_roll, std::abs(e.roll_rad) * kRadToDeg);
         max_pitch = std::max(max_pitch, std::abs(e.pitch_rad) * kRadToDeg);
         max_yaw = std::max(max_yaw, std::abs(e.yaw_rad) * kRadToDeg);
@@ -85,8 +85,8 @@ TEST(Scenario, NoiselessGyroIntegratesToTruth) {
         double worst = 0.0;
         for (std::size_t i = 1; i < s.rows.size(); ++i) {
             const double dt = 1e-6 * static_cast<double>(s.rows[i].sample.t_us - s.rows[i - 1].sample.t_us);
-            q = (q * filter::quat_from_rotvec(filter::to_vec3(s.rows[i].sample.gyro_rad_s) * dt)).normalized();
-            worst = std::max(worst, filter::angle_rad(q * filter::conj(s.rows[i].q_earth_sensor)));
+            q = (q * math::quat_from_rotvec(math::to_vec3(s.rows[i].sample.gyro_rad_s) * dt)).normalized();
+            worst = std::max(worst, math::angle_rad(q * math::conj(s.rows[i].q_earth_sensor)));
         }
         EXPECT_LT(worst * kRadToDeg, 1e-6) << scenario_name(k);
     }
@@ -99,17 +99,17 @@ TEST(Scenario, AccelAndMagFollowTruth) {
         const Scenario s = make_scenario(k, 5, {.noise_scale = 0.0});
         std::size_t rest = 0;
         for (const ScenarioRow& row : s.rows) {
-            const Quat q_se = filter::conj(row.q_earth_sensor);
-            const Vec3 f = filter::to_vec3(row.sample.accel_m_s2);
-            const Vec3 m = filter::to_vec3(row.sample.mag_ut);
-            ASSERT_LT((f - filter::rotate(q_se, row.lin_acc_earth_m_s2 + s.spec.gravity_up_m_s2)).norm(), 1e-9);
-            ASSERT_LT((m - filter::rotate(q_se, row.mag_earth_ut)).norm(), 1e-9);
+            const Quat q_se = math::conj(row.q_earth_sensor);
+            const Vec3 f = math::to_vec3(row.sample.accel_m_s2);
+            const Vec3 m = math::to_vec3(row.sample.mag_ut);
+            ASSERT_LT((f - math::rotate(q_se, row.lin_acc_earth_m_s2 + s.spec.gravity_up_m_s2)).norm(), 1e-9);
+            ASSERT_LT((m - math::rotate(q_se, row.mag_earth_ut)).norm(), 1e-9);
             if (!row.moving) {
                 ++rest;
                 ASSERT_LT(row.lin_acc_earth_m_s2.norm(), 1e-12);
-                ASSERT_LT((filter::to_vec3(row.sample.gyro_rad_s) - s.gyro_bias_rad_s).norm(), 1e-12);
+                ASSERT_LT((math::to_vec3(row.sample.gyro_rad_s) - s.gyro_bias_rad_s).norm(), 1e-12);
                 // Specific force points up: rotated back to earth it is +9.81 on z.
-                ASSERT_NEAR(filter::rotate(row.q_earth_sensor, f).z(), 9.81, 1e-9);
+                ASSERT_NEAR(math::rotate(row.q_earth_sensor, f).z(), 9.81, 1e-9);
             }
         }
         if (k != ScenarioKind::fourati) {
@@ -124,8 +124,8 @@ TEST(Scenario, AccelAtRestMatchesGravityWithinNoise) {
     std::size_t n = 0;
     for (const ScenarioRow& row : s.rows) {
         if (row.moving) continue;
-        const Vec3 expected = filter::rotate(filter::conj(row.q_earth_sensor), s.spec.gravity_up_m_s2);
-        sum_sq += (filter::to_vec3(row.sample.accel_m_s2) - expected).squaredNorm();
+        const Vec3 expected = math::rotate(math::conj(row.q_earth_sensor), s.spec.gravity_up_m_s2);
+        sum_sq += (math::to_vec3(row.sample.accel_m_s2) - expected).squaredNorm();
         n += 3;
     }
     ASSERT_GT(n, 1000u);
@@ -144,11 +144,11 @@ TEST(Scenario, FouratiNoiseIsTableTwo) {
     Vec3 sum[3] = {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
     Vec3 sum_sq[3] = {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
     for (const ScenarioRow& row : s.rows) {
-        const Quat q_se = filter::conj(row.q_earth_sensor);
+        const Quat q_se = math::conj(row.q_earth_sensor);
         const Vec3 e[3] = {
-            filter::to_vec3(row.sample.gyro_rad_s) - row.gyro_true_rad_s,
-            filter::to_vec3(row.sample.accel_m_s2) - filter::rotate(q_se, s.spec.gravity_up_m_s2),
-            (filter::to_vec3(row.sample.mag_ut) - filter::rotate(q_se, row.mag_earth_ut)) / 100.0,  // G
+            math::to_vec3(row.sample.gyro_rad_s) - row.gyro_true_rad_s,
+            math::to_vec3(row.sample.accel_m_s2) - math::rotate(q_se, s.spec.gravity_up_m_s2),
+            (math::to_vec3(row.sample.mag_ut) - math::rotate(q_se, row.mag_earth_ut)) / 100.0,  // G
         };
         for (int i = 0; i < 3; ++i) {
             sum[i] += e[i];

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <string>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 #include "sim/stream_motion.hpp"
 #include "skeleton/body_model.hpp"
 
@@ -13,7 +13,7 @@ namespace mocap::sim {
 namespace {
 
 double angle_between(const Quat& a, const Quat& b) {
-    return filter::angle_rad(filter::conj(a) * b);
+    return math::angle_rad(math::conj(a) * b);
 }
 
 const std::string kWalkClip = std::string(MOCAP_MOTION_DIR) + "/cmu_131_01_walk.bvh";
@@ -45,10 +45,10 @@ TEST(StreamMotion, WalkStandsStillInTheTPoseThenMovesContinuously) {
     }
     EXPECT_LT(max_step, 5.0 * M_PI / 180.0);
     EXPECT_GT(moved_thigh, 15.0 * M_PI / 180.0) << "the hip flexes";
-    const Vec3 fwd = filter::rotate(prev.q_earth_segment[0], Vec3::UnitX());
+    const Vec3 fwd = math::rotate(prev.q_earth_segment[0], Vec3::UnitX());
     EXPECT_GT(std::abs(std::atan2(fwd.y(), fwd.x())), 60.0 * M_PI / 180.0) << "10 s on a 4 m circle turns > 90°";
     // Upper arm lowered from the T-pose: its long axis (model end_m, along +y for the left arm) points down.
-    const Vec3 arm = filter::rotate(prev.q_earth_segment[3], model.segments[3].end_m.normalized());
+    const Vec3 arm = math::rotate(prev.q_earth_segment[3], model.segments[3].end_m.normalized());
     EXPECT_LT(arm.z(), -0.8);
 }
 
@@ -77,12 +77,12 @@ TEST(StreamMotion, BvhSourceReproducesTheMappedClip) {
     clip->clip_frame(401, q1, nullptr);
     clip->orientations(clip->calibrate_s() + 400.5 * ft, 0.0, Vec3::Zero(), q_sim, root_sim);
     for (std::size_t i = 0; i < model.size(); ++i) {
-        EXPECT_LT(angle_between(filter::slerp(q0[i], q1[i], 0.5), q_sim[i]), 1e-3);
+        EXPECT_LT(angle_between(math::slerp(q0[i], q1[i], 0.5), q_sim[i]), 1e-3);
     }
     // Still T-pose first, facing the clip's first pelvis heading.
     clip->orientations(0.5, 0.0, Vec3::Zero(), q_sim, root_sim);
     clip->clip_frame(0, q0, nullptr);
-    const Vec3 fwd = filter::rotate(q0[0], Vec3::UnitX());
+    const Vec3 fwd = math::rotate(q0[0], Vec3::UnitX());
     const double h = std::atan2(fwd.y(), fwd.x());
     for (std::size_t i = 0; i < model.size(); ++i) {
         EXPECT_LT(angle_between(q_sim[i], Quat(std::cos(h / 2), 0, 0, std::sin(h / 2))), 1e-9);

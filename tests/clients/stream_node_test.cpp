@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 #include "mocap_wire/mw_can.h"
 #include "mocap_wire/mw_scale.h"
 #include "sim/stream_command.hpp"
@@ -21,7 +21,7 @@ TEST(StreamNode, GyroIntegratesBackToTheTruthOverAWalk) {
     const auto model = skeleton::default_body_model();
     const StreamMotion walk = StreamMotion::walk(model, 1.0);
     const double dt = 0.01;
-    const Quat mount = filter::quat_from_rotvec(Vec3(0.2, -0.3, 0.1));
+    const Quat mount = math::quat_from_rotvec(Vec3(0.2, -0.3, 0.1));
     std::array<Quat, kMaxSegments> q_prev, q_cur;
     Vec3 root;
     for (std::size_t seg : {0u, 4u, 10u}) {
@@ -31,26 +31,26 @@ TEST(StreamNode, GyroIntegratesBackToTheTruthOverAWalk) {
             walk.orientations(k * dt, 0.3, Vec3::Zero(), q_cur, root);
             walk.orientations((k - 1) * dt, 0.3, Vec3::Zero(), q_prev, root);
             const SensorReading r = ideal_reading(q_prev[seg] * mount, q_cur[seg] * mount, dt, Vec3::Zero());
-            q_est = (q_est * filter::quat_exp(0.5 * dt * r.gyro_rad_s)).normalized();
+            q_est = (q_est * math::quat_exp(0.5 * dt * r.gyro_rad_s)).normalized();
         }
-        EXPECT_LT(filter::angle_rad(filter::conj(q_est) * (q_cur[seg] * mount)), 1e-9) << "segment " << seg;
+        EXPECT_LT(math::angle_rad(math::conj(q_est) * (q_cur[seg] * mount)), 1e-9) << "segment " << seg;
     }
 }
 
 TEST(StreamNode, AtRestSpecificForceIsGravityAndFieldIsRotated) {
-    const Quat q = filter::quat_from_rotvec(Vec3(0.4, -1.1, 2.0));
+    const Quat q = math::quat_from_rotvec(Vec3(0.4, -1.1, 2.0));
     const SensorReading r = ideal_reading(q, q, 0.01, Vec3::Zero());
-    const Vec3 g_sensor = filter::rotate(filter::conj(q), Vec3(0, 0, MW_STANDARD_GRAVITY_M_S2));
+    const Vec3 g_sensor = math::rotate(math::conj(q), Vec3(0, 0, MW_STANDARD_GRAVITY_M_S2));
     EXPECT_LT((r.accel_m_s2 - g_sensor).norm(), 1e-6);
     EXPECT_LT(r.gyro_rad_s.norm(), 1e-12);
-    EXPECT_LT((filter::rotate(q, r.mag_ut) - stream_mag_earth_ut()).norm(), 1e-9);
+    EXPECT_LT((math::rotate(q, r.mag_ut) - stream_mag_earth_ut()).norm(), 1e-9);
     const Vec3 m = stream_mag_earth_ut();
     EXPECT_NEAR(m.norm(), 50.0, 1e-9);
     EXPECT_NEAR(std::atan2(-m.z(), m.y()), 60.0 * kDeg, 1e-9) << "dip 60°, pointing north and down";
     // With linear acceleration: f = R(q)ᵀ (a_lin + g).
     const Vec3 lin(0.8, -2.0, 1.5);
     const SensorReading moving = ideal_reading(q, q, 0.01, lin);
-    EXPECT_LT((filter::rotate(q, moving.accel_m_s2) - (lin + Vec3(0, 0, MW_STANDARD_GRAVITY_M_S2))).norm(), 1e-6);
+    EXPECT_LT((math::rotate(q, moving.accel_m_s2) - (lin + Vec3(0, 0, MW_STANDARD_GRAVITY_M_S2))).norm(), 1e-6);
     // Level and at rest: +1 g on +z, as a real MPU9250.
     const SensorReading level = ideal_reading(Quat::Identity(), Quat::Identity(), 0.01, Vec3::Zero());
     EXPECT_NEAR(level.accel_m_s2.z(), MW_STANDARD_GRAVITY_M_S2, 1e-6);
@@ -83,8 +83,8 @@ TEST(StreamNode, WalkSensorAccelerationIsZeroAtRestAndCentripetalWhileWalking) {
 
 TEST(StreamNode, RawFramesDecodeToTheTruthWithinQuantisation) {
     SimulatedNode node(7, false, 42, 7, stream_node_noise(0.0));
-    const Quat q0 = filter::quat_from_rotvec(Vec3(0.3, 0.2, -0.5));
-    const Quat q1 = q0 * filter::quat_from_rotvec(Vec3(0.02, -0.01, 0.015));
+    const Quat q0 = math::quat_from_rotvec(Vec3(0.3, 0.2, -0.5));
+    const Quat q1 = q0 * math::quat_from_rotvec(Vec3(0.02, -0.01, 0.015));
     const Vec3 lin(1.5, -0.5, 2.0);
     mw_can_frame frames[3];
     ASSERT_EQ(node.raw_frames(q0, q1, 0.01, lin, 0x12345u, frames), 3);
@@ -113,20 +113,20 @@ TEST(StreamNode, RawFramesDecodeToTheTruthWithinQuantisation) {
 
 TEST(StreamNode, AttitudeFrameDecodesToTheSensorOrientation) {
     SimulatedNode node(3, false, 42, 3, stream_node_noise(0.0));
-    const Quat q = filter::quat_from_rotvec(Vec3(-0.7, 0.4, 1.9));
+    const Quat q = math::quat_from_rotvec(Vec3(-0.7, 0.4, 1.9));
     mw_can_frame frame{};
     ASSERT_EQ(node.attitude_frame(q, 20000u, &frame), 1);
     mw_attitude att{};
     ASSERT_EQ(mw_attitude_decode(&frame, &att), MW_OK);
     EXPECT_EQ(att.counter_low, 20000u & 0x3FFFu);
     const Quat decoded(att.q[0], att.q[1], att.q[2], att.q[3]);
-    EXPECT_LT(filter::angle_rad(filter::conj(decoded) * (q * node.q_segment_sensor())), 2e-4);
+    EXPECT_LT(math::angle_rad(math::conj(decoded) * (q * node.q_segment_sensor())), 2e-4);
 }
 
 TEST(StreamNode, MountingAndBiasAreSeededAndBounded) {
     for (std::uint64_t stream = 1; stream <= 40; ++stream) {
         SimulatedNode node(static_cast<std::uint8_t>(stream), false, 9, stream, stream_node_noise(1.0));
-        EXPECT_LE(filter::angle_rad(node.q_segment_sensor()), 30.0 * kDeg + 1e-12);
+        EXPECT_LE(math::angle_rad(node.q_segment_sensor()), 30.0 * kDeg + 1e-12);
         for (int i = 0; i < 3; ++i) {
             EXPECT_GE(std::abs(node.gyro_bias_rad_s()[i]), 0.5 * kDeg - 1e-12);
             EXPECT_LE(std::abs(node.gyro_bias_rad_s()[i]), 2.0 * kDeg + 1e-12);
@@ -135,7 +135,7 @@ TEST(StreamNode, MountingAndBiasAreSeededAndBounded) {
         EXPECT_EQ(same.q_segment_sensor().coeffs(), node.q_segment_sensor().coeffs());
         // The root's node keeps its x axis forward (facing = "sensor" calibration).
         SimulatedNode root(1, true, 9, stream, stream_node_noise(1.0));
-        EXPECT_LT((filter::rotate(root.q_segment_sensor(), Vec3::UnitX()) - Vec3::UnitX()).norm(), 1e-12);
+        EXPECT_LT((math::rotate(root.q_segment_sensor(), Vec3::UnitX()) - Vec3::UnitX()).norm(), 1e-12);
     }
 }
 

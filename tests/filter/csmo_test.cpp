@@ -11,7 +11,7 @@ namespace {
 
 using testing::kRadToDeg;
 
-CsmoParams starting_at(const Quat& q0) {
+CsmoParams starting_at(const math::Quat& q0) {
     CsmoParams p;
     p.q0w = q0.w();
     p.q0x = q0.x();
@@ -25,7 +25,7 @@ double settle_time_s(Csmo& f, const std::vector<sim::ScenarioRow>& rows, double 
     double last = 0.0;
     for (const sim::ScenarioRow& r : rows) {
         f.update(r.sample);
-        if (angle_rad(f.orientation() * r.q_earth_sensor.conjugate()) * kRadToDeg > limit_deg)
+        if (math::angle_rad(f.orientation() * r.q_earth_sensor.conjugate()) * kRadToDeg > limit_deg)
             last = static_cast<double>(r.sample.t_us) * 1e-6;
     }
     return last;
@@ -41,7 +41,7 @@ TEST(Csmo, DefaultsAreThePapersGains) {
     EXPECT_EQ(p.gain_rate_hz, 100.0);
     Csmo f;
     EXPECT_EQ(f.name(), "csmo");
-    EXPECT_LT(angle_rad(f.orientation()), 1e-15);
+    EXPECT_LT(math::angle_rad(f.orientation()), 1e-15);
 }
 
 TEST(Csmo, TracksNoiselessFouratiMotionWithinTheChatterBand) {
@@ -63,8 +63,8 @@ TEST(Csmo, ConvergesFromThePapersFarOffStartOnNoiselessData) {
     sim::ScenarioOptions o;
     o.noise_scale = 0.0;
     const sim::Scenario sc = sim::make_scenario(sim::ScenarioKind::fourati, 2, o);
-    const Quat start = testing::fourati_paper_initial_estimate();
-    EXPECT_GT(angle_rad(start * testing::fourati_start_truth().conjugate()) * kRadToDeg, 150.0);
+    const math::Quat start = testing::fourati_paper_initial_estimate();
+    EXPECT_GT(math::angle_rad(start * testing::fourati_start_truth().conjugate()) * kRadToDeg, 150.0);
     Csmo f(starting_at(start));
     // The saturated switching term turns ≤ 0.2 rad/s per axis: 155° takes ~10-20 s.
     const double t = settle_time_s(f, sc.rows, 1.0);
@@ -103,9 +103,9 @@ TEST(Csmo, FixedDipReferenceIsBiasedByTheNoisyField) {
 
 TEST(Csmo, GainsScaleWithTheSampleRate) {
     // From the same 20° error, the correction per second is the same at 50, 100 and 200 Hz.
-    const Quat truth0 = quat_from_rotvec(Vec3(0.3, -0.4, 1.2));
-    const Quat start = truth0 * quat_from_rotvec(Vec3(0.2, 0.25, -0.1));
-    const Vec3 w(0.2, -0.1, 0.3);
+    const math::Quat truth0 = math::quat_from_rotvec(math::Vec3(0.3, -0.4, 1.2));
+    const math::Quat start = truth0 * math::quat_from_rotvec(math::Vec3(0.2, 0.25, -0.1));
+    const math::Vec3 w(0.2, -0.1, 0.3);
     double t100 = 0;
     for (const double hz : {100.0, 50.0, 200.0}) {
         Csmo f(starting_at(start));
@@ -120,17 +120,17 @@ TEST(Csmo, GainsScaleWithTheSampleRate) {
 }
 
 TEST(Csmo, InitialisesFromTheMeasurementWhenAsked) {
-    const Quat truth0 = quat_from_rotvec(Vec3(-0.5, 0.4, 2.5));
-    const auto rows = testing::constant_rate(truth0, Vec3(0, 0, 0.1), 100.0, 1.0);
+    const math::Quat truth0 = math::quat_from_rotvec(math::Vec3(-0.5, 0.4, 2.5));
+    const auto rows = testing::constant_rate(truth0, math::Vec3(0, 0, 0.1), 100.0, 1.0);
     CsmoParams p;
     p.init_from_measurement = true;
     Csmo f(p);
     f.update(rows[0].sample);
-    EXPECT_LT(angle_rad(f.orientation() * truth0.conjugate()), 1e-6);
+    EXPECT_LT(math::angle_rad(f.orientation() * truth0.conjugate()), 1e-6);
 }
 
 TEST(Csmo, RejectsUnusableMeasurementsAndGapsWithoutNaN) {
-    const auto rows = testing::constant_rate(Quat::Identity(), Vec3(0, 0, 0.5), 100.0, 1.0);
+    const auto rows = testing::constant_rate(math::Quat::Identity(), math::Vec3(0, 0, 0.5), 100.0, 1.0);
     Csmo f;
     f.update(rows[0].sample);
     ImuSample s = rows[1].sample;
@@ -144,7 +144,7 @@ TEST(Csmo, RejectsUnusableMeasurementsAndGapsWithoutNaN) {
     f.update(s);
     EXPECT_EQ(f.state().rejected_measurements, 3u);
     // Gyro-only propagation still happened: 3 samples at 0.5 rad/s about z.
-    EXPECT_NEAR(to_euler_zyx(f.orientation()).yaw_rad, 0.015, 1e-3);
+    EXPECT_NEAR(math::to_euler_zyx(f.orientation()).yaw_rad, 0.015, 1e-3);
     s = rows[3].sample;  // time going back: a gap, no propagation
     f.update(s);
     s = rows[50].sample;  // 0.47 s later: still within max_step_s
@@ -159,14 +159,14 @@ TEST(Csmo, RejectsUnusableMeasurementsAndGapsWithoutNaN) {
     f.reset();
     EXPECT_EQ(f.gaps(), 0u);
     EXPECT_EQ(f.state().rejected_measurements, 0u);
-    EXPECT_LT(angle_rad(f.orientation()), 1e-15);
+    EXPECT_LT(math::angle_rad(f.orientation()), 1e-15);
 }
 
 TEST(Csmo, ZeroNormInitialEstimateFallsBackToIdentity) {
     CsmoParams p;
     p.q0w = 0.0;
     Csmo f(p);
-    EXPECT_LT(angle_rad(f.orientation()), 1e-15);
+    EXPECT_LT(math::angle_rad(f.orientation()), 1e-15);
 }
 
 }  // namespace

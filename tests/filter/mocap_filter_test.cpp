@@ -16,17 +16,18 @@ namespace {
 using testing::kRadToDeg;
 
 // A sensor held still at `truth` (100 Hz, 48 µT at 60° dip) whose gyro reads a bias.
-std::vector<sim::ScenarioRow> still(const Quat& truth, double duration_s, const Vec3& bias = Vec3::Zero()) {
-    auto rows = testing::constant_rate(truth, Vec3::Zero(), 100.0, duration_s);
+std::vector<sim::ScenarioRow> still(const math::Quat& truth, double duration_s,
+                                    const math::Vec3& bias = math::Vec3::Zero()) {
+    auto rows = testing::constant_rate(truth, math::Vec3::Zero(), 100.0, duration_s);
     for (auto& r : rows)
-        r.sample.gyro_rad_s = to_array(bias);
+        r.sample.gyro_rad_s = math::to_array(bias);
     return rows;
 }
 
 // CSMO started at the truth (its best case: the paper's observer has no initialiser).
 Csmo csmo_at_truth(const sim::Scenario& sc) {
     CsmoParams p;
-    const Quat q0 = sc.rows.front().q_earth_sensor;
+    const math::Quat q0 = sc.rows.front().q_earth_sensor;
     p.q0w = q0.w();
     p.q0x = q0.x();
     p.q0y = q0.y();
@@ -35,31 +36,32 @@ Csmo csmo_at_truth(const sim::Scenario& sc) {
 }
 
 TEST(MocapFilter, ClosedFormAttitudeFromAccelAndMag) {
-    const Quat truth = from_euler_zyx({0.3, -0.5, 2.5});
+    const math::Quat truth = math::from_euler_zyx({0.3, -0.5, 2.5});
     const ImuSample s = still(truth, 0.0).front().sample;
-    const Quat q = attitude_from_accel_mag(to_vec3(s.accel_m_s2), to_vec3(s.mag_ut), true);
-    EXPECT_LT(angle_rad(q * truth.conjugate()), 1e-9);
+    const math::Quat q = attitude_from_accel_mag(math::to_vec3(s.accel_m_s2), math::to_vec3(s.mag_ut), true);
+    EXPECT_LT(math::angle_rad(q * truth.conjugate()), 1e-9);
     // Without the magnetometer: same inclination, reached by a rotation about a horizontal
     // axis (no z component).
-    const Quat q6 = attitude_from_accel_mag(to_vec3(s.accel_m_s2), Vec3::Zero(), false);
-    EXPECT_LT(error_inclination_rad(q6 * truth.conjugate()), 1e-9);
+    const math::Quat q6 = attitude_from_accel_mag(math::to_vec3(s.accel_m_s2), math::Vec3::Zero(), false);
+    EXPECT_LT(math::error_inclination_rad(q6 * truth.conjugate()), 1e-9);
     EXPECT_LT(std::abs(q6.z()), 1e-12);
     // Upside down.
-    const Quat flipped = attitude_from_accel_mag(Vec3(0, 0, -9.81), Vec3::Zero(), false);
-    EXPECT_LT(std::abs(rotate(flipped, Vec3(0, 0, -1)).z() - 1.0), 1e-12);
+    const math::Quat flipped = attitude_from_accel_mag(math::Vec3(0, 0, -9.81), math::Vec3::Zero(), false);
+    EXPECT_LT(std::abs(math::rotate(flipped, math::Vec3(0, 0, -1)).z() - 1.0), 1e-12);
 }
 
 TEST(MocapFilter, FirstSampleGivesTheClosedFormAttitude) {
-    const Quat truth = from_euler_zyx({-0.4, 0.2, -2.2});
+    const math::Quat truth = math::from_euler_zyx({-0.4, 0.2, -2.2});
     MocapFilter f;
     f.update(still(truth, 0.0).front().sample);
-    EXPECT_LT(angle_rad(f.orientation() * truth.conjugate()) * kRadToDeg, 1e-6);
+    EXPECT_LT(math::angle_rad(f.orientation() * truth.conjugate()) * kRadToDeg, 1e-6);
 }
 
 TEST(MocapFilter, TracksNoiselessRotationAtSeveralRates) {
     // The coefficients follow the sample period measured on the timestamps.
     for (const double rate_hz : {50.0, 100.0, 286.0, 1000.0}) {
-        const auto rows = testing::constant_rate(from_euler_zyx({0.2, 0.1, 0.5}), Vec3(0.3, -0.5, 0.8), rate_hz, 20.0);
+        const auto rows =
+            testing::constant_rate(math::from_euler_zyx({0.2, 0.1, 0.5}), math::Vec3(0.3, -0.5, 0.8), rate_hz, 20.0);
         MocapFilter f;
         const testing::Rmse r = testing::run(f, rows, 0.0);
         EXPECT_LT(r.worst_deg, 0.2) << rate_hz;
@@ -70,8 +72,8 @@ TEST(MocapFilter, TracksNoiselessRotationAtSeveralRates) {
 TEST(MocapFilter, LearnsGyroBiasAtRest) {
     // Rest detection after 1.5 s; the rest measurement has σ = 0.03 °/s. After 30 s the
     // estimate is within 0.05 °/s per axis and the attitude has not drifted.
-    const Quat truth = from_euler_zyx({0.2, -0.1, 0.7});
-    const Vec3 bias(0.01, -0.02, 0.015);
+    const math::Quat truth = math::from_euler_zyx({0.2, -0.1, 0.7});
+    const math::Vec3 bias(0.01, -0.02, 0.015);
     MocapFilter f;
     const testing::Rmse r = testing::run(f, still(truth, 30.0, bias), 29.9);
     EXPECT_TRUE(f.state().rest_detected);
@@ -128,7 +130,7 @@ double worst_heading_deg(OrientationFilter& f, const sim::Scenario& sc, double t
         f.update(r.sample);
         const double t = static_cast<double>(r.sample.t_us) * 1e-6;
         if (t < t0_s || t > t1_s) continue;
-        worst = std::max(worst, error_heading_rad(f.orientation() * r.q_earth_sensor.conjugate()));
+        worst = std::max(worst, math::error_heading_rad(f.orientation() * r.q_earth_sensor.conjugate()));
     }
     return worst * kRadToDeg;
 }
@@ -176,16 +178,17 @@ TEST(MocapFilter, AcceptsAPersistentNewField) {
     // At t = 20 s the field changes for good (another room: heading of the field +30°,
     // norm +20 %, dip -12°) while the sensor keeps turning. The guard rejects it first, then
     // adopts it after mag_new_time_s of motion.
-    const Quat q0 = from_euler_zyx({0.2, 0.1, 0.0});
-    const Vec3 w(0.05, -0.05, 0.6);  // 35 °/s: enough motion for the new-field timer
-    const Vec3 new_field =
-        1.2 * 48.0 * (Eigen::AngleAxisd(0.5236, Vec3::UnitZ()) * field_direction_enu(48.0 * std::numbers::pi / 180.0));
+    const math::Quat q0 = math::from_euler_zyx({0.2, 0.1, 0.0});
+    const math::Vec3 w(0.05, -0.05, 0.6);  // 35 °/s: enough motion for the new-field timer
+    const math::Vec3 new_field =
+        1.2 * 48.0 *
+        (Eigen::AngleAxisd(0.5236, math::Vec3::UnitZ()) * field_direction_enu(48.0 * std::numbers::pi / 180.0));
     auto rows = testing::constant_rate(q0, w, 100.0, 80.0);
     MocapFilter f;
     bool rejected_after_change = false;
     for (auto& r : rows) {
         const double t = static_cast<double>(r.sample.t_us) * 1e-6;
-        if (t >= 20.0) r.sample.mag_ut = to_array(rotate(r.q_earth_sensor.conjugate(), new_field));
+        if (t >= 20.0) r.sample.mag_ut = math::to_array(math::rotate(r.q_earth_sensor.conjugate(), new_field));
         f.update(r.sample);
         if (t > 21.0 && t < 30.0 && f.mag_rejected()) rejected_after_change = true;
     }
@@ -194,7 +197,7 @@ TEST(MocapFilter, AcceptsAPersistentNewField) {
     EXPECT_FALSE(f.mag_rejected());
     // The heading now follows the new field (30° off the old truth, converging at tau_mag_s).
     const double heading_deg =
-        to_euler_zyx(f.orientation() * rows.back().q_earth_sensor.conjugate()).yaw_rad * kRadToDeg;
+        math::to_euler_zyx(f.orientation() * rows.back().q_earth_sensor.conjugate()).yaw_rad * kRadToDeg;
     EXPECT_NEAR(std::abs(heading_deg), 30.0, 6.0);
 }
 
@@ -211,13 +214,13 @@ TEST(MocapFilter, SamplesWithoutMagnetometerKeepInclination) {
 
 TEST(MocapFilter, ResetRestoresTheInitialState) {
     MocapFilter f;
-    testing::run(f, still(from_euler_zyx({0.1, 0.2, 0.3}), 5.0, Vec3(0.01, 0, 0)), 0.0);
+    testing::run(f, still(math::from_euler_zyx({0.1, 0.2, 0.3}), 5.0, math::Vec3(0.01, 0, 0)), 0.0);
     EXPECT_GT(f.state().samples, 0u);
     f.reset();
     EXPECT_EQ(f.state().samples, 0u);
     EXPECT_FALSE(f.state().initialised);
     EXPECT_EQ(f.gyro_bias_rad_s().norm(), 0.0);
-    EXPECT_LT(angle_rad(f.orientation()), 1e-12);
+    EXPECT_LT(math::angle_rad(f.orientation()), 1e-12);
     EXPECT_EQ(f.gaps(), 0u);
 }
 

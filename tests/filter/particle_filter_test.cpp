@@ -66,8 +66,8 @@ TEST(ParticleFilter, SameSeedSameOutputOtherSeedOtherOutput) {
 }
 
 TEST(ParticleFilter, InitialisesAroundTheFirstMeasurementNotUniformly) {
-    const Quat truth0 = quat_from_rotvec(Vec3(0.7, -0.3, 2.0));
-    const auto rows = testing::constant_rate(truth0, Vec3::Zero(), 100.0, 0.1);
+    const math::Quat truth0 = math::quat_from_rotvec(math::Vec3(0.7, -0.3, 2.0));
+    const auto rows = testing::constant_rate(truth0, math::Vec3::Zero(), 100.0, 0.1);
     ParticleFilter f;
     EXPECT_FALSE(f.state().initialised);
     f.update(rows[0].sample);
@@ -76,18 +76,18 @@ TEST(ParticleFilter, InitialisesAroundTheFirstMeasurementNotUniformly) {
     // The cloud's heading spread is init_heading, its tilt spread init_tilt (earth frame).
     double sum_h2 = 0, sum_t2 = 0;
     for (int i = 0; i < f.particle_count(); ++i) {
-        const Vec3 e = rotvec_from_quat(f.particle(i) * truth0.conjugate());
+        const math::Vec3 e = math::rotvec_from_quat(f.particle(i) * truth0.conjugate());
         sum_h2 += e.z() * e.z();
         sum_t2 += 0.5 * (e.x() * e.x() + e.y() * e.y());
     }
     EXPECT_NEAR(std::sqrt(sum_h2 / f.particle_count()), p.init_heading_rad, 0.2 * p.init_heading_rad);
     EXPECT_NEAR(std::sqrt(sum_t2 / f.particle_count()), p.init_tilt_rad, 0.2 * p.init_tilt_rad);
-    EXPECT_LT(angle_rad(f.orientation() * truth0.conjugate()), 0.05);
+    EXPECT_LT(math::angle_rad(f.orientation() * truth0.conjugate()), 0.05);
 }
 
 TEST(ParticleFilter, TracksNoiselessRotation) {
-    const Quat truth0 = quat_from_rotvec(Vec3(0.2, 0.4, -1.0));
-    const auto rows = testing::constant_rate(truth0, Vec3(0.5, -0.8, 1.5), 100.0, 20.0);
+    const math::Quat truth0 = math::quat_from_rotvec(math::Vec3(0.2, 0.4, -1.0));
+    const auto rows = testing::constant_rate(truth0, math::Vec3(0.5, -0.8, 1.5), 100.0, 20.0);
     ParticleFilter f;
     const testing::Rmse r = testing::run(f, rows, 2.0);
     EXPECT_LT(r.total_deg, 0.6);
@@ -163,13 +163,13 @@ TEST(ParticleFilter, BiasShrinkageAndJitterAndRegularisationMatter) {
 }
 
 TEST(ParticleFilter, GatesLinearAccelerationAndMissingMagnetometer) {
-    const auto rows = testing::constant_rate(Quat::Identity(), Vec3(0, 0, 0.3), 100.0, 1.0);
+    const auto rows = testing::constant_rate(math::Quat::Identity(), math::Vec3(0, 0, 0.3), 100.0, 1.0);
     ParticleFilter f;
     f.update(rows[0].sample);
     f.update(rows[1].sample);
     const std::uint64_t rejected = f.state().rejected_measurements;
     const double w0 = f.weight(0);
-    const double yaw0 = to_euler_zyx(f.orientation()).yaw_rad;
+    const double yaw0 = math::to_euler_zyx(f.orientation()).yaw_rad;
     ImuSample s = rows[2].sample;
     for (double& a : s.accel_m_s2)
         a *= 1.5;  // 0.5 g of linear acceleration
@@ -181,7 +181,7 @@ TEST(ParticleFilter, GatesLinearAccelerationAndMissingMagnetometer) {
     f.update(s);
     EXPECT_EQ(f.state().rejected_measurements, rejected + 2);
     // The gyro still propagated: 2 steps of 0.3 rad/s about z.
-    EXPECT_NEAR(to_euler_zyx(f.orientation()).yaw_rad - yaw0, 0.006, 0.001);
+    EXPECT_NEAR(math::to_euler_zyx(f.orientation()).yaw_rad - yaw0, 0.006, 0.001);
     s = rows[4].sample;
     s.gyro_rad_s = {std::nan(""), 0, 0};
     f.update(s);
@@ -189,7 +189,8 @@ TEST(ParticleFilter, GatesLinearAccelerationAndMissingMagnetometer) {
 }
 
 TEST(ParticleFilter, WaitsForAUsableFirstMeasurement) {
-    const auto rows = testing::constant_rate(quat_from_rotvec(Vec3(0, 0, 1.0)), Vec3::Zero(), 100.0, 0.1);
+    const auto rows =
+        testing::constant_rate(math::quat_from_rotvec(math::Vec3(0, 0, 1.0)), math::Vec3::Zero(), 100.0, 0.1);
     ParticleFilter f;
     ImuSample s = rows[0].sample;
     s.accel_m_s2 = {0, 0, 0};
@@ -197,7 +198,7 @@ TEST(ParticleFilter, WaitsForAUsableFirstMeasurement) {
     EXPECT_FALSE(f.state().initialised);
     f.update(rows[1].sample);
     EXPECT_TRUE(f.state().initialised);
-    EXPECT_LT(angle_rad(f.orientation() * rows[1].q_earth_sensor.conjugate()), 0.05);
+    EXPECT_LT(math::angle_rad(f.orientation() * rows[1].q_earth_sensor.conjugate()), 0.05);
 }
 
 TEST(ParticleFilter, UpdateDoesNotAllocate) {

@@ -31,18 +31,18 @@ inline Rmse run(OrientationFilter& f, const std::vector<sim::ScenarioRow>& rows,
     for (const sim::ScenarioRow& row : rows) {
         f.update(row.sample);
         const double t = static_cast<double>(row.sample.t_us) * 1e-6;
-        const Quat q = f.orientation();
-        const Quat e = q * row.q_earth_sensor.conjugate();
-        const double tot = error_total_rad(e) * kRadToDeg;
+        const math::Quat q = f.orientation();
+        const math::Quat e = q * row.q_earth_sensor.conjugate();
+        const double tot = math::error_total_rad(e) * kRadToDeg;
         if (tot > 10.0) r.last_above_10_s = t;
         if (t < skip_s) continue;
-        const EulerZyx a = to_euler_zyx(q), b = to_euler_zyx(row.q_earth_sensor);
+        const math::EulerZyx a = math::to_euler_zyx(q), b = math::to_euler_zyx(row.q_earth_sensor);
         st += tot * tot;
-        sh += std::pow(error_heading_rad(e) * kRadToDeg, 2);
-        si += std::pow(error_inclination_rad(e) * kRadToDeg, 2);
-        sr += std::pow(wrap_pi(a.roll_rad - b.roll_rad) * kRadToDeg, 2);
-        sp += std::pow(wrap_pi(a.pitch_rad - b.pitch_rad) * kRadToDeg, 2);
-        sy += std::pow(wrap_pi(a.yaw_rad - b.yaw_rad) * kRadToDeg, 2);
+        sh += std::pow(math::error_heading_rad(e) * kRadToDeg, 2);
+        si += std::pow(math::error_inclination_rad(e) * kRadToDeg, 2);
+        sr += std::pow(math::wrap_pi(a.roll_rad - b.roll_rad) * kRadToDeg, 2);
+        sp += std::pow(math::wrap_pi(a.pitch_rad - b.pitch_rad) * kRadToDeg, 2);
+        sy += std::pow(math::wrap_pi(a.yaw_rad - b.yaw_rad) * kRadToDeg, 2);
         r.worst_deg = std::max(r.worst_deg, tot);
         ++r.samples;
     }
@@ -57,24 +57,24 @@ inline Rmse run(OrientationFilter& f, const std::vector<sim::ScenarioRow>& rows,
 }
 
 /// Noiseless constant body rate from q0 at rate_hz for duration_s; dip 60°.
-inline std::vector<sim::ScenarioRow> constant_rate(const Quat& q0, const Vec3& w_rad_s, double rate_hz,
+inline std::vector<sim::ScenarioRow> constant_rate(const math::Quat& q0, const math::Vec3& w_rad_s, double rate_hz,
                                                    double duration_s) {
     std::vector<sim::ScenarioRow> rows;
     const double dt = 1.0 / rate_hz;
-    const Vec3 g(0, 0, 9.81), h = 48.0 * field_direction_enu(60.0 * std::numbers::pi / 180.0);
-    Quat q = q0;
+    const math::Vec3 g(0, 0, 9.81), h = 48.0 * field_direction_enu(60.0 * std::numbers::pi / 180.0);
+    math::Quat q = q0;
     const int n = static_cast<int>(duration_s * rate_hz);
     for (int k = 0; k <= n; ++k) {
-        if (k > 0) q = (q * quat_from_rotvec(w_rad_s * dt)).normalized();
+        if (k > 0) q = (q * math::quat_from_rotvec(w_rad_s * dt)).normalized();
         sim::ScenarioRow r;
         r.sample.t_us = static_cast<std::int64_t>(std::llround(k * dt * 1e6));
-        r.sample.gyro_rad_s = to_array(w_rad_s);
-        r.sample.accel_m_s2 = to_array(rotate(q.conjugate(), g));
-        r.sample.mag_ut = to_array(rotate(q.conjugate(), h));
+        r.sample.gyro_rad_s = math::to_array(w_rad_s);
+        r.sample.accel_m_s2 = math::to_array(math::rotate(q.conjugate(), g));
+        r.sample.mag_ut = math::to_array(math::rotate(q.conjugate(), h));
         r.q_earth_sensor = q;
         r.moving = true;
         r.gyro_true_rad_s = w_rad_s;
-        r.lin_acc_earth_m_s2 = Vec3::Zero();
+        r.lin_acc_earth_m_s2 = math::Vec3::Zero();
         r.mag_earth_ut = h;
         rows.push_back(r);
     }
@@ -83,11 +83,11 @@ inline std::vector<sim::ScenarioRow> constant_rate(const Quat& q0, const Vec3& w
 
 /// The fourati scenario's truth starts at the paper's q(0) = identity in NED, which is
 /// q_enu_ned() here; the paper's far-off initial estimate maps the same way.
-inline Quat fourati_start_truth() {
-    return q_enu_ned();
+inline math::Quat fourati_start_truth() {
+    return math::q_enu_ned();
 }
-inline Quat fourati_paper_initial_estimate() {
-    return q_enu_ned() * Quat(0.2, 0.5, 0.7, 0.3).normalized();
+inline math::Quat fourati_paper_initial_estimate() {
+    return math::q_enu_ned() * math::Quat(0.2, 0.5, 0.7, 0.3).normalized();
 }
 
 }  // namespace mocap::filter::testing

@@ -10,15 +10,15 @@
 #include <sstream>
 #include <thread>
 
-#include "filter/quaternion.hpp"
 #include "harness.hpp"
+#include "math/quaternion.hpp"
 #include "pose_client.hpp"
 
 namespace mocap::itest {
 namespace {
 
 using namespace std::chrono_literals;
-using filter::Quat;
+using math::Quat;
 
 constexpr const char* kToken = "it-s3cret";
 constexpr int kRateHz = 100;
@@ -189,8 +189,8 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
     // With heading "earth" and a given facing of 0, the output equals the truth turned by the
     // subject's own facing ψ during calibration: q_out ⊗ Rz(ψ) = q_true. ψ from the truth.
     const Quat pelvis0 = truth.begin()->second;
-    const double psi = filter::to_euler_zyx(pelvis0).yaw_rad;
-    const Quat rz_psi(Eigen::AngleAxisd(psi, filter::Vec3::UnitZ()));
+    const double psi = math::to_euler_zyx(pelvis0).yaw_rad;
+    const Quat rz_psi(Eigen::AngleAxisd(psi, math::Vec3::UnitZ()));
 
     std::vector<double> err_deg;
     std::size_t calibrated_frames = 0, motion_frames = 0, stale = 0;
@@ -209,7 +209,7 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
             const auto it = truth.find({1, counter_of(f), names[static_cast<std::size_t>(i)]});
             if (it == truth.end()) continue;
             const Quat q_err = segment_q(f, i) * rz_psi * it->second.conjugate();
-            err_deg.push_back(filter::error_total_rad(q_err) * 180.0 / std::numbers::pi);
+            err_deg.push_back(math::error_total_rad(q_err) * 180.0 / std::numbers::pi);
         }
     }
     ASSERT_GT(calibrated_frames, 0u) << "calibration never applied";

@@ -22,7 +22,7 @@ Quat random_quat(std::mt19937& rng) {
 /// A small random rotation with sigma_rad per axis.
 Quat noise(std::mt19937& rng, double sigma_rad) {
     std::normal_distribution<double> n(0.0, sigma_rad);
-    return filter::quat_from_rotvec(Vec3(n(rng), n(rng), n(rng)));
+    return math::quat_from_rotvec(Vec3(n(rng), n(rng), n(rng)));
 }
 
 Quat rz(double a) {

@@ -1,11 +1,11 @@
-#include "filter/markley_average.hpp"
+#include "math/markley_average.hpp"
 
 #include <gtest/gtest.h>
 
 #include <random>
 #include <vector>
 
-namespace mocap::filter {
+namespace mocap::math {
 namespace {
 
 Quat random_quat(std::mt19937& rng) {
@@ -221,4 +221,4 @@ TEST(MarkleyAverage, PowerIterationHandlesNegativeSemidefiniteMatrixForm) {
 }
 
 }  // namespace
-}  // namespace mocap::filter
+}  // namespace mocap::math

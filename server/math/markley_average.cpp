@@ -1,4 +1,4 @@
-#include "filter/markley_average.hpp"
+#include "math/markley_average.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
@@ -6,7 +6,7 @@
 #include <cassert>
 #include <cmath>
 
-namespace mocap::filter {
+namespace mocap::math {
 
 Mat43 xi_matrix(const Quat& q) {
     Mat43 xi;
@@ -154,4 +154,4 @@ Mat3 average_covariance_approx(std::span<const Mat3> info) {
     return sum.inverse();
 }
 
-}  // namespace mocap::filter
+}  // namespace mocap::math

@@ -1,4 +1,4 @@
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <numbers>
 #include <random>
 
-namespace mocap::filter {
+namespace mocap::math {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
@@ -133,4 +133,4 @@ TEST(Quaternion, WrapPiAndSkew) {
 }
 
 }  // namespace
-}  // namespace mocap::filter
+}  // namespace mocap::math

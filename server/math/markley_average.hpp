@@ -21,9 +21,9 @@
 #include <Eigen/Core>
 #include <span>
 
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
-namespace mocap::filter {
+namespace mocap::math {
 
 using Mat4 = Eigen::Matrix4d;
 using Mat43 = Eigen::Matrix<double, 4, 3>;
@@ -114,4 +114,4 @@ Mat3 average_covariance(std::span<const Quat> qs, std::span<const Mat3> info);
 /// Small-spread approximation (eq. 39): P ≈ (Σ R_i⁻¹)⁻¹.
 Mat3 average_covariance_approx(std::span<const Mat3> info);
 
-}  // namespace mocap::filter
+}  // namespace mocap::math

@@ -1,10 +1,10 @@
-#include "filter/quaternion.hpp"
+#include "math/quaternion.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 
-namespace mocap::filter {
+namespace mocap::math {
 
 Quat canonical(const Quat& q) {
     return q.w() < 0.0 ? Quat(-q.w(), -q.x(), -q.y(), -q.z()) : q;
@@ -116,4 +116,4 @@ Mat3 skew(const Vec3& v) {
     return m;
 }
 
-}  // namespace mocap::filter
+}  // namespace mocap::math

@@ -11,7 +11,7 @@
 
 #include "core/imu_sample.hpp"
 
-namespace mocap::filter {
+namespace mocap::math {
 
 using Quat = Eigen::Quaterniond;
 using Vec3 = Eigen::Vector3d;
@@ -95,4 +95,4 @@ Quat q_enu_ned();
 /// Skew-symmetric matrix [v]x with [v]x w = v × w.
 Mat3 skew(const Vec3& v);
 
-}  // namespace mocap::filter
+}  // namespace mocap::math
