@@ -288,4 +288,8 @@ std::vector<FilterKey> filter_keys(std::string_view name) {
     return out;
 }
 
+std::uint32_t filter_cost_weight(std::string_view name) {
+    return name == "pf" ? 20 : 1;
+}
+
 }  // namespace mocap::filter

@@ -11,6 +11,7 @@
 // only at start-up.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -41,5 +42,10 @@ struct FilterKey {
 
 /// The parameters of filter `name` (empty for an unknown name).
 std::vector<FilterKey> filter_keys(std::string_view name);
+
+/// Relative cost of one update of filter `name`, for balancing a worker pool by work rather
+/// than by segment count: 20 for the particle filter ("pf", tens of times a complementary
+/// filter), 1 for every other name (unknown names too).
+std::uint32_t filter_cost_weight(std::string_view name);
 
 }  // namespace mocap::filter

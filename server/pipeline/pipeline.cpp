@@ -45,9 +45,8 @@ bool Pipeline::build(std::string* error) {
                 *error = "filter for segment " + seg.name + ": " + *error;
                 return false;
             }
-            // A particle filter costs tens of times a complementary filter: weigh it so
-            // the pool balances work, not segment counts.
-            const std::uint32_t weight = seg.filter == "pf" ? 20 : 1;
+            // Weighed so the pool balances work, not segment counts.
+            const std::uint32_t weight = filter::filter_cost_weight(seg.filter);
             processors_.push_back(std::make_unique<FilterProcessor>(std::move(f)));
             pool_->add_segment(id, static_cast<std::uint16_t>(i), *processors_.back(), weight);
         }

@@ -136,5 +136,13 @@ TEST(FilterFactory, UnknownNameHasNoKeys) {
     EXPECT_TRUE(filter_keys("nope").empty());
 }
 
+TEST(FilterFactory, CostWeightSetsTheParticleFilterApart) {
+    EXPECT_EQ(filter_cost_weight("pf"), 20u);
+    for (std::string_view name : filter_names()) {
+        if (name != "pf") EXPECT_EQ(filter_cost_weight(name), 1u) << name;
+    }
+    EXPECT_EQ(filter_cost_weight("nope"), 1u) << "an unknown name weighs as a plain filter";
+}
+
 }  // namespace
 }  // namespace mocap::filter
