@@ -76,7 +76,7 @@ std::size_t count_lines(const std::string& s) {
 }
 
 // First data row of t,qw,qx,qy,qz output.
-math::Quat first_quat(const std::string& csv) {
+mocap::math::Quat first_quat(const std::string& csv) {
     std::istringstream in(csv);
     std::string line;
     std::getline(in, line);
@@ -85,7 +85,7 @@ math::Quat first_quat(const std::string& csv) {
     char c;
     std::istringstream row(line);
     row >> t >> c >> w >> c >> x >> c >> y >> c >> z;
-    return math::Quat(w, x, y, z);
+    return mocap::math::Quat(w, x, y, z);
 }
 
 TEST_F(ToolsEndToEnd, SimWritesTheContractFileDeterministically) {
@@ -146,7 +146,7 @@ TEST_F(ToolsEndToEnd, NedFrameGivesTheSameTotalErrorAndNedOutput) {
     // The NED output is q_enu_ned ⊗ the ENU output.
     const auto q_enu = first_quat(slurp(path("a.csv")));
     const auto q_ned = first_quat(slurp(path("b.csv")));
-    EXPECT_LT(math::angle_rad(q_ned * math::conj(math::q_enu_ned() * q_enu)), 1e-6);
+    EXPECT_LT(mocap::math::angle_rad(q_ned * mocap::math::conj(mocap::math::q_enu_ned() * q_enu)), 1e-6);
     // The fourati truth starts on NED's axes: the NED file's first reference is identity.
     std::ifstream in(ned_in);
     std::string header, row;
@@ -158,7 +158,7 @@ TEST_F(ToolsEndToEnd, NedFrameGivesTheSameTotalErrorAndNedOutput) {
     for (double& x : v)
         fields >> x;
     ASSERT_TRUE(fields) << row;
-    EXPECT_LT(math::angle_rad(math::Quat(v[10], v[11], v[12], v[13])), 1e-9) << row;
+    EXPECT_LT(mocap::math::angle_rad(mocap::math::Quat(v[10], v[11], v[12], v[13])), 1e-9) << row;
 }
 
 TEST_F(ToolsEndToEnd, MalformedInputIsRejectedWithTheLine) {

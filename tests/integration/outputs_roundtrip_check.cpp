@@ -170,7 +170,7 @@ int main(int argc, char** argv) {
     std::vector<Quat> offsets;
     for (const auto& p : pairs)
         offsets.push_back(p.q_bvh * p.q_truth.conjugate());
-    const Quat mean = math::average_quaternions(offsets);
+    const Quat mean = mocap::math::average_quaternions(offsets);
     const Quat yaw = Quat(mean.w(), 0, 0, mean.z()).normalized();
     std::vector<double> err_all, err_nofit, err_kept;
     std::map<std::size_t, std::pair<double, std::size_t>> per_joint;
