@@ -4,7 +4,7 @@
 // Adding an output: a class implementing pipeline::Output (here, or in serve/ when the
 // server class itself implements it), a config section read by its factory, and one line
 // in the registry table (outputs.cpp). The daemon and replay create outputs only through
-// make_outputs(), so neither changes.
+// add_outputs(), so neither changes.
 #pragma once
 
 #include <functional>
