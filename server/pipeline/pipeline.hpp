@@ -87,7 +87,7 @@ public:
     /// Ingest thread only. Feeds the sample-outputs, then routes it to its segment's worker
     /// without waking it. True when the sample was queued: the caller calls wake_workers()
     /// once after the batch (one wake-up per worker, not one per sample).
-    bool route(const SegmentSample& sample);
+    bool route(const SegmentSample& in);
     /// Ingest thread only.
     void wake_workers() { pool_->wake_workers(); }
     /// The assembler thread: drains the workers, assembles, solves and publishes until
@@ -103,7 +103,7 @@ public:
     // --- synchronous ---
     /// Routes, filters and assembles one sample at now_us (the caller's clock, never
     /// decreasing). Outputs receive frames from inside this call.
-    RouteResult process(const SegmentSample& sample, std::int64_t now_us);
+    RouteResult process(const SegmentSample& in, std::int64_t now_us);
     /// Emits every open instant.
     void flush(std::int64_t now_us) { assemblers_->flush(now_us); }
 
@@ -132,7 +132,7 @@ public:
 private:
     Pipeline(PipelineConfig config, const Clock& clock);
     bool build(std::string* error);
-    void note_sample(const SegmentSample& sample);
+    void note_sample(const SegmentSample& in);
     void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     PipelineConfig config_;
