@@ -1,8 +1,15 @@
 #include "daemon/config.hpp"
 
+#include <arpa/inet.h>
+#include <net/if.h>
 #include <toml++/toml.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -68,6 +75,21 @@ public:
         }
     }
 
+    // 0 switches the feature off; any other value must lie in lo..hi (a tiny period or size
+    // is never what an operator means: raw_rotate_s = 0.001 made hundreds of files a second).
+    void read_zero_or(std::string_view key, double& out, double lo, double hi) {
+        if (const auto* n = take(key)) {
+            if (!n->is_number()) fail(key, n, "expected a number");
+            const double v = number_of(*n);
+            if (!std::isfinite(v) || (v != 0.0 && (v < lo || v > hi))) {
+                std::ostringstream s;
+                s << "must be 0 (off) or between " << lo << " and " << hi;
+                fail(key, n, s.str());
+            }
+            out = v;
+        }
+    }
+
     template <typename U>
     void read(std::string_view key, U& out, std::int64_t lo, std::int64_t hi) {
         if (const auto* n = take(key)) {
@@ -122,7 +144,7 @@ void read_log(TableReader& r, DaemonConfig& c) {
     if (!levels.count(c.log_level)) {
         r.fail("level", r.take("level"), "must be one of trace, debug, info, warn, error, off");
     }
-    r.read("stats_interval_s", c.stats_interval_s, 0.0, 86400.0);
+    r.read_zero_or("stats_interval_s", c.stats_interval_s, 0.1, 86400.0);
 }
 
 void read_ingest(TableReader& r, DaemonConfig& c) {
@@ -276,6 +298,20 @@ void read_serve(TableReader& r, DaemonConfig& c) {
 
 void read_control(TableReader& r, DaemonConfig& c) {
     r.read("token", c.control_token);
+    // A token pasted with a stray space or newline, or made of blanks only, would either never
+    // match what a client sends or look set while being trivially guessable: refuse both.
+    const std::string& t = c.control_token;
+    if (!t.empty()) {
+        const bool blank_edge = std::isspace(static_cast<unsigned char>(t.front())) != 0 ||
+                                std::isspace(static_cast<unsigned char>(t.back())) != 0;
+        const bool control_char =
+            std::any_of(t.begin(), t.end(), [](char ch) { return std::iscntrl(static_cast<unsigned char>(ch)) != 0; });
+        if (blank_edge || control_char) {
+            r.fail("token", r.take("token"),
+                   "must not be blank, start or end with whitespace, or contain control characters "
+                   "(\"\" disables control)");
+        }
+    }
     if (const auto* n = r.take("loopback_only")) {
         if (!n->is_boolean()) r.fail("loopback_only", n, "expected true or false");
         c.control_loopback_only = n->value<bool>().value();
@@ -317,8 +353,8 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
         if (!n->is_boolean()) r.fail("raw_record", n, "expected true or false");
         c.raw_record = n->value<bool>().value();
     }
-    r.read("raw_rotate_mb", c.raw_rotate_mb, 0.0, 1e6);
-    r.read("raw_rotate_s", c.raw_rotate_s, 0.0, 1e7);
+    r.read_zero_or("raw_rotate_mb", c.raw_rotate_mb, 1.0, 1e6);
+    r.read_zero_or("raw_rotate_s", c.raw_rotate_s, 10.0, 1e7);
     r.read("raw_ring_capacity", c.raw_ring_capacity, 16, 1 << 24);
     if ((c.raw_ring_capacity & (c.raw_ring_capacity - 1)) != 0) {
         r.fail("raw_ring_capacity", r.take("raw_ring_capacity"), "must be a power of two");
@@ -333,6 +369,29 @@ void read_http(TableReader& r, DaemonConfig& c) {
     r.read("listen", c.http_listen);
     r.read("max_clients", c.http_max_clients, 1, 10000);
     r.read("ws_queue_frames", c.http_ws_queue_frames, 1, 4096);
+}
+
+// An IPv4 or IPv6 literal, as make_address accepts it (an IPv6 link-local address may carry
+// "%interface", which must name an interface of this host).
+bool is_address_literal(const std::string& host) {
+    std::array<unsigned char, sizeof(in6_addr)> buf{};
+    if (inet_pton(AF_INET, host.c_str(), buf.data()) == 1) return true;
+    const auto percent = host.find('%');
+    const std::string addr = host.substr(0, percent);
+    if (inet_pton(AF_INET6, addr.c_str(), buf.data()) != 1) return false;
+    return percent == std::string::npos || if_nametoindex(host.substr(percent + 1).c_str()) != 0;
+}
+
+// True when the text holds something other than blanks and comment lines: an empty config
+// file is far more likely a truncated or mistyped one than a request for every default
+// (which would bind every interface).
+bool has_settings(std::string_view text) {
+    std::istringstream in{std::string(text)};
+    for (std::string line; std::getline(in, line);) {
+        const auto first = line.find_first_not_of(" \t\r\f\v");
+        if (first != std::string::npos && line[first] != '#') return true;
+    }
+    return false;
 }
 
 }  // namespace
@@ -365,6 +424,12 @@ std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error
     const auto [end, ec] = std::from_chars(port_part.data(), port_part.data() + port_part.size(), port);
     if (ec != std::errc{} || end != port_part.data() + port_part.size() || port == 0 || port > 65535) {
         *error = "port must be 1..65535";
+        return std::nullopt;
+    }
+    // The listeners bind with asio::ip::make_address, which takes address literals only: a
+    // host name would pass here and fail at start-up, so it is refused here.
+    if (!is_address_literal(ep.host)) {
+        *error = "host \"" + ep.host + "\" must be an IPv4 or IPv6 address (names are not resolved)";
         return std::nullopt;
     }
     ep.port = static_cast<std::uint16_t>(port);
@@ -402,6 +467,19 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
 }
 
 std::optional<DaemonConfig> load_config_file(const std::string& path, std::string* error) {
+    // A directory opens fine with ifstream and reads as empty; a FIFO would block the open.
+    // Both are refused before opening, by what stat says the path is.
+    std::error_code ec;
+    const auto st = std::filesystem::status(path, ec);
+    if (ec) {
+        *error = path + ": cannot open for reading: " + ec.message();
+        return std::nullopt;
+    }
+    if (!std::filesystem::is_regular_file(st)) {
+        *error = path + ": not a regular file" + (std::filesystem::is_directory(st) ? " (a directory)" : "") +
+                 "; --config takes a TOML file";
+        return std::nullopt;
+    }
     std::ifstream in(path, std::ios::binary);
     if (!in) {
         *error = path + ": cannot open for reading";
@@ -409,6 +487,12 @@ std::optional<DaemonConfig> load_config_file(const std::string& path, std::strin
     }
     std::ostringstream s;
     s << in.rdbuf();
+    if (!has_settings(s.str())) {
+        *error = path +
+                 ": the file has no settings (empty or comments only); mocapd --print-default-config "
+                 "writes a complete one";
+        return std::nullopt;
+    }
     return parse_config(s.str(), path, error);
 }
 

@@ -16,7 +16,8 @@
 
 namespace mocap::daemon {
 
-/// "host:port" split and checked (port 1..65535; host may be an IPv4/IPv6 literal or name).
+/// "host:port" split and checked (port 1..65535; host an IPv4/IPv6 literal: the listeners do
+/// not resolve names).
 struct Endpoint {
     std::string host;
     std::uint16_t port = 0;
@@ -110,7 +111,10 @@ std::string_view embedded_default_config();
 /// "<source_name>:<line>: <key>: <message>". Never throws.
 std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name, std::string* error);
 
-/// Reads a file and parses it (errors as above; an unreadable file names the path).
+/// Reads a file and parses it (errors as above; an unreadable file names the path). A path
+/// that is not a regular file (a directory, a FIFO) and a file with no settings (empty,
+/// blanks or comments only) are refused. What the text alone cannot show (filters, ports
+/// shared by two listeners, directories) is checked by check_config (daemon/config_check.hpp).
 std::optional<DaemonConfig> load_config_file(const std::string& path, std::string* error);
 
 /// Parses "host:port" or "[v6]:port".

@@ -5,6 +5,8 @@
 
 #include <chrono>
 
+#include "daemon/config_check.hpp"
+
 namespace mocap::daemon {
 
 Daemon::Daemon(DaemonConfig config, std::string config_path)
@@ -144,7 +146,7 @@ void Daemon::reload() {
         return;
     }
     std::string err;
-    auto next = load_config_file(config_path_, &err);
+    auto next = load_checked_config(config_path_, &err);
     if (!next) {
         spdlog::error("reload: keeping the running config: {}", err);
         return;

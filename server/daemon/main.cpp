@@ -8,6 +8,7 @@
 
 #include "core/guarded_main.hpp"
 #include "daemon/config.hpp"
+#include "daemon/config_check.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/replay.hpp"
 
@@ -60,9 +61,9 @@ static int run(int argc, char** argv) {
         return 0;
     }
     std::string error;
+    // --check-config, start-up and reload (Daemon::reload) share one validation path.
     if (!check_path.empty()) {
-        auto c = load_config_file(check_path, &error);
-        if (c && !body_model_from_config(*c, &error)) c.reset();
+        const auto c = load_checked_config(check_path, &error);
         if (!c) {
             std::cerr << "mocapd: invalid config: " << error << "\n";
             return 1;
@@ -70,10 +71,9 @@ static int run(int argc, char** argv) {
         std::cout << check_path << ": valid\n";
         return 0;
     }
-    auto config = config_path.empty() ? parse_config(embedded_default_config(), "<embedded mocapd.toml>", &error)
-                                      : load_config_file(config_path, &error);
+    auto config = load_checked_config(config_path, &error);
     if (!config) {
-        std::cerr << "mocapd: " << error << "\n";
+        std::cerr << "mocapd: invalid config: " << error << "\n";
         return 1;
     }
     spdlog::set_level(spdlog::level::from_str(config->log_level));

@@ -260,3 +260,183 @@ TEST(Config, HttpSectionDefaultsValuesAndErrors) {
 
 }  // namespace
 }  // namespace mocap::daemon
+
+// ---- the one validation path of --check-config, start-up and reload (daemon/config_check.hpp)
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "daemon/config_check.hpp"
+
+namespace mocap::daemon {
+namespace {
+
+/// A scratch directory for config files, removed at the end of the test.
+class ConfigCheck : public ::testing::Test {
+protected:
+    void SetUp() override {
+        char tmpl[] = "/tmp/mocap_config_check_XXXXXX";
+        ASSERT_NE(::mkdtemp(tmpl), nullptr);
+        dir_ = tmpl;
+    }
+    void TearDown() override { std::filesystem::remove_all(dir_); }
+
+    std::string write(const std::string& name, const std::string& text) const {
+        const auto path = (dir_ / name).string();
+        std::ofstream(path) << text;
+        return path;
+    }
+
+    /// The error of loading and checking `text` as a file ("" = accepted).
+    std::string refusal(const std::string& text) const {
+        std::string err;
+        return load_checked_config(write("c.toml", text), &err) ? "" : err;
+    }
+
+    std::filesystem::path dir_;
+};
+
+// Each refusal names the file and the key an operator has to fix.
+#define EXPECT_REFUSED(text, needle)                                                        \
+    do {                                                                                    \
+        const std::string e_ = refusal(text);                                               \
+        EXPECT_NE(e_.find(needle), std::string::npos) << "error: \"" << e_ << "\"";         \
+        EXPECT_EQ(e_.rfind((dir_ / "c.toml").string(), 0), 0u) << "names the file: " << e_; \
+    } while (0)
+
+TEST_F(ConfigCheck, EmbeddedDefaultAndShippedConfigsPass) {
+    std::string err;
+    EXPECT_TRUE(load_checked_config("", &err)) << err;
+    std::size_t files = 0;
+    for (const char* dir : {"/config", "/tests/fuzz/corpus/config"}) {
+        for (const auto& e : std::filesystem::directory_iterator(std::string(MOCAP_SOURCE_DIR) + dir)) {
+            if (e.path().extension() != ".toml") continue;
+            ++files;
+            EXPECT_TRUE(load_checked_config(e.path().string(), &err)) << err;
+        }
+    }
+    EXPECT_GE(files, 3u) << "config/mocapd.toml and the fuzz corpus's two written configs";
+}
+
+TEST_F(ConfigCheck, DirectoryIsRefused) {
+    std::string err;
+    EXPECT_FALSE(load_checked_config(dir_.string(), &err));
+    EXPECT_NE(err.find("not a regular file (a directory)"), std::string::npos) << err;
+}
+
+TEST_F(ConfigCheck, EmptyBlankAndCommentOnlyFilesAreRefused) {
+    for (const char* text : {"", "  \n\t\n", "# only a comment\n\n   # another\n"}) {
+        const std::string e = refusal(text);
+        EXPECT_NE(e.find("has no settings"), std::string::npos) << "\"" << text << "\": " << e;
+    }
+    EXPECT_EQ(refusal("[log]\nlevel = \"info\"\n"), "") << "one setting is enough";
+}
+
+TEST_F(ConfigCheck, UnknownFilterNameIsRefused) {
+    EXPECT_REFUSED("[filter]\nname = \"kalman\"\n", "filter.name: unknown filter \"kalman\"");
+}
+
+TEST_F(ConfigCheck, UnknownFilterInASegmentIsRefused) {
+    EXPECT_REFUSED(
+        "[[skeleton.segment]]\nname = \"pelvis\"\nnode = 1\nend_m = [0.0, 0.2, 0.0]\n"
+        "[[skeleton.segment]]\nname = \"torso\"\nparent = \"pelvis\"\nnode = 2\noffset_m = [0.0, 0.2, 0.0]\n"
+        "end_m = [0.0, 0.3, 0.0]\nfilter = \"kalmann\"\n",
+        "skeleton.segment[1].filter: unknown filter \"kalmann\"");
+}
+
+TEST_F(ConfigCheck, UnknownFilterParameterIsRefused) {
+    EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { gamma = 0.1 }\n",
+                   "filter.params.gamma: filter \"madgwick\" has no parameter \"gamma\"");
+}
+
+TEST_F(ConfigCheck, IllTypedFilterParameterIsRefused) {
+    EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { beta = \"abc\" }\n",
+                   "filter.params.beta: parameter \"beta\" of filter \"madgwick\": cannot parse \"abc\"");
+    EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { beta = true }\n", "filter.params.beta:");
+}
+
+TEST_F(ConfigCheck, ParameterThatASegmentsFilterDoesNotKnowIsRefused) {
+    // [filter.params] apply to every segment's filter: a segment overriding the filter must
+    // know them too (start-up built it and failed).
+    EXPECT_REFUSED(
+        "[filter]\nname = \"madgwick\"\nparams = { beta = 0.05 }\n"
+        "[[skeleton.segment]]\nname = \"pelvis\"\nnode = 1\nend_m = [0.0, 0.2, 0.0]\nfilter = \"mahony\"\n",
+        "filter.params.beta: filter \"mahony\" has no parameter \"beta\" (used by skeleton.segment[0].filter)");
+}
+
+TEST_F(ConfigCheck, HostNameIsRefused) {
+    EXPECT_REFUSED("[serve]\npose_listen = \"no-such-host.invalid:7001\"\n",
+                   "serve.pose_listen: host \"no-such-host.invalid\" must be an IPv4 or IPv6 address");
+    EXPECT_REFUSED("[ingest]\nsink_listen = \"localhost:7000\"\n", "ingest.sink_listen: host \"localhost\"");
+    EXPECT_REFUSED("[http]\nlisten = \"[fe80::1%no-such-if0]:8080\"\n", "http.listen: host");
+    EXPECT_EQ(refusal("[http]\nlisten = \"[::1]:8080\"\n"), "");
+}
+
+TEST_F(ConfigCheck, TwoListenersOnOnePortAreRefused) {
+    EXPECT_REFUSED("[serve]\npose_listen = \"127.0.0.1:7000\"\n",
+                   "serve.pose_listen: 127.0.0.1:7000 collides with ingest.sink_listen (0.0.0.0:7000)");
+    EXPECT_REFUSED("[http]\nlisten = \"0.0.0.0:7002\"\n", "http.listen: 0.0.0.0:7002 collides with outputs.bvh_listen");
+    // Distinct addresses may share a port, and a listener that is off takes no port.
+    EXPECT_EQ(refusal("[ingest]\nsink_listen = \"127.0.0.1:7000\"\n[serve]\npose_listen = \"127.0.0.2:7000\"\n"
+                      "[outputs]\nbvh_listen = \"127.0.0.1:7009\"\n[http]\nlisten = \"127.0.0.1:7009\"\n"
+                      "enabled = false\n"),
+              "");
+}
+
+TEST_F(ConfigCheck, RawRecordIntoAMissingDirectoryIsRefused) {
+    const std::string missing = (dir_ / "gone").string();
+    EXPECT_REFUSED("[outputs]\nraw_record = true\nrecord_dir = \"" + missing + "\"\n",
+                   "outputs.record_dir: \"" + missing + "\" is not a directory");
+    EXPECT_EQ(refusal("[outputs]\nraw_record = false\nrecord_dir = \"" + missing + "\"\n"), "")
+        << "not recording from start: the directory is only needed by a later record request";
+    EXPECT_EQ(refusal("[outputs]\nraw_record = true\nrecord_dir = \"" + dir_.string() + "\"\n"), "");
+}
+
+TEST_F(ConfigCheck, RawRotationBelowTenSecondsOrOneMiBIsRefused) {
+    EXPECT_REFUSED("[outputs]\nraw_rotate_s = 0.001\n",
+                   "c.toml:2: outputs.raw_rotate_s: must be 0 (off) or between 10");
+    EXPECT_REFUSED("[outputs]\nraw_rotate_mb = 0.001\n", "outputs.raw_rotate_mb: must be 0 (off) or between 1 ");
+    EXPECT_EQ(refusal("[outputs]\nraw_rotate_s = 0\nraw_rotate_mb = 0\n"), "") << "0 = never";
+    EXPECT_EQ(refusal("[outputs]\nraw_rotate_s = 10\nraw_rotate_mb = 1\n"), "");
+}
+
+TEST_F(ConfigCheck, BvhSubjectMustBeAConfiguredSubject) {
+    EXPECT_REFUSED("[outputs]\nbvh_subject = 65000\n", "outputs.bvh_subject: 65000 is not a configured subject");
+    EXPECT_REFUSED("[pipeline]\nmax_subjects = 4\n[outputs]\nbvh_subject = 5\n", "outputs.bvh_subject: 5");
+    EXPECT_EQ(refusal("[pipeline]\nmax_subjects = 4\n[outputs]\nbvh_subject = 4\n"), "");
+    EXPECT_EQ(refusal("[ingest]\n[[ingest.socketcan]]\ninterface = \"vcan0\"\nsubject = 200\n"
+                      "[outputs]\nbvh_subject = 200\n"),
+              "")
+        << "a SocketCAN subject above max_subjects is configured too";
+}
+
+TEST_F(ConfigCheck, BlankOrPaddedTokenIsRefused) {
+    for (const char* token : {" ", "   \t", " secret-token-123", "secret-token-123\n", "secret\x01token"}) {
+        std::string text = "[control]\ntoken = \"";
+        for (const char ch : std::string(token)) {
+            if (ch == '\n') {
+                text += "\\n";
+            } else if (ch == '\t') {
+                text += "\\t";
+            } else if (ch == '\x01') {
+                text += "\\u0001";
+            } else {
+                text += ch;
+            }
+        }
+        text += "\"\n";
+        EXPECT_REFUSED(text, "c.toml:2: control.token: must not be blank");
+    }
+    EXPECT_EQ(refusal("[control]\ntoken = \"\"\n"), "") << "empty = control disabled";
+    EXPECT_EQ(refusal("[control]\ntoken = \"a token with inner spaces\"\n"), "");
+}
+
+TEST_F(ConfigCheck, StatsIntervalBelowATenthOfASecondIsRefused) {
+    EXPECT_REFUSED("[log]\nstats_interval_s = 0.001\n", "log.stats_interval_s: must be 0 (off) or between 0.1");
+    EXPECT_EQ(refusal("[log]\nstats_interval_s = 0\n"), "");
+}
+
+}  // namespace
+}  // namespace mocap::daemon

@@ -328,5 +328,90 @@ TEST(DaemonCli, CheckConfigNamesKeyAndLine) {
     EXPECT_EQ(good.wait(10s).value_or(-1), 0) << good.log();
 }
 
+// ---- the one validation path (server/daemon/config_check.hpp): --check-config refuses what
+// start-up refuses, and start-up refuses it with the same message.
+
+/// A complete config on free loopback ports; `extra` is appended (TOML allows a table to be
+/// continued only once, so cases add keys to tables this one does not open).
+std::string valid_config(const TempDir& dir, const std::string& extra, std::uint16_t pose_port = 0) {
+    std::ostringstream cfg;
+    cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
+        << "[ingest]\nsink_listen = \"127.0.0.1:" << free_port() << "\"\n"
+        << "[pipeline]\nworkers = 1\nmax_subjects = 4\n"
+        << "[skeleton]\ncalibration_dir = \"" << dir.path().string() << "\"\n"
+        << "[serve]\npose_listen = \"127.0.0.1:" << (pose_port != 0 ? pose_port : free_port()) << "\"\n"
+        << "[http]\nlisten = \"127.0.0.1:" << free_port() << "\"\n"
+        << extra;
+    return cfg.str();
+}
+
+/// Runs mocapd with `args`; expects a non-zero exit within the deadline and returns its output.
+std::string refused(const std::vector<std::string>& args, const std::string& log_path) {
+    std::vector<std::string> argv{MOCAPD_BIN};
+    argv.insert(argv.end(), args.begin(), args.end());
+    Process p(argv, log_path);
+    const auto rc = p.wait(10s);
+    EXPECT_TRUE(rc.has_value()) << "mocapd must exit, not run: " << p.log();
+    EXPECT_NE(rc.value_or(0), 0) << p.log();
+    return p.log();
+}
+
+TEST(DaemonCli, DirectoryOrEmptyFileAsConfigIsRefusedAtStartAndCheck) {
+    TempDir dir;
+    write_file(dir.file("empty.toml"), "");
+    write_file(dir.file("comments.toml"), "# nothing but a comment\n\n");
+    for (const auto& mode : {"--config", "--check-config"}) {
+        std::string log = refused({mode, dir.path().string()}, dir.file("dir.log"));
+        EXPECT_NE(log.find("invalid config: " + dir.path().string() + ": not a regular file (a directory)"),
+                  std::string::npos)
+            << mode << ": " << log;
+        for (const auto& name : {"empty.toml", "comments.toml"}) {
+            log = refused({mode, dir.file(name)}, dir.file("empty.log"));
+            EXPECT_NE(log.find(dir.file(name) + ": the file has no settings"), std::string::npos)
+                << mode << " " << name << ": " << log;
+        }
+    }
+}
+
+TEST(DaemonCli, CheckConfigRefusesEveryConfigStartUpRefuses) {
+    TempDir dir;
+    const std::string missing = dir.file("no-such-dir");
+    const std::uint16_t shared_port = free_port();
+    // {what is appended to a valid config, what the message must say}
+    const std::vector<std::pair<std::string, std::string>> cases{
+        {"[filter]\nname = \"kalman\"\n", "filter.name: unknown filter \"kalman\""},
+        {"[[skeleton.segment]]\nname = \"pelvis\"\nnode = 1\nend_m = [0.0, 0.2, 0.0]\nfilter = \"kalmann\"\n",
+         "skeleton.segment[0].filter: unknown filter \"kalmann\""},
+        {"[filter]\nname = \"madgwick\"\nparams = { beta = \"abc\" }\n", "filter.params.beta: parameter \"beta\""},
+        {"[filter]\nname = \"madgwick\"\nparams = { gamma = 0.1 }\n", "filter.params.gamma: filter \"madgwick\""},
+        {"[outputs]\nbvh_listen = \"no-such-host.invalid:7002\"\n",
+         "outputs.bvh_listen: host \"no-such-host.invalid\" must be an IPv4 or IPv6 address"},
+        // The live-BVH listener on the pose port (valid_config puts the pose port there).
+        {"[outputs]\nbvh_listen = \"127.0.0.1:" + std::to_string(shared_port) + "\"\n",
+         "outputs.bvh_listen: 127.0.0.1:" + std::to_string(shared_port) + " collides with serve.pose_listen"},
+        {"[outputs]\nraw_record = true\nrecord_dir = \"" + missing + "\"\n",
+         "outputs.record_dir: \"" + missing + "\" is not a directory"},
+        {"[outputs]\nraw_rotate_s = 0.001\n", "outputs.raw_rotate_s: must be 0 (off) or between 10"},
+        {"[outputs]\nbvh_subject = 65000\n", "outputs.bvh_subject: 65000 is not a configured subject"},
+        {"[control]\ntoken = \"   \"\n", "control.token: must not be blank"},
+    };
+    int n = 0;
+    for (const auto& [extra, expect] : cases) {
+        const std::string text = valid_config(dir, extra, shared_port);
+        const std::string path = dir.file("case" + std::to_string(++n) + ".toml");
+        write_file(path, text);
+        const std::string check = refused({"--check-config", path}, dir.file("check.log"));
+        EXPECT_NE(check.find("mocapd: invalid config: " + path + ":"), std::string::npos) << check;
+        EXPECT_NE(check.find(expect), std::string::npos) << "--check-config, case " << n << ": " << check;
+        const std::string start = refused({"--config", path}, dir.file("start.log"));
+        EXPECT_NE(start.find(expect), std::string::npos) << "--config, case " << n << ": " << start;
+    }
+    // The same base config passes both ways (the cases fail for their own reason only).
+    const std::string good = dir.file("good.toml");
+    write_file(good, valid_config(dir, ""));
+    Process ok({MOCAPD_BIN, "--check-config", good}, dir.file("good.log"));
+    EXPECT_EQ(ok.wait(10s).value_or(-1), 0) << ok.log();
+}
+
 }  // namespace
 }  // namespace mocap::itest

@@ -384,6 +384,16 @@ bool wait_frames(Watcher& w, std::uint32_t subject, std::size_t n, std::chrono::
     return false;
 }
 
+/// Waits until `needle` appears on at least `n` lines of the daemon's log (bounded).
+bool wait_log_lines(const Process& p, const std::string& needle, std::size_t n, std::chrono::milliseconds limit) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    while (std::chrono::steady_clock::now() < end) {
+        if (count_lines(p.log(), needle) >= n) return true;
+        std::this_thread::sleep_for(20ms);
+    }
+    return false;
+}
+
 // ================================================================== bad input
 
 TEST_F(Faults, GarbageOnEveryPortIsCountedLoggedOnceAndDropped) {
@@ -758,6 +768,48 @@ TEST_F(Faults, SighupAndReloadRequestUnderLoadDropNoClient) {
     EXPECT_EQ(count_lines(log, "reload: log level debug"), 1u) << "SIGHUP applied [log]";
     EXPECT_EQ(count_lines(log, "reload: log level info"), 1u) << "the reload request applied [log]";
     EXPECT_EQ(count_lines(log, "need a restart"), 0u) << "only [log] changed";
+}
+
+TEST_F(Faults, SighupWithARefusedConfigKeepsTheRunningOne) {
+    ASSERT_NO_FATAL_FAILURE(start_daemon());
+    Watcher ref(pose_port_, {1});
+    ASSERT_TRUE(ref.ok()) << ref.error();
+    auto s = sim({"--subjects", "1", "--duration", "8", "--seed", "5"});
+    ASSERT_TRUE(wait_frames(ref, 1, 50, 10s));
+    // Each of these used to "reload": the [log] part applied, the rest logged as needing a
+    // restart, and a restart would then have refused the file (or run on defaults).
+    const std::string good = config_text("info");
+    const std::vector<std::pair<std::string, std::string>> bad{
+        {config_text("debug") + "[filter]\nname = \"kalman\"\n", "filter.name: unknown filter"},
+        {config_text("debug") + "[filter]\nname = \"madgwick\"\nparams = { beta = \"abc\" }\n", "filter.params.beta"},
+        {"", "the file has no settings"},
+        {"# a comment only\n", "the file has no settings"},
+    };
+    std::size_t refusals = 0;
+    for (const auto& [text, reason] : bad) {
+        write_file(config_, text);
+        daemon_->signal(SIGHUP);
+        ASSERT_TRUE(wait_log_lines(*daemon_, "reload: keeping the running config", ++refusals, 10s))
+            << "refusal " << refusals << ": " << daemon_->log();
+        EXPECT_GE(count_lines(daemon_->log(), reason), 1u) << reason;
+    }
+    // The config path replaced by a directory.
+    std::filesystem::remove(config_);
+    std::filesystem::create_directory(config_);
+    daemon_->signal(SIGHUP);
+    ASSERT_TRUE(wait_log_lines(*daemon_, "reload: keeping the running config", ++refusals, 10s)) << daemon_->log();
+    EXPECT_EQ(count_lines(daemon_->log(), "not a regular file (a directory)"), 1u);
+    std::filesystem::remove(config_);
+    // Nothing applied: the level is still info (no debug lines), and a valid file applies.
+    EXPECT_EQ(count_lines(daemon_->log(), "reload: log level"), 0u);
+    EXPECT_EQ(count_lines(daemon_->log(), "need a restart"), 0u);
+    write_file(config_, good);
+    daemon_->signal(SIGHUP);
+    ASSERT_TRUE(wait_log_lines(*daemon_, "reload: log level info", 1, 10s)) << daemon_->log();
+    ASSERT_EQ(s->wait(15s).value_or(-1), 0) << s->log();
+    ref.stop();
+    EXPECT_FALSE(ref.closed());
+    EXPECT_LE(gaps(ref.syncs(1)), sim_skipped(*s)) << "every frame through the refused reloads";
 }
 
 TEST_F(Faults, SigtermUnderLoadDrainsWithinFiveSeconds) {

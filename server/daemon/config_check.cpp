@@ -1,0 +1,125 @@
+#include "daemon/config_check.hpp"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <set>
+#include <utility>
+#include <vector>
+
+#include "daemon/pipeline_config.hpp"
+#include "filter/filter_factory.hpp"
+
+namespace mocap::daemon {
+namespace {
+
+// The filter `name`, as `key` names it, built with [filter.params]: the pipeline builds every
+// segment's filter with the same parameter list, so a parameter that only the default filter
+// knows fails for a segment that overrides the filter, at start-up; it fails here instead.
+bool check_filter(const std::string& key, const std::string& name, const filter::FilterParamList& params,
+                  std::string* error) {
+    const auto names = filter::filter_names();
+    if (std::find(names.begin(), names.end(), name) == names.end()) {
+        std::string list;
+        for (std::string_view n : names)
+            list += (list.empty() ? "" : ", ") + std::string(n);
+        *error = key + ": unknown filter \"" + name + "\" (known: " + list + ")";
+        return false;
+    }
+    std::string err;
+    if (filter::make_filter(name, params, &err)) return true;
+    // Name the offending key: the first parameter that fails on its own (a failure of the
+    // combination only, e.g. a check across two keys, names the table).
+    for (const auto& kv : params) {
+        std::string one;
+        if (!filter::make_filter(name, {kv}, &one)) {
+            *error = "filter.params." + kv.first + ": " + one + (key == "filter.name" ? "" : " (used by " + key + ")");
+            return false;
+        }
+    }
+    *error = "filter.params: " + err;
+    return false;
+}
+
+bool is_unspecified(const std::string& host) {
+    return host == "0.0.0.0" || host == "::" || host == "0:0:0:0:0:0:0:0";
+}
+
+// Two listeners collide when they share a port and an address, or one of them binds every
+// address (0.0.0.0 or ::) on that port.
+bool check_listeners(const DaemonConfig& c, std::string* error) {
+    std::vector<std::pair<const char*, const Endpoint*>> listeners{{"ingest.sink_listen", &c.sink_listen},
+                                                                   {"serve.pose_listen", &c.pose_listen}};
+    if (c.bvh_live) listeners.emplace_back("outputs.bvh_listen", &c.bvh_listen);
+    if (c.http_enabled) listeners.emplace_back("http.listen", &c.http_listen);
+    for (std::size_t i = 0; i < listeners.size(); ++i) {
+        for (std::size_t j = 0; j < i; ++j) {
+            const Endpoint& a = *listeners[j].second;
+            const Endpoint& b = *listeners[i].second;
+            if (a.port != b.port) continue;
+            if (a.host == b.host || is_unspecified(a.host) || is_unspecified(b.host)) {
+                *error = std::string(listeners[i].first) + ": " + b.str() + " collides with " + listeners[j].first +
+                         " (" + a.str() + "): each listener needs its own port";
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
+bool check_config_impl(const DaemonConfig& c, std::string* error) {
+    std::string err;
+    if (!check_filter("filter.name", c.filter_name, c.filter_params, error)) return false;
+    for (std::size_t i = 0; i < c.segments.size(); ++i) {
+        const auto& s = c.segments[i];
+        if (s.filter.empty() || s.filter == c.filter_name) continue;
+        const std::string key = "skeleton.segment[" + std::to_string(i) + "].filter";
+        if (!check_filter(key, s.filter, c.filter_params, error)) return false;
+    }
+    if (!body_model_from_config(c, &err)) {
+        *error = err;
+        return false;
+    }
+    if (c.bvh_subject != 0) {
+        const auto ids = subject_ids_from_config(c);
+        if (std::find(ids.begin(), ids.end(), c.bvh_subject) == ids.end()) {
+            *error = "outputs.bvh_subject: " + std::to_string(c.bvh_subject) +
+                     " is not a configured subject (0 = the first subject with a frame, or 1..pipeline.max_subjects " +
+                     std::to_string(c.max_subjects) + ", or an ingest.socketcan subject)";
+            return false;
+        }
+    }
+    if (!check_listeners(c, error)) return false;
+    if (c.raw_record) {
+        struct stat st {};
+        if (::stat(c.record_dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) {
+            *error =
+                "outputs.record_dir: \"" + c.record_dir + "\" is not a directory (raw_record = true records there)";
+            return false;
+        }
+        if (::access(c.record_dir.c_str(), W_OK | X_OK) != 0) {
+            *error = "outputs.record_dir: \"" + c.record_dir + "\" is not writable (raw_record = true records there)";
+            return false;
+        }
+    }
+    return true;
+}
+
+}  // namespace
+
+bool check_config(const DaemonConfig& config, std::string_view source_name, std::string* error) {
+    std::string err;
+    if (check_config_impl(config, &err)) return true;
+    *error = std::string(source_name) + ": " + err;
+    return false;
+}
+
+std::optional<DaemonConfig> load_checked_config(const std::string& path, std::string* error) {
+    constexpr std::string_view kEmbedded = "<embedded mocapd.toml>";
+    auto c = path.empty() ? parse_config(embedded_default_config(), kEmbedded, error) : load_config_file(path, error);
+    if (c && !check_config(*c, path.empty() ? kEmbedded : std::string_view(path), error)) c.reset();
+    return c;
+}
+
+}  // namespace mocap::daemon
