@@ -255,6 +255,14 @@ void AssemblerSet::set_deadline_us(std::int64_t deadline_us) noexcept {
         s->set_deadline_us(deadline_us);
 }
 
+void AssemblerSet::register_metrics(MetricsRegistry& registry) const {
+    registry.add(counters_);
+    registry.add_latency("assembly", [this] { return assembly_snapshot(); });
+    // subjects_ is fixed after set-up, so the count is read without the assembler thread.
+    registry.add_gauge("subjects_configured", "Subjects the pipeline was built for",
+                       [this] { return static_cast<double>(subject_count()); });
+}
+
 const SubjectAssembler* AssemblerSet::find(std::uint32_t subject_id) const noexcept {
     return lookup(subject_id);
 }

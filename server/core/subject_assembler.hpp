@@ -50,6 +50,7 @@
 #include "core/counters.hpp"
 #include "core/frame.hpp"
 #include "core/latency_histogram.hpp"
+#include "core/metrics_registry.hpp"
 #include "core/segment_processor.hpp"
 
 namespace mocap {
@@ -176,6 +177,9 @@ public:
     [[nodiscard]] const CounterGroup& counters() const noexcept { return counters_; }
     /// Any thread. filtered_us -> assembled_us of every emitted frame.
     [[nodiscard]] LatencySnapshot assembly_snapshot() const noexcept { return assembly_.snapshot(); }
+    /// Set-up, after every add_subject(): the counters, stage latency "assembly" and gauge
+    /// "subjects_configured".
+    void register_metrics(MetricsRegistry& registry) const;
 
 private:
     [[nodiscard]] SubjectAssembler* lookup(std::uint32_t subject_id) const noexcept;

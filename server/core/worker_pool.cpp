@@ -233,6 +233,12 @@ std::size_t WorkerPool::input_depth(std::size_t worker) const noexcept {
     return worker < workers_.size() ? workers_[worker]->input.size_approx() : 0;
 }
 
+void WorkerPool::register_metrics(MetricsRegistry& registry) const {
+    registry.add(counters_);
+    registry.add_latency("queue_wait", [this] { return queue_wait_snapshot(); });
+    registry.add_latency("filter", [this] { return filter_snapshot(); });
+}
+
 LatencySnapshot WorkerPool::queue_wait_snapshot() const noexcept {
     LatencySnapshot total;
     for (const auto& w : workers_)

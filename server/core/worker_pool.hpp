@@ -52,6 +52,7 @@
 #include "core/event_count.hpp"
 #include "core/frame.hpp"
 #include "core/latency_histogram.hpp"
+#include "core/metrics_registry.hpp"
 #include "core/segment_processor.hpp"
 #include "core/spsc_ring.hpp"
 
@@ -157,6 +158,8 @@ public:
     [[nodiscard]] LatencySnapshot queue_wait_snapshot() const noexcept;
     /// Filter: dequeued_us -> filtered_us, all workers.
     [[nodiscard]] LatencySnapshot filter_snapshot() const noexcept;
+    /// Set-up: the counters above and stage latencies "queue_wait" and "filter".
+    void register_metrics(MetricsRegistry& registry) const;
 
 private:
     using WorkItem = detail::WorkItem;

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <exception>
 
@@ -145,6 +146,15 @@ SinkListener::SinkListener(asio::io_context& io, SinkListenerConfig config, cons
     group_.add("unknown_sink_packets", c_.unknown_sink);
     group_.add("sink_takeovers", c_.takeovers);
     reassembly_.register_in(group_);
+}
+
+void SinkListener::register_metrics(MetricsRegistry& registry) const {
+    registry.add(group_);
+    registry.add_gauge("sinks_connected", "Sink TCP connections open now", [this] {
+        const std::uint64_t opened = c_.accepted.value();
+        const std::uint64_t closed = c_.closed.value();
+        return static_cast<double>(opened - std::min(opened, closed));
+    });
 }
 
 SinkListener::~SinkListener() {

@@ -25,6 +25,7 @@
 #include "core/asio.hpp"
 #include "core/clock.hpp"
 #include "core/counters.hpp"
+#include "core/metrics_registry.hpp"
 #include "ingest/frame_reassembler.hpp"
 #include "mocap_wire/mw_packet.h"
 
@@ -67,6 +68,9 @@ public:
     /// bytes_discarded, sequence_gaps, unknown_sink_packets, sink_takeovers; plus the
     /// reassembly counters of every sink.
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
+    /// Set-up: the counters and gauge "sinks_connected" (accepted - closed, read from the
+    /// counters, so any thread may read it).
+    void register_metrics(MetricsRegistry& registry) const;
 
 private:
     friend class SinkConnection;

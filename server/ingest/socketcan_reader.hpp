@@ -20,6 +20,7 @@
 #include "core/asio.hpp"
 #include "core/clock.hpp"
 #include "core/counters.hpp"
+#include "core/metrics_registry.hpp"
 #include "ingest/frame_reassembler.hpp"
 
 namespace mocap::ingest {
@@ -47,6 +48,8 @@ public:
     /// Component "ingest_can:<interface>": frames_read, fd_frames, error_frames, rtr_frames,
     /// foreign_frames, kernel_drops, read_errors, plus the reassembly counters.
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
+    /// Set-up: the counters above.
+    void register_metrics(MetricsRegistry& registry) const { registry.add(group_); }
 
 private:
     void do_wait();

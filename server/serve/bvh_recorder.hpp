@@ -27,6 +27,7 @@
 
 #include "core/counters.hpp"
 #include "core/frame.hpp"
+#include "core/metrics_registry.hpp"
 #include "serve/bvh_frame_encoder.hpp"
 #include "skeleton/skeleton_pose.hpp"
 
@@ -61,6 +62,8 @@ public:
     /// Component "bvh_record": recordings_started, frames_recorded, frames_dropped,
     /// write_errors.
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
+    /// Set-up: the counters above.
+    void register_metrics(MetricsRegistry& registry) const { registry.add(group_); }
 
 private:
     void writer_loop();

@@ -105,7 +105,7 @@ std::string render_prometheus(const MetricsSnapshot& snapshot) {
         std::vector<std::string> sources;
     };
     std::map<std::string, Family> counters;
-    for (const NamedCounter& c : snapshot.counters) {
+    for (const CounterValue& c : snapshot.counters) {
         double divisor = 1.0;
         Family& f = counters[prometheus_counter_name(c.name, &divisor)];
         f.value += static_cast<double>(c.value) / divisor;  // exact decimals, unlike * 1e-6
@@ -119,8 +119,8 @@ std::string render_prometheus(const MetricsSnapshot& snapshot) {
         fmt::format_to(std::back_inserter(out), "{} {}\n", name, number(f.value));
     }
 
-    std::map<std::string, const MetricGauge*> gauges;
-    for (const MetricGauge& g : snapshot.gauges)
+    std::map<std::string, const GaugeValue*> gauges;
+    for (const GaugeValue& g : snapshot.gauges)
         gauges["mocapd_" + sanitize(g.name)] = &g;
     for (const auto& [name, g] : gauges) {
         family(out, name, "gauge", g->help);
@@ -132,7 +132,7 @@ std::string render_prometheus(const MetricsSnapshot& snapshot) {
         family(out, name, "histogram",
                "Latency of each pipeline stage in seconds (wall clock; ingest = sink send to "
                "host receive)");
-        for (const StageLatency& l : snapshot.latencies) {
+        for (const LatencyValue& l : snapshot.latencies) {
             const std::string stage = escape_label(l.stage);
             const LatencySnapshot& s = l.snapshot;
             std::size_t bucket = 0;
@@ -153,7 +153,7 @@ std::string render_prometheus(const MetricsSnapshot& snapshot) {
         const std::string neg = "mocapd_stage_latency_negative_total";
         family(out, neg, "counter",
                "Stage latencies below zero (a sender's clock ahead of the host's), not in the histogram");
-        for (const StageLatency& l : snapshot.latencies) {
+        for (const LatencyValue& l : snapshot.latencies) {
             fmt::format_to(std::back_inserter(out), "{}{{stage=\"{}\"}} {}\n", neg, escape_label(l.stage),
                            l.snapshot.negative);
         }

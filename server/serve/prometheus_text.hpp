@@ -12,7 +12,9 @@
 //   log-linear µs histogram: a fine bucket counts toward `le` when its upper bound is
 //   <= le, so a value up to 1/32 below a bound may land in the next bound (never an
 //   earlier one); _sum and _count are exact.
-// Every family has # HELP and # TYPE lines. Thread-safety: pure functions.
+// Every family has # HELP and # TYPE lines. The snapshot is the metrics registry's
+// (core/metrics_registry.hpp): /metrics is one of its three renderers, with the Stats reply
+// and the log line. Thread-safety: pure functions.
 // Cost: a few µs per metric (stats path only, never the hot path).
 #pragma once
 
@@ -21,28 +23,11 @@
 #include <string_view>
 #include <vector>
 
-#include "core/latency_histogram.hpp"
-#include "serve/serve_config.hpp"
+#include "core/metrics_registry.hpp"
 
 namespace mocap::serve {
 
-struct MetricGauge {
-    std::string name;  ///< without the "mocapd_" prefix, e.g. "http_ws_clients"
-    std::string help;
-    double value = 0;
-};
-
-struct StageLatency {
-    std::string stage;  ///< label value, e.g. "ingest", "filter", "assembly"
-    LatencySnapshot snapshot;
-};
-
-/// Everything /metrics shows, gathered by the daemon (plus the HTTP server's own).
-struct MetricsSnapshot {
-    std::vector<NamedCounter> counters;  ///< "component.name", values only go up
-    std::vector<MetricGauge> gauges;
-    std::vector<StageLatency> latencies;
-};
+using mocap::MetricsSnapshot;  // the registry's snapshot; serve::MetricsSnapshot is the same type
 
 /// Upper bounds (seconds) of the latency histogram's buckets; +Inf is added.
 inline constexpr std::array<double, 16> kLatencyBucketsS{0.00005, 0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01,

@@ -33,6 +33,7 @@
 #include "core/clock.hpp"
 #include "core/counters.hpp"
 #include "core/frame.hpp"
+#include "core/metrics_registry.hpp"
 #include "core/spsc_ring.hpp"
 
 namespace mocap::serve {
@@ -69,6 +70,8 @@ public:
     /// Component "raw_record": samples_recorded, samples_dropped, bytes_written,
     /// files_opened, write_errors.
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
+    /// Set-up: the counters above.
+    void register_metrics(MetricsRegistry& registry) const { registry.add(group_); }
 
 private:
     bool open_next(std::string* error);

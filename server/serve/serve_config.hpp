@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "core/counters.hpp"
+
 namespace mocap::serve {
 
 struct ServeConfig {
@@ -70,10 +72,7 @@ struct ControlResult {
     static ControlResult failure(std::string why) { return {false, std::move(why)}; }
 };
 
-struct NamedCounter {
-    std::string name;
-    std::uint64_t value = 0;
-};
+using NamedCounter = CounterValue;  ///< "component.name" and its value (core/counters.hpp)
 
 struct StageLatencySummary {
     std::string stage;  ///< e.g. "ingest", "filter", "assembly", "encode"

@@ -39,7 +39,7 @@ TEST(PrometheusText, FamiliesHaveHelpTypeAndValidNames) {
                   {"ingest_tcp.sink1.packets", 2},
                   {"ingest_tcp.sink1.packets", 3}};
     m.gauges = {{"http_ws_clients", "open WebSockets", 2}};
-    StageLatency l;
+    LatencyValue l;
     l.stage = "filter";
     LatencyHistogram h;
     for (int v : {3, 40, 100, 900, 4'000, 2'000'000})
