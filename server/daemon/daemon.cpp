@@ -28,7 +28,7 @@ serve::ControlHandlers Daemon::control_handlers() {
         asio::post(main_io_, [this] { reload(); });
         return serve::ControlResult::success();
     };
-    handlers.stats = [this] { return stats(); };
+    handlers.stats = [this] { return metrics(); };
     handlers.start_recording = [this](const std::string& path) {
         std::string err;
         return bvh_recorder_->start_recording(path, &err) ? serve::ControlResult::success()
@@ -54,7 +54,6 @@ bool Daemon::start(std::string* error) {
         config_, *pipeline_, clock_, control_handlers(), [this] { return metrics(); }, [this] { return health(); }};
     add_outputs(outputs, *pipeline_);
     for (const auto& o : pipeline_->outputs()) {
-        if (const auto* p = dynamic_cast<const PoseServiceOutput*>(o.get())) pose_ = p;
         if (auto* r = dynamic_cast<BvhRecorderOutput*>(o.get())) bvh_recorder_ = r;
     }
 
@@ -74,9 +73,16 @@ bool Daemon::start(std::string* error) {
         can_readers_.push_back(std::make_unique<ingest::SocketCanReader>(ingest_io_, cc, clock_, sink));
     }
 
-    // Bind everything before announcing readiness: a failure here exits non-zero. The start
-    // time is set before any thread starts: /metrics reads it from the HTTP thread.
-    start_us_ = clock_.now_us();
+    // Every metric, registered once before any thread that reads them starts (docs/performance.md,
+    // "Metrics registry").
+    sink_listener_->register_metrics(metrics_);
+    for (const auto& r : can_readers_)
+        r->register_metrics(metrics_);
+    pipeline_->register_metrics(metrics_);
+    const double start_s = static_cast<double>(clock_.now_us()) * 1e-6;
+    metrics_.add_gauge("start_time_seconds", "Start of mocapd, Unix time in seconds", [start_s] { return start_s; });
+
+    // Bind everything before announcing readiness: a failure here exits non-zero.
     if (!pipeline_->start_outputs(error)) return false;
     pipeline_->start_workers();
     if (!sink_listener_->start(error)) return false;

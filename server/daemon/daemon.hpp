@@ -53,10 +53,11 @@ public:
     [[nodiscard]] std::uint16_t sink_port() const { return sink_listener_ ? sink_listener_->port() : 0; }
     [[nodiscard]] std::uint16_t pose_port() const { return output_port("pose"); }
     [[nodiscard]] std::uint16_t bvh_port() const { return output_port("bvh_live"); }
-    [[nodiscard]] serve::StatsSnapshot stats() const;
-    // Web endpoint: what /metrics and /healthz show (any thread).
     [[nodiscard]] std::uint16_t http_port() const { return output_port("http"); }
-    [[nodiscard]] serve::MetricsSnapshot metrics() const;
+    /// Any thread, after start(): every metric, as the Stats reply, /metrics and the log line
+    /// show them.
+    [[nodiscard]] MetricsSnapshot metrics() const { return metrics_.snapshot(); }
+    /// Any thread: what /healthz shows.
     [[nodiscard]] serve::HealthStatus health() const;
 
 private:
@@ -73,10 +74,10 @@ private:
     WallClock clock_;
 
     std::unique_ptr<pipeline::Pipeline> pipeline_;
-    // Set once in start(): the outputs the control handlers and the stats reach by type.
-    const PoseServiceOutput* pose_ = nullptr;
+    // Set once in start(): the output the control handlers reach by type.
     BvhRecorderOutput* bvh_recorder_ = nullptr;
-    std::int64_t start_us_ = 0;
+    // Filled in start() before any reader runs; read-only afterwards (core/metrics_registry.hpp).
+    MetricsRegistry metrics_;
 
     asio::io_context ingest_io_;
     std::unique_ptr<ingest::SinkListener> sink_listener_;

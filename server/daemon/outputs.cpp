@@ -14,11 +14,6 @@ namespace mocap::daemon {
 
 namespace {
 
-void append_group(std::vector<CounterValue>& out, const CounterGroup& g) {
-    for (const auto& c : g.snapshot())
-        out.push_back({g.component() + "." + c.name, c.value});
-}
-
 /// Live BVH text over TCP (serve/bvh_server.hpp), [outputs].bvh_live.
 class BvhLiveOutput final : public pipeline::Output {
 public:
@@ -34,14 +29,7 @@ public:
     void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         server_.publish(frame, pose);
     }
-    void append_counters(std::vector<CounterValue>& out) const override {
-        for (const auto& c : server_.counters().snapshot())
-            out.push_back({c.name, c.value});  // already "bvh_live.<name>"
-    }
-    void append_gauges(std::vector<pipeline::OutputGauge>& out) const override {
-        out.push_back(
-            {"bvh_live_clients", "Live BVH clients connected now", static_cast<double>(server_.client_count())});
-    }
+    void register_metrics(MetricsRegistry& registry) const override { server_.register_metrics(registry); }
     [[nodiscard]] std::uint16_t port() const override { return server_.port(); }
 
 private:
@@ -62,7 +50,7 @@ public:
     void on_frame(const SubjectFrame& /*frame*/, const skeleton::SkeletonPose& /*pose*/) override {}
     [[nodiscard]] bool wants_samples() const override { return true; }
     void on_sample(const SegmentSample& sample) override { recorder_.push(sample); }
-    void append_counters(std::vector<CounterValue>& out) const override { append_group(out, recorder_.counters()); }
+    void register_metrics(MetricsRegistry& registry) const override { recorder_.register_metrics(registry); }
 
 private:
     serve::RawRecorder recorder_;
@@ -89,6 +77,7 @@ public:
     void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         if (!off_) server_->publish(frame, pose);
     }
+    void register_metrics(MetricsRegistry& registry) const override { server_->register_metrics(registry); }
     [[nodiscard]] std::uint16_t port() const override { return off_ ? 0 : server_->port(); }
     [[nodiscard]] std::int64_t last_frame_us() const override { return off_ ? 0 : server_->last_frame_us(); }
 
@@ -262,10 +251,6 @@ PoseServiceOutput::PoseServiceOutput(const serve::ServeConfig& config, const ser
     server_.set_description(description);
 }
 
-void PoseServiceOutput::append_gauges(std::vector<pipeline::OutputGauge>& out) const {
-    out.push_back({"pose_clients", "Protobuf pose clients connected now", static_cast<double>(server_.client_count())});
-}
-
 BvhRecorderOutput::BvhRecorderOutput(const serve::BvhRecorderConfig& config, const skeleton::BodyModel& model,
                                      const serve::BvhOutputOptions& options, std::string start_path)
     : encoder_(model, options), recorder_(config, encoder_), start_path_(std::move(start_path)) {}
@@ -277,10 +262,6 @@ bool BvhRecorderOutput::start(std::string* error) {
 bool BvhRecorderOutput::stop(std::string* error) {
     if (!recorder_.recording()) return true;
     return recorder_.stop(error, &frames_written_);  // patches the frame count
-}
-
-void BvhRecorderOutput::append_counters(std::vector<CounterValue>& out) const {
-    append_group(out, recorder_.counters());
 }
 
 std::span<const OutputEntry> output_registry() {

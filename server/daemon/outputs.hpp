@@ -66,7 +66,7 @@ public:
     void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         server_.publish(frame, pose);
     }
-    void append_gauges(std::vector<pipeline::OutputGauge>& out) const override;
+    void register_metrics(MetricsRegistry& registry) const override { server_.register_metrics(registry); }
     [[nodiscard]] std::uint16_t port() const override { return server_.port(); }
     [[nodiscard]] const serve::PoseServer& server() const { return server_; }
 
@@ -88,7 +88,7 @@ public:
     void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
         recorder_.publish(frame, pose);
     }
-    void append_counters(std::vector<CounterValue>& out) const override;
+    void register_metrics(MetricsRegistry& registry) const override { recorder_.register_metrics(registry); }
 
     /// Control requests (any thread).
     bool start_recording(const std::string& path, std::string* error) { return recorder_.start(path, error); }

@@ -9,29 +9,21 @@
 //                   Must not block: it delays every other output and the next frame.
 //   ingest          on_sample(), for every sample as it arrives (before routing drops
 //                   unknown nodes), only if wants_samples() is true.
-//   any thread      the health/metrics hooks (append_counters, append_gauges, port,
-//                   last_frame_us): read atomics or counters only.
+//   any thread      the health hooks (port, last_frame_us) and the readers registered by
+//                   register_metrics(): read atomics or counters only.
 // In the synchronous (replay) mode on_frame and on_sample run on the caller's thread.
 #pragma once
 
 #include <cstdint>
 #include <string>
 #include <string_view>
-#include <vector>
 
-#include "core/counters.hpp"
 #include "core/frame.hpp"
 #include "core/imu_sample.hpp"
+#include "core/metrics_registry.hpp"
 #include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::pipeline {
-
-/// A gauge for /metrics: a value that goes up and down (clients connected now).
-struct OutputGauge {
-    std::string name;
-    std::string help;
-    double value = 0.0;
-};
 
 class Output {
 public:
@@ -56,12 +48,12 @@ public:
     /// Ingest thread: one sample as received. Must not block.
     virtual void on_sample(const SegmentSample& /*sample*/) {}
 
-    // Health and metrics (any thread).
-    /// Counters of this output for the Stats reply, /metrics and the periodic log line,
-    /// named "component.name".
-    virtual void append_counters(std::vector<CounterValue>& /*out*/) const {}
-    /// Gauges for /metrics.
-    virtual void append_gauges(std::vector<OutputGauge>& /*out*/) const {}
+    /// Set-up thread, once, after construction: registers this output's counters and gauges
+    /// (read later from any thread) in the daemon's registry, which the Stats reply,
+    /// /metrics and the periodic log line render.
+    virtual void register_metrics(MetricsRegistry& /*registry*/) const {}
+
+    // Health (any thread).
     /// The TCP port it listens on (0 = none): tests and logs.
     [[nodiscard]] virtual std::uint16_t port() const { return 0; }
     /// Wall clock µs of the last frame it delivered to a client (0 = none or not tracked):

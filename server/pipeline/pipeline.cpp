@@ -70,6 +70,17 @@ void Pipeline::add_output(std::unique_ptr<Output> output) {
     outputs_.push_back(std::move(output));
 }
 
+void Pipeline::register_metrics(MetricsRegistry& registry) const {
+    registry.add(route_counters_);
+    // A sink clock ahead of the host gives negative latencies: not in the histogram, counted.
+    registry.add_latency("ingest", [this] { return ingest_latency(); }, {.negative_counter = true});
+    pool_->register_metrics(registry);
+    assemblers_->register_metrics(registry);
+    registry.add(solver_->counters());
+    for (const auto& o : outputs_)
+        o->register_metrics(registry);
+}
+
 bool Pipeline::start_outputs(std::string* error) {
     for (auto& o : outputs_) {
         if (!o->start(error)) return false;

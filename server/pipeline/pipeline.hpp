@@ -31,6 +31,7 @@
 #include "core/clock.hpp"
 #include "core/counters.hpp"
 #include "core/latency_histogram.hpp"
+#include "core/metrics_registry.hpp"
 #include "core/subject_assembler.hpp"
 #include "core/worker_pool.hpp"
 #include "filter/filter_factory.hpp"
@@ -121,6 +122,10 @@ public:
     [[nodiscard]] const CounterGroup& route_counters() const { return route_counters_; }
     [[nodiscard]] LatencySnapshot ingest_latency() const { return ingest_latency_.snapshot(); }
     [[nodiscard]] const std::vector<std::unique_ptr<Output>>& outputs() const { return outputs_; }
+    /// Set-up, after the outputs were added: the route counters and the ingest latency (with
+    /// counter latency.ingest_negative), the worker pool's, the assemblers' and the solver's
+    /// metrics, and every output's.
+    void register_metrics(MetricsRegistry& registry) const;
     /// Wall clock µs of the first and the latest received sample (0 = none yet).
     [[nodiscard]] std::int64_t first_sample_us() const { return first_sample_us_.load(std::memory_order_relaxed); }
     [[nodiscard]] std::int64_t last_sample_us() const { return last_sample_us_.load(std::memory_order_relaxed); }

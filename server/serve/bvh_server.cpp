@@ -11,17 +11,22 @@ constexpr std::size_t kMaxBatch = 32;       // lines per write (one writev)
 constexpr std::size_t kMaxClientLine = 64;  // "subject <id>" fits easily
 }  // namespace
 
-std::vector<NamedCounter> BvhServerCounters::snapshot() const {
-    auto v = [](const C& c) { return c.load(std::memory_order_relaxed); };
-    return {{"bvh_live.connections_accepted", v(connections_accepted)},
-            {"bvh_live.connections_rejected_full", v(connections_rejected_full)},
-            {"bvh_live.connections_closed", v(connections_closed)},
-            {"bvh_live.frames_published", v(frames_published)},
-            {"bvh_live.frames_sent", v(frames_sent)},
-            {"bvh_live.frames_dropped", v(frames_dropped)},
-            {"bvh_live.backlog_dropped", v(backlog_dropped)},
-            {"bvh_live.bad_client_lines", v(bad_client_lines)},
-            {"bvh_live.write_errors", v(write_errors)}};
+BvhServerCounters::BvhServerCounters() {
+    group.add("connections_accepted", connections_accepted);
+    group.add("connections_rejected_full", connections_rejected_full);
+    group.add("connections_closed", connections_closed);
+    group.add("frames_published", frames_published);
+    group.add("frames_sent", frames_sent);
+    group.add("frames_dropped", frames_dropped);
+    group.add("backlog_dropped", backlog_dropped);
+    group.add("bad_client_lines", bad_client_lines);
+    group.add("write_errors", write_errors);
+}
+
+void BvhServer::register_metrics(MetricsRegistry& registry) const {
+    registry.add(counters_.group);
+    registry.add_gauge("bvh_live_clients", "Live BVH clients connected now",
+                       [this] { return static_cast<double>(client_count()); });
 }
 
 // One client. Lives on the serve thread only: no locks.
@@ -80,7 +85,7 @@ private:
         if (ec) return fail(ec, "write");
         // The greeting is not a frame; every other buffer is one MOTION line.
         const std::size_t lines = in_flight_.size() - (in_flight_.front() == server_.greeting_ ? 1 : 0);
-        server_.counters_.frames_sent.fetch_add(lines, std::memory_order_relaxed);
+        server_.counters_.frames_sent.add(lines);
         do_write();
     }
 
@@ -100,7 +105,7 @@ private:
                 handle_line(partial_);
                 partial_.clear();
             } else if (partial_.size() >= kMaxClientLine) {
-                server_.counters_.bad_client_lines.fetch_add(1, std::memory_order_relaxed);
+                server_.counters_.bad_client_lines.add();
                 return close();
             } else {
                 partial_ += c;
@@ -124,12 +129,12 @@ private:
                 return;
             }
         }
-        server_.counters_.bad_client_lines.fetch_add(1, std::memory_order_relaxed);
+        server_.counters_.bad_client_lines.add();
     }
 
     void fail(const boost::system::error_code& ec, const char* what) {
         if (ec != asio::error::operation_aborted && ec != asio::error::eof && std::string_view(what) == "write") {
-            server_.counters_.write_errors.fetch_add(1, std::memory_order_relaxed);
+            server_.counters_.write_errors.add();
         }
         close();
     }
@@ -184,9 +189,9 @@ void BvhServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose&
     auto text = std::make_shared<std::string>();
     text->reserve(16 * encoder_.values_per_frame());
     encoder_.append_motion_line(pose, *text);
-    counters_.frames_published.fetch_add(1, std::memory_order_relaxed);
+    counters_.frames_published.add();
     if (!backlog_.push({frame.subject_id, std::move(text)})) {
-        counters_.backlog_dropped.fetch_add(1, std::memory_order_relaxed);
+        counters_.backlog_dropped.add();
     }
 }
 

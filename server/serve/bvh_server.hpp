@@ -33,6 +33,7 @@
 
 #include "core/asio.hpp"
 #include "core/frame.hpp"
+#include "core/metrics_registry.hpp"
 #include "serve/bvh_frame_encoder.hpp"
 #include "serve/publish_backlog.hpp"
 #include "serve/serve_config.hpp"
@@ -52,18 +53,21 @@ struct BvhServerConfig {
 };
 
 struct BvhServerCounters {
-    using C = std::atomic<std::uint64_t>;
-    C connections_accepted{0};
-    C connections_rejected_full{0};
-    C connections_closed{0};
-    C frames_published{0};  ///< frames handed to publish() while clients were connected
-    C frames_sent{0};       ///< lines written (sum over clients)
-    C frames_dropped{0};    ///< oldest lines dropped from lagging clients
-    C backlog_dropped{0};   ///< the serve thread fell behind publish()
-    C bad_client_lines{0};  ///< client input that is not "subject <id>"
-    C write_errors{0};
-    /// Every counter as "bvh_live.<name>".
-    [[nodiscard]] std::vector<NamedCounter> snapshot() const;
+    Counter connections_accepted;
+    Counter connections_rejected_full;
+    Counter connections_closed;
+    Counter frames_published;  ///< frames handed to publish() while clients were connected
+    Counter frames_sent;       ///< lines written (sum over clients)
+    Counter frames_dropped;    ///< oldest lines dropped from lagging clients
+    Counter backlog_dropped;   ///< the serve thread fell behind publish()
+    Counter bad_client_lines;  ///< client input that is not "subject <id>"
+    Counter write_errors;
+
+    /// Component "bvh_live": every counter above by its member name (the metrics registry's
+    /// entry, core/metrics_registry.hpp).
+    CounterGroup group{"bvh_live"};
+
+    BvhServerCounters();
 };
 
 class BvhServer {
@@ -85,6 +89,8 @@ public:
     [[nodiscard]] std::uint16_t port() const { return serve_.port(); }
     [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }
     [[nodiscard]] const BvhServerCounters& counters() const { return counters_; }
+    /// Set-up: counter group "bvh_live" and gauge "bvh_live_clients".
+    void register_metrics(MetricsRegistry& registry) const;
 
     class Session;  // one client (bvh_server.cpp)
 

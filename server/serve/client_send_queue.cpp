@@ -8,7 +8,7 @@
 
 namespace mocap::serve {
 
-ClientSendQueue::ClientSendQueue(std::size_t capacity, std::atomic<std::uint64_t>& dropped_counter)
+ClientSendQueue::ClientSendQueue(std::size_t capacity, Counter& dropped_counter)
     : ring_(std::max<std::size_t>(capacity, 1)), dropped_counter_(dropped_counter) {}
 
 void ClientSendQueue::push(Bytes frame) {
@@ -16,7 +16,7 @@ void ClientSendQueue::push(Bytes frame) {
         static_cast<void>(pop());  // the oldest frame: counted, then released
         ++dropped_total_;
         ++dropped_unreported_;
-        dropped_counter_.fetch_add(1, std::memory_order_relaxed);
+        dropped_counter_.add();
     }
     ring_[(head_ + size_) % ring_.size()] = std::move(frame);
     ++size_;

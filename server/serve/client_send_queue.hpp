@@ -32,6 +32,8 @@
 #include <string>
 #include <vector>
 
+#include "core/counters.hpp"
+
 namespace mocap::serve {
 
 class ClientSendQueue {
@@ -39,7 +41,7 @@ public:
     using Bytes = std::shared_ptr<const std::string>;  ///< one encoded frame, shared
 
     /// `capacity` 0 is taken as 1. `dropped_counter` must outlive the queue.
-    ClientSendQueue(std::size_t capacity, std::atomic<std::uint64_t>& dropped_counter);
+    ClientSendQueue(std::size_t capacity, Counter& dropped_counter);
 
     /// Appends `frame`; when full, first drops the oldest (counted). Never fails.
     void push(Bytes frame);
@@ -64,7 +66,7 @@ private:
     std::vector<Bytes> ring_;
     std::size_t head_ = 0;
     std::size_t size_ = 0;
-    std::atomic<std::uint64_t>& dropped_counter_;
+    Counter& dropped_counter_;
     std::uint64_t dropped_total_ = 0;
     std::uint64_t dropped_unreported_ = 0;
 };

@@ -6,6 +6,7 @@
 #include <algorithm>
 
 #include "mocap/v1/mocap.pb.h"
+#include "serve/stats_reply.hpp"
 
 namespace mocap::serve {
 
@@ -76,17 +77,17 @@ void ClientSession::parse_messages() {
         const FrameResult r = reader_.next();
         if (r.status == FrameStatus::kNeedMore) return;
         if (r.status == FrameStatus::kTooLarge) {
-            ctx_.counters.oversized_messages.fetch_add(1, std::memory_order_relaxed);
+            ctx_.counters.oversized_messages.add();
             return protocol_error(CloseReason::kMalformed, LogLimiter::kOversized,
                                   "message longer than max_client_message_bytes");
         }
         if (r.status == FrameStatus::kBadPrefix ||
             !in_->ParseFromArray(r.payload.data(), static_cast<int>(r.payload.size()))) {
-            ctx_.counters.malformed_messages.fetch_add(1, std::memory_order_relaxed);
+            ctx_.counters.malformed_messages.add();
             return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "unparseable message");
         }
         if (!take_request_token()) {
-            ctx_.counters.rate_limited.fetch_add(1, std::memory_order_relaxed);
+            ctx_.counters.rate_limited.add();
             return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, "too many requests");
         }
         if (!handle(*in_)) return;
@@ -138,7 +139,7 @@ bool ClientSession::handle(const v1::ClientMessage& message) {
         }
         case M::BODY_NOT_SET:
             // A newer client's message type: tolerated (forward compatibility), counted.
-            ctx_.counters.unknown_messages.fetch_add(1, std::memory_order_relaxed);
+            ctx_.counters.unknown_messages.add();
             break;
     }
     if (closing_) return false;
@@ -150,7 +151,7 @@ bool ClientSession::handle(const v1::ClientMessage& message) {
 void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
     const v1::Subscribe& sub = message.subscribe();
     if (static_cast<std::uint32_t>(sub.subject_ids_size()) > kMaxSubscribeSubjects) {
-        ctx_.counters.malformed_messages.fetch_add(1, std::memory_order_relaxed);
+        ctx_.counters.malformed_messages.add();
         return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "too many subjects in Subscribe");
     }
     unsubscribe();
@@ -162,7 +163,7 @@ void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
     decimation_counts_.clear();
     ctx_.broadcaster.subscribe(lane_, shared_from_this(), subjects_, fields_);
     subscribed_ = true;
-    ctx_.counters.subscriptions.fetch_add(1, std::memory_order_relaxed);
+    ctx_.counters.subscriptions.add();
     timer_.cancel();  // a subscribed client may stay silent
 
     reply_->Clear();
@@ -183,31 +184,17 @@ void ClientSession::unsubscribe() {
 }
 
 void ClientSession::handle_stats(const v1::ClientMessage& message) {
-    ctx_.counters.stats_requests.fetch_add(1, std::memory_order_relaxed);
+    ctx_.counters.stats_requests.add();
     v1::ServerMessage reply;  // rare: a fresh message keeps reply_ small
     v1::Stats* stats = reply.mutable_stats();
     stats->set_request_id(message.stats_request().request_id());
     stats->set_server_time_us(ctx_.wall_clock_us());
-    auto add_counters = [stats](const std::vector<NamedCounter>& counters) {
-        for (const NamedCounter& c : counters) {
-            v1::Counter* out = stats->add_counters();
-            out->set_name(c.name);
-            out->set_value(c.value);
-        }
-    };
-    add_counters(ctx_.counters.snapshot());
     if (ctx_.handlers.stats) {
-        const StatsSnapshot snapshot = ctx_.handlers.stats();
-        add_counters(snapshot.counters);
-        for (const StageLatencySummary& l : snapshot.latencies) {
-            v1::StageLatency* out = stats->add_latencies();
-            out->set_stage(l.stage);
-            out->set_count(l.count);
-            out->set_p50_us(l.p50_us);
-            out->set_p90_us(l.p90_us);
-            out->set_p99_us(l.p99_us);
-            out->set_max_us(l.max_us);
-        }
+        render_stats(ctx_.handlers.stats(), *stats);
+    } else {  // a server on its own (tests, tools): its own counters
+        MetricsRegistry own;
+        own.add(ctx_.counters.group);
+        render_stats(own.snapshot(), *stats);
     }
     send_reply(reply);
 }
@@ -257,7 +244,7 @@ void ClientSession::send_reply(const v1::ServerMessage& message) {
     if (closing_) return;
     if (replies_.size() >= kMaxPendingReplies) {
         // The client asks but does not read its answers.
-        ctx_.counters.rate_limited.fetch_add(1, std::memory_order_relaxed);
+        ctx_.counters.rate_limited.add();
         return close();
     }
     SharedBytes bytes = encode_server_message(message);
@@ -322,12 +309,12 @@ void ClientSession::on_write(const boost::system::error_code& ec, std::size_t n)
     writing_ = false;
     if (ec) {
         if (ec != asio::error::operation_aborted) {
-            ctx_.counters.write_errors.fetch_add(1, std::memory_order_relaxed);
+            ctx_.counters.write_errors.add();
         }
         return fail(ec, "write");
     }
-    ctx_.counters.bytes_sent.fetch_add(n, std::memory_order_relaxed);
-    ctx_.counters.frames_sent.fetch_add(in_flight_frames_, std::memory_order_relaxed);
+    ctx_.counters.bytes_sent.add(n);
+    ctx_.counters.frames_sent.add(in_flight_frames_);
     in_flight_.clear();  // release the shared buffers now, not at the next write
     do_write();
 }
@@ -346,7 +333,7 @@ void ClientSession::on_timer(const boost::system::error_code& ec) {
     if (closed_) return;
     if (closing_) return close();  // the client did not take its Goodbye in time
     if (!subscribed_) {
-        ctx_.counters.idle_timeouts.fetch_add(1, std::memory_order_relaxed);
+        ctx_.counters.idle_timeouts.add();
         protocol_error(CloseReason::kTimeout, LogLimiter::kIdle, "nothing received within subscribe_timeout_ms");
     }
 }
@@ -381,7 +368,7 @@ void ClientSession::close() {
     socket_.close(ignored);
     unsubscribe();
     replies_.clear();
-    ctx_.counters.connections_closed.fetch_add(1, std::memory_order_relaxed);
+    ctx_.counters.connections_closed.add();
     ctx_.on_closed(lane_, id_);
 }
 

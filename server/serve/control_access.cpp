@@ -35,20 +35,17 @@ bool peer_on_loopback(const asio::ip::tcp::socket& socket) {
     return !ec && is_loopback(peer.address());
 }
 
-void ControlCounters::append_to(std::vector<NamedCounter>& out, std::string_view prefix) const {
-    auto add = [&](const char* name, const C& c) {
-        out.push_back({std::string(prefix) + "control_" + name, c.load(std::memory_order_relaxed)});
-    };
-    add("ok", ok);
-    add("failed", failed);
-    add("refused_disabled", refused_disabled);
-    add("refused_not_loopback", refused_not_loopback);
-    add("refused_no_token", refused_no_token);
-    add("refused_bad_token", refused_bad_token);
+void ControlCounters::register_in(CounterGroup& group) const {
+    group.add("control_ok", ok);
+    group.add("control_failed", failed);
+    group.add("control_refused_disabled", refused_disabled);
+    group.add("control_refused_not_loopback", refused_not_loopback);
+    group.add("control_refused_no_token", refused_no_token);
+    group.add("control_refused_bad_token", refused_bad_token);
 }
 
 void ControlCounters::count_result(const ControlResult& result) {
-    (result.ok ? ok : failed).fetch_add(1, std::memory_order_relaxed);
+    (result.ok ? ok : failed).add();
 }
 
 std::optional<ControlRefusal> authorize_control(const ControlPolicy& policy, bool peer_loopback,
@@ -65,9 +62,9 @@ std::optional<ControlRefusal> authorize_control(const ControlPolicy& policy, boo
         refusal = ControlRefusal{ControlRefusal::kBadToken, "bad token"};
     }
     if (!refusal) return refusal;
-    ControlCounters::C* counter[] = {&counters.refused_disabled, &counters.refused_not_loopback,
-                                     &counters.refused_no_token, &counters.refused_bad_token};
-    counter[refusal->kind]->fetch_add(1, std::memory_order_relaxed);
+    Counter* counter[] = {&counters.refused_disabled, &counters.refused_not_loopback, &counters.refused_no_token,
+                          &counters.refused_bad_token};
+    counter[refusal->kind]->add();
     std::uint64_t suppressed = 0;
     if (log.allow(LogLimiter::kControlRefused, suppressed)) {
         spdlog::warn("{} refused: {} ({} suppressed)", who, refusal->reason, suppressed);

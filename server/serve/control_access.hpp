@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "core/asio.hpp"
+#include "core/counters.hpp"
 #include "serve/serve_config.hpp"
 
 namespace mocap::serve {
@@ -38,16 +39,15 @@ bool is_loopback(const asio::ip::address& address);
 bool peer_on_loopback(const asio::ip::tcp::socket& socket);
 
 struct ControlCounters {
-    using C = std::atomic<std::uint64_t>;
-    C ok{0};
-    C failed{0};            ///< authorised, but the action reported an error
-    C refused_disabled{0};  ///< no token configured
-    C refused_not_loopback{0};
-    C refused_no_token{0};
-    C refused_bad_token{0};
+    Counter ok;
+    Counter failed;            ///< authorised, but the action reported an error
+    Counter refused_disabled;  ///< no token configured
+    Counter refused_not_loopback;
+    Counter refused_no_token;
+    Counter refused_bad_token;
 
-    /// Appends every counter as "<prefix>control_<name>" (prefix e.g. "serve.").
-    void append_to(std::vector<NamedCounter>& out, std::string_view prefix) const;
+    /// Set-up: adds every counter to the server's group as "control_<name>".
+    void register_in(CounterGroup& group) const;
     /// Counts an authorised request's outcome in ok or failed.
     void count_result(const ControlResult& result);
 };

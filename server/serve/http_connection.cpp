@@ -77,7 +77,7 @@ void HttpServer::HttpSession::do_read() {
 void HttpServer::HttpSession::on_read(const beast::error_code& ec) {
     if (ec == http::error::end_of_stream) return close();
     if (ec) return fail(ec, "read");
-    server_.counters_.requests.fetch_add(1, std::memory_order_relaxed);
+    server_.counters_.requests.add();
     Request request = parser_->release();
     const std::string_view target(request.target().data(), request.target().size());
     const std::size_t q = target.find('?');
@@ -106,11 +106,11 @@ void HttpServer::HttpSession::upgrade(Request request, std::string_view query) {
 void HttpServer::HttpSession::respond(const Request& request, std::string_view path, std::string_view query) {
     const bool read_only = request.method() == http::verb::get || request.method() == http::verb::head;
     if (path == "/metrics" && read_only) {
-        server_.counters_.metrics_scrapes.fetch_add(1, std::memory_order_relaxed);
+        server_.counters_.metrics_scrapes.add();
         return send_text(request, http::status::ok, server_.metrics_text(), "text/plain; version=0.0.4; charset=utf-8");
     }
     if (path == "/healthz" && read_only) {
-        server_.counters_.health_checks.fetch_add(1, std::memory_order_relaxed);
+        server_.counters_.health_checks.add();
         const HealthStatus h = server_.handlers_.health ? server_.handlers_.health() : HealthStatus{true, "ok"};
         return h.ok ? send_text(request, http::status::ok, "ok\n")
                     : send_text(request, http::status::service_unavailable, "unhealthy: " + h.detail + "\n");
@@ -165,7 +165,7 @@ void HttpServer::HttpSession::control(const Request& request, std::string_view p
         const auto subject = parse_u32(query_value(query, "subject").value_or(""));
         const std::string_view pose = query_value(query, "pose").value_or("t");
         if (!subject || (pose != "t" && pose != "n")) {
-            counters.bad_requests.fetch_add(1, std::memory_order_relaxed);
+            counters.bad_requests.add();
             return reply(http::status::bad_request, ControlResult::failure("expected ?subject=<id>&pose=t|n"));
         }
         if (h.calibrate) result = h.calibrate(*subject, pose == "n" ? CalibrationPose::kN : CalibrationPose::kT);
@@ -174,7 +174,7 @@ void HttpServer::HttpSession::control(const Request& request, std::string_view p
     } else if (path == "/api/record/stop") {
         if (h.stop_recording) result = h.stop_recording();
     } else {
-        counters.bad_requests.fetch_add(1, std::memory_order_relaxed);
+        counters.bad_requests.add();
         return reply(http::status::not_found, ControlResult::failure("unknown control action"));
     }
     if (!result) return reply(http::status::not_implemented, ControlResult::failure("not supported by this server"));
@@ -186,7 +186,7 @@ void HttpServer::HttpSession::send_text(const Request& request, http::status sta
                                         const char* content_type) {
     if (static_cast<unsigned>(status) >= 400 && status != http::status::service_unavailable &&
         status != http::status::conflict) {
-        server_.counters_.bad_requests.fetch_add(1, std::memory_order_relaxed);
+        server_.counters_.bad_requests.add();
     }
     http::response<http::string_body> res{status, request.version()};
     res.set(http::field::server, "mocapd");
@@ -202,7 +202,7 @@ void HttpServer::HttpSession::send_text(const Request& request, http::status sta
 void HttpServer::HttpSession::on_write(const beast::error_code& ec) {
     if (ec) {
         if (ec != asio::error::operation_aborted) {
-            server_.counters_.write_errors.fetch_add(1, std::memory_order_relaxed);
+            server_.counters_.write_errors.add();
         }
         return fail(ec, "write");
     }
@@ -215,7 +215,7 @@ void HttpServer::HttpSession::fail(const beast::error_code& ec, const char* what
     if (ec != asio::error::operation_aborted && ec != beast::error::timeout && ec != asio::error::eof &&
         ec != asio::error::connection_reset) {
         if (std::string_view(what) == "read") {
-            server_.counters_.bad_requests.fetch_add(1, std::memory_order_relaxed);
+            server_.counters_.bad_requests.add();
         }
         spdlog::debug("http: connection {} {}: {}", id_, what, ec.message());
     }

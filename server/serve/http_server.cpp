@@ -12,24 +12,22 @@
 
 namespace mocap::serve {
 
-std::vector<NamedCounter> HttpServerCounters::snapshot() const {
-    auto v = [](const C& c) { return c.load(std::memory_order_relaxed); };
-    std::vector<NamedCounter> out{{"http.connections_accepted", v(connections_accepted)},
-                                  {"http.connections_rejected_full", v(connections_rejected_full)},
-                                  {"http.connections_closed", v(connections_closed)},
-                                  {"http.requests", v(requests)},
-                                  {"http.bad_requests", v(bad_requests)},
-                                  {"http.metrics_scrapes", v(metrics_scrapes)},
-                                  {"http.health_checks", v(health_checks)},
-                                  {"http.ws_connections", v(ws_connections)},
-                                  {"http.ws_frames_encoded", v(ws_frames_encoded)},
-                                  {"http.ws_frames_sent", v(ws_frames_sent)},
-                                  {"http.ws_frames_dropped", v(ws_frames_dropped)},
-                                  {"http.ws_backlog_dropped", v(ws_backlog_dropped)},
-                                  {"http.ws_client_messages", v(ws_client_messages)},
-                                  {"http.write_errors", v(write_errors)}};
-    control.append_to(out, "http.");
-    return out;
+HttpServerCounters::HttpServerCounters() {
+    group.add("connections_accepted", connections_accepted);
+    group.add("connections_rejected_full", connections_rejected_full);
+    group.add("connections_closed", connections_closed);
+    group.add("requests", requests);
+    group.add("bad_requests", bad_requests);
+    group.add("metrics_scrapes", metrics_scrapes);
+    group.add("health_checks", health_checks);
+    group.add("ws_connections", ws_connections);
+    group.add("ws_frames_encoded", ws_frames_encoded);
+    group.add("ws_frames_sent", ws_frames_sent);
+    group.add("ws_frames_dropped", ws_frames_dropped);
+    group.add("ws_backlog_dropped", ws_backlog_dropped);
+    group.add("ws_client_messages", ws_client_messages);
+    group.add("write_errors", write_errors);
+    control.register_in(group);
 }
 
 // --------------------------------------------------------------------------- server
@@ -44,6 +42,7 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
               [this] { sessions_.close_all(); }}),
       sessions_(counters_.connections_closed),
       backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& frame) { deliver(frame); }) {
+    register_metrics(own_metrics_);
     if (!config_.wall_clock_us) {
         config_.wall_clock_us = [] {
             return std::chrono::duration_cast<std::chrono::microseconds>(
@@ -73,7 +72,7 @@ void HttpServer::admit(asio::ip::tcp::socket socket) {
 }
 
 void HttpServer::on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& session) {
-    counters_.ws_connections.fetch_add(1, std::memory_order_relaxed);
+    counters_.ws_connections.add();
     ws_sessions_[id] = session;
     ws_clients_.store(ws_sessions_.size());
 }
@@ -98,17 +97,18 @@ std::string HttpServer::hello_json(std::uint32_t subject) const {
                                             config_.control_loopback_only});
 }
 
+void HttpServer::register_metrics(MetricsRegistry& registry) const {
+    registry.add(counters_.group);
+    registry.add_gauge("http_clients", "HTTP and WebSocket connections open now",
+                       [this] { return static_cast<double>(sessions_.open()); });
+    registry.add_gauge("http_ws_clients", "Viewer WebSocket connections open now",
+                       [this] { return static_cast<double>(ws_clients_.load()); });
+    registry.add_gauge("subjects_active", "Subjects that delivered a frame in the last 2 s",
+                       [this] { return static_cast<double>(active_subjects(2'000'000)); });
+}
+
 std::string HttpServer::metrics_text() {
-    MetricsSnapshot m = handlers_.metrics ? handlers_.metrics() : MetricsSnapshot{};
-    for (NamedCounter& c : counters_.snapshot())
-        m.counters.push_back(std::move(c));
-    m.gauges.push_back(
-        {"http_clients", "HTTP and WebSocket connections open now", static_cast<double>(sessions_.open())});
-    m.gauges.push_back(
-        {"http_ws_clients", "Viewer WebSocket connections open now", static_cast<double>(ws_clients_.load())});
-    m.gauges.push_back({"subjects_active", "Subjects that delivered a frame in the last 2 s",
-                        static_cast<double>(active_subjects(2'000'000))});
-    return render_prometheus(m);
+    return render_prometheus(handlers_.metrics ? handlers_.metrics() : own_metrics_.snapshot());
 }
 
 void HttpServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
@@ -127,10 +127,10 @@ void HttpServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose
     if (ws_clients_.load(std::memory_order_relaxed) == 0 || !serve_.running()) return;
 
     auto json = std::make_shared<std::string>(encode_frame_json(frame, pose, now));
-    counters_.ws_frames_encoded.fetch_add(1, std::memory_order_relaxed);
+    counters_.ws_frames_encoded.add();
 
     if (!backlog_.push({frame.subject_id, std::move(json)})) {
-        counters_.ws_backlog_dropped.fetch_add(1, std::memory_order_relaxed);
+        counters_.ws_backlog_dropped.add();
     }
 }
 

@@ -95,30 +95,35 @@ struct HealthStatus {
 
 /// Called on the serve thread; must return quickly and be safe from any thread.
 struct HttpHandlers {
-    ControlHandlers control;                   ///< calibrate, start/stop_recording used
-    std::function<MetricsSnapshot()> metrics;  ///< daemon counters, gauges, latencies
-    std::function<HealthStatus()> health;      ///< empty = always healthy
+    ControlHandlers control;  ///< calibrate, start/stop_recording used
+    /// What /metrics renders: the daemon's registry, which holds this server's metrics too
+    /// (register_metrics). Empty = this server's own metrics only.
+    std::function<MetricsSnapshot()> metrics;
+    std::function<HealthStatus()> health;  ///< empty = always healthy
 };
 
 struct HttpServerCounters {
-    using C = std::atomic<std::uint64_t>;
-    C connections_accepted{0};
-    C connections_rejected_full{0};
-    C connections_closed{0};
-    C requests{0};
-    C bad_requests{0};  ///< unparseable, unknown path or method (4xx)
-    C metrics_scrapes{0};
-    C health_checks{0};
-    C ws_connections{0};
-    C ws_frames_encoded{0};
-    C ws_frames_sent{0};
-    C ws_frames_dropped{0};   ///< oldest frames dropped from lagging browsers
-    C ws_backlog_dropped{0};  ///< the serve thread fell behind publish()
-    C ws_client_messages{0};  ///< messages browsers sent (ignored)
-    C write_errors{0};
+    Counter connections_accepted;
+    Counter connections_rejected_full;
+    Counter connections_closed;
+    Counter requests;
+    Counter bad_requests;  ///< unparseable, unknown path or method (4xx)
+    Counter metrics_scrapes;
+    Counter health_checks;
+    Counter ws_connections;
+    Counter ws_frames_encoded;
+    Counter ws_frames_sent;
+    Counter ws_frames_dropped;   ///< oldest frames dropped from lagging browsers
+    Counter ws_backlog_dropped;  ///< the serve thread fell behind publish()
+    Counter ws_client_messages;  ///< messages browsers sent (ignored)
+    Counter write_errors;
     ControlCounters control;  ///< http.control_* (control_access.hpp)
-    /// Every counter as "http.<name>".
-    [[nodiscard]] std::vector<NamedCounter> snapshot() const;
+
+    /// Component "http": every counter above by its member name (the metrics registry's
+    /// entry, core/metrics_registry.hpp).
+    CounterGroup group{"http"};
+
+    HttpServerCounters();
 };
 
 class HttpServer {
@@ -140,6 +145,9 @@ public:
     [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }
     [[nodiscard]] std::size_t ws_client_count() const { return ws_clients_.load(); }
     [[nodiscard]] const HttpServerCounters& counters() const { return counters_; }
+    /// Set-up: counter group "http" and gauges "http_clients", "http_ws_clients" and
+    /// "subjects_active" (frames in the last 2 s).
+    void register_metrics(MetricsRegistry& registry) const;
     /// Subjects whose last frame is at most `window_us` old (wall clock); any thread.
     [[nodiscard]] std::size_t active_subjects(std::int64_t window_us) const;
     /// Wall-clock time of the newest published frame (0 = none yet); any thread.
@@ -164,7 +172,8 @@ private:
     HttpDescription description_;
     HttpHandlers handlers_;
     HttpServerCounters counters_;
-    LogLimiter log_;  ///< one refusal line per 10 s, not one per request
+    MetricsRegistry own_metrics_;  ///< this server's alone: /metrics without a metrics handler
+    LogLimiter log_;               ///< one refusal line per 10 s, not one per request
 
     ServeThread serve_;               // before the sessions and the backlog, which use its io_context
     SessionTable<Session> sessions_;  // HTTP and WebSocket; serve thread (open(): any thread)

@@ -44,7 +44,7 @@ PoseBroadcaster::~PoseBroadcaster() = default;
 
 void PoseBroadcaster::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
     if (stopped_.load(std::memory_order_acquire)) return;
-    counters_.frames_published.fetch_add(1, std::memory_order_relaxed);
+    counters_.frames_published.add();
     if (all_subject_users_.load(std::memory_order_relaxed) == 0 &&
         subject_interest_[frame.subject_id % kInterestSlots].load(std::memory_order_relaxed) == 0) {
         return;  // nobody watches this subject
@@ -59,7 +59,7 @@ void PoseBroadcaster::publish(const SubjectFrame& frame, const skeleton::Skeleto
         for (std::uint32_t f = 1; f < kFieldCombinations; ++f) {
             if (field_users_[f].load(std::memory_order_relaxed) == 0) continue;
             encoded.by_fields[f] = encoder_.encode_frame(frame, pose, f, now_us);
-            counters_.frames_encoded.fetch_add(1, std::memory_order_relaxed);
+            counters_.frames_encoded.add();
             any = true;
         }
     }
@@ -73,7 +73,7 @@ void PoseBroadcaster::publish(const SubjectFrame& frame, const skeleton::Skeleto
             if (lane.pending.size() >= backlog_frames_) {
                 // The lane's thread is not keeping up at all (not a slow client: those
                 // drop in their own queues). Dropping here keeps publish() bounded.
-                counters_.backlog_dropped.fetch_add(1, std::memory_order_relaxed);
+                counters_.backlog_dropped.add();
                 continue;
             }
             lane.pending.push_back(encoded);

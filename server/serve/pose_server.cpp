@@ -11,6 +11,13 @@
 
 namespace mocap::serve {
 
+void PoseServer::register_metrics(MetricsRegistry& registry) const {
+    registry.add(counters_.group);
+    registry.add_gauge(
+        "pose_clients", "Protobuf pose clients connected now", [this] { return static_cast<double>(client_count()); },
+        "clients");
+}
+
 PoseServer::PoseServer(ServeConfig config, ControlHandlers handlers)
     : config_(std::move(config)), handlers_(std::move(handlers)) {
     if (!config_.wall_clock_us) {
@@ -140,7 +147,7 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
     if (ec == asio::error::operation_aborted || !running_.load()) return;
     if (ec) {
         // E.g. EMFILE: back off briefly instead of spinning on a failing accept.
-        counters_.accept_errors.fetch_add(1, std::memory_order_relaxed);
+        counters_.accept_errors.add();
         std::uint64_t suppressed = 0;
         if (log_.allow(LogLimiter::kAcceptError, suppressed)) {
             spdlog::warn("serve: accept: {} ({} suppressed)", ec.message(), suppressed);
@@ -155,7 +162,7 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
     const std::size_t lane = next_lane_;
     next_lane_ = (next_lane_ + 1) % lanes_.size();
     if (active_clients_.load() >= config_.max_clients) {
-        counters_.connections_rejected_full.fetch_add(1, std::memory_order_relaxed);
+        counters_.connections_rejected_full.add();
         std::uint64_t suppressed = 0;
         if (log_.allow(LogLimiter::kClientFull, suppressed)) {
             spdlog::warn("serve: client limit {} reached, connection refused ({} suppressed)", config_.max_clients,
@@ -164,7 +171,7 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
         reject(socket);
     } else {
         active_clients_.fetch_add(1);
-        counters_.connections_accepted.fetch_add(1, std::memory_order_relaxed);
+        counters_.connections_accepted.add();
         asio::post(lanes_[lane]->io,
                    [this, lane, s = std::move(socket)]() mutable { start_session(lane, std::move(s)); });
     }

@@ -17,7 +17,8 @@
 // Control and stats callbacks run on serve threads. publish() may be called from any
 // thread; set_description() too (clients connecting later see the new Hello).
 //
-// Counters: counters() / counter_snapshot(); they are also part of every Stats reply.
+// Metrics: counters() for tests; register_metrics() puts them in the daemon's registry, which
+// the Stats reply renders (a server without a stats handler answers with its own counters).
 #pragma once
 
 #include <atomic>
@@ -32,6 +33,7 @@
 
 #include "core/asio.hpp"
 #include "core/frame.hpp"
+#include "core/metrics_registry.hpp"
 #include "serve/client_session.hpp"
 #include "serve/pose_broadcaster.hpp"
 #include "serve/serve_config.hpp"
@@ -67,7 +69,8 @@ public:
     /// Connected clients (including ones still handshaking).
     [[nodiscard]] std::size_t client_count() const { return active_clients_.load(); }
     [[nodiscard]] const ServeCounters& counters() const { return counters_; }
-    [[nodiscard]] std::vector<NamedCounter> counter_snapshot() const { return counters_.snapshot(); }
+    /// Set-up: counter group "serve" and gauge "pose_clients" (logged as "clients").
+    void register_metrics(MetricsRegistry& registry) const;
     [[nodiscard]] const ServeConfig& config() const { return config_; }
 
 private:

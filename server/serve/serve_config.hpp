@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "core/counters.hpp"
+#include "core/metrics_registry.hpp"
 
 namespace mocap::serve {
 
@@ -72,19 +72,6 @@ struct ControlResult {
     static ControlResult failure(std::string why) { return {false, std::move(why)}; }
 };
 
-using NamedCounter = CounterValue;  ///< "component.name" and its value (core/counters.hpp)
-
-struct StageLatencySummary {
-    std::string stage;  ///< e.g. "ingest", "filter", "assembly", "encode"
-    std::uint64_t count = 0;
-    double p50_us = 0, p90_us = 0, p99_us = 0, max_us = 0;
-};
-
-struct StatsSnapshot {
-    std::vector<NamedCounter> counters;
-    std::vector<StageLatencySummary> latencies;
-};
-
 /// Actions the daemon performs for control requests, and its stats. Each is called on
 /// a serve thread after the token was checked; it must return quickly (start the work
 /// elsewhere and report "accepted" rather than block: it delays that thread's clients).
@@ -94,8 +81,9 @@ struct ControlHandlers {
     std::function<ControlResult(const std::string& path)> start_recording;  ///< "" = default
     std::function<ControlResult()> stop_recording;
     std::function<ControlResult()> reload;
-    /// Daemon-wide counters and stage latencies for StatsRequest (serve adds its own).
-    std::function<StatsSnapshot()> stats;
+    /// Every metric for StatsRequest: the daemon's registry (core/metrics_registry.hpp),
+    /// which holds the pose service's own counters too. Empty = the server's own counters.
+    std::function<MetricsSnapshot()> stats;
 };
 
 }  // namespace mocap::serve

@@ -1,15 +1,14 @@
 // serve_counters.hpp — counters of the pose service (docs/style.md, "Counters only go up") and a
 // log limiter so that a flood of bad clients yields one log line per interval.
 //
-// Thread-safety: all members are atomics, updated with relaxed ordering from any serve
-// thread and the publishing thread; snapshots are not atomic across counters.
+// Thread-safety: the counters are core/counters.hpp Counters, added to from any serve
+// thread and the publishing thread; reads are not atomic across counters.
 #pragma once
 
 #include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
-#include <vector>
 
 #include "serve/control_access.hpp"
 #include "serve/serve_config.hpp"
@@ -17,29 +16,31 @@
 namespace mocap::serve {
 
 struct ServeCounters {
-    using C = std::atomic<std::uint64_t>;
-    C connections_accepted{0};
-    C connections_rejected_full{0};  ///< client limit reached
-    C connections_closed{0};
-    C accept_errors{0};
-    C frames_published{0};  ///< frames handed to publish()
-    C frames_encoded{0};    ///< encodings (one per frame and field selection in use)
-    C frames_sent{0};       ///< frame deliveries written to clients (sum over clients)
-    C frames_dropped{0};    ///< oldest frames dropped from lagging clients' queues
-    C backlog_dropped{0};   ///< frames dropped because a serve thread fell behind publish()
-    C bytes_sent{0};
-    C subscriptions{0};
-    C malformed_messages{0};  ///< unparseable message or garbage length prefix
-    C oversized_messages{0};  ///< length prefix above max_client_message_bytes
-    C unknown_messages{0};    ///< parseable but no known body (newer client): ignored
-    C idle_timeouts{0};       ///< no Subscribe/valid message within subscribe_timeout_ms
-    C rate_limited{0};        ///< clients closed for sending too many messages
-    C write_errors{0};
-    C stats_requests{0};
+    Counter connections_accepted;
+    Counter connections_rejected_full;  ///< client limit reached
+    Counter connections_closed;
+    Counter accept_errors;
+    Counter frames_published;  ///< frames handed to publish()
+    Counter frames_encoded;    ///< encodings (one per frame and field selection in use)
+    Counter frames_sent;       ///< frame deliveries written to clients (sum over clients)
+    Counter frames_dropped;    ///< oldest frames dropped from lagging clients' queues
+    Counter backlog_dropped;   ///< frames dropped because a serve thread fell behind publish()
+    Counter bytes_sent;
+    Counter subscriptions;
+    Counter malformed_messages;  ///< unparseable message or garbage length prefix
+    Counter oversized_messages;  ///< length prefix above max_client_message_bytes
+    Counter unknown_messages;    ///< parseable but no known body (newer client): ignored
+    Counter idle_timeouts;       ///< no Subscribe/valid message within subscribe_timeout_ms
+    Counter rate_limited;        ///< clients closed for sending too many messages
+    Counter write_errors;
+    Counter stats_requests;
     ControlCounters control;  ///< serve.control_* (control_access.hpp)
 
-    /// Every counter as "serve.<name>".
-    [[nodiscard]] std::vector<NamedCounter> snapshot() const;
+    /// Component "serve": every counter above by its member name (the metrics registry's
+    /// entry, core/metrics_registry.hpp).
+    CounterGroup group{"serve"};
+
+    ServeCounters();
 };
 
 /// Allows one log line per kind per interval and counts what it suppressed.

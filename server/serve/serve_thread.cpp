@@ -60,10 +60,10 @@ void ServeThread::on_accept(const boost::system::error_code& ec, asio::ip::tcp::
     if (!ec) {
         boost::system::error_code ignored;
         if (hooks_.open_clients() >= max_clients_) {
-            counters_.rejected_full.fetch_add(1, std::memory_order_relaxed);
+            counters_.rejected_full.add();
             socket.close(ignored);
         } else {
-            counters_.accepted.fetch_add(1, std::memory_order_relaxed);
+            counters_.accepted.add();
             socket.set_option(asio::ip::tcp::no_delay(true), ignored);
             hooks_.admit(std::move(socket));
         }

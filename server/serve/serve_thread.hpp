@@ -29,14 +29,15 @@
 #include <thread>
 
 #include "core/asio.hpp"
+#include "core/counters.hpp"
 
 namespace mocap::serve {
 
 class ServeThread {
 public:
     struct Counters {
-        std::atomic<std::uint64_t>& accepted;
-        std::atomic<std::uint64_t>& rejected_full;
+        Counter& accepted;
+        Counter& rejected_full;
     };
     struct Names {
         std::string service;      ///< prefix of the log line and errors: "bvh", "http"

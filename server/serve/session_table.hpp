@@ -17,13 +17,15 @@
 #include <utility>
 #include <vector>
 
+#include "core/counters.hpp"
+
 namespace mocap::serve {
 
 template <class Session>
 class SessionTable {
 public:
     /// `closed_counter` (e.g. connections_closed) must outlive the table.
-    explicit SessionTable(std::atomic<std::uint64_t>& closed_counter) : closed_counter_(closed_counter) {}
+    explicit SessionTable(Counter& closed_counter) : closed_counter_(closed_counter) {}
 
     /// A fresh id for a new session (never 0, never reused).
     [[nodiscard]] std::uint64_t next_id() { return next_id_++; }
@@ -35,7 +37,7 @@ public:
     }
     /// Unlists `id`; counts a closed connection if it was listed.
     void remove(std::uint64_t id) {
-        if (sessions_.erase(id) != 0) closed_counter_.fetch_add(1, std::memory_order_relaxed);
+        if (sessions_.erase(id) != 0) closed_counter_.add();
         open_.store(sessions_.size(), std::memory_order_relaxed);
     }
     /// Closes every session (each close() removes it).
@@ -62,7 +64,7 @@ public:
 
 private:
     std::unordered_map<std::uint64_t, std::shared_ptr<Session>> sessions_;
-    std::atomic<std::uint64_t>& closed_counter_;
+    Counter& closed_counter_;
     std::uint64_t next_id_ = 1;
     std::atomic<std::size_t> open_{0};
 };

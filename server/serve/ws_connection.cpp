@@ -68,7 +68,7 @@ void HttpServer::WsSession::do_read() {
 
 void HttpServer::WsSession::on_read(const beast::error_code& ec) {
     if (ec) return fail(ec, "read");
-    server_.counters_.ws_client_messages.fetch_add(1, std::memory_order_relaxed);
+    server_.counters_.ws_client_messages.add();
     read_buf_.consume(read_buf_.size());
     do_read();
 }
@@ -97,11 +97,11 @@ void HttpServer::WsSession::on_write(const beast::error_code& ec) {
     writing_ = false;
     if (ec) {
         if (ec != asio::error::operation_aborted) {
-            server_.counters_.write_errors.fetch_add(1, std::memory_order_relaxed);
+            server_.counters_.write_errors.add();
         }
         return fail(ec, "write");
     }
-    if (in_flight_is_frame_) server_.counters_.ws_frames_sent.fetch_add(1, std::memory_order_relaxed);
+    if (in_flight_is_frame_) server_.counters_.ws_frames_sent.add();
     in_flight_.reset();
     do_write();
 }

@@ -57,9 +57,9 @@ struct Harness {
         handlers.stop_recording = [] { return serve::ControlResult::success(); };
         handlers.reload = [] { return serve::ControlResult::failure("no config file"); };
         handlers.stats = [] {
-            serve::StatsSnapshot s;
+            mocap::MetricsSnapshot s;
             s.counters.push_back({"samples", 42});
-            s.latencies.push_back({"filter", 3, 1.0, 2.0, 3.0, 4.0});
+            s.latencies.push_back({"filter", {}});
             return s;
         };
         mocap::v1::ServerMessage m;
@@ -146,6 +146,6 @@ MOCAP_FUZZ_ENTRY(client_session) {
     MOCAP_FUZZ_CHECK(h->closed == closed_before + 1, "session did not close exactly once");
 
     const serve::ServeCounters& c = h->counters;
-    MOCAP_FUZZ_CHECK(c.connections_closed.load() == h->closed, "connections_closed");
+    MOCAP_FUZZ_CHECK(c.connections_closed.value() == h->closed, "connections_closed");
     return 0;
 }

@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 
 namespace mocap::pipeline {
 namespace {
@@ -32,6 +34,10 @@ public:
     void on_frame(const SubjectFrame& f, const skeleton::SkeletonPose& p) override {
         frames.push_back(
             {f.subject_id, f.sync, f.segment_count, f.segments[0].q_earth_sensor_wxyz, p.joint_angle_count});
+    }
+    void register_metrics(MetricsRegistry& registry) const override {
+        registry.add_gauge("test_frames", "Frames this output saw",
+                           [this] { return static_cast<double>(frames.size()); });
     }
 };
 
@@ -148,6 +154,48 @@ TEST(Pipeline, UnknownFilterNamesTheSegment) {
     c.model.segments[2].filter = "nope";
     EXPECT_FALSE(Pipeline::create(std::move(c), clock, &error));
     EXPECT_NE(error.find("filter for segment"), std::string::npos) << error;
+}
+
+// One registration call publishes every stage's metrics and the outputs' own: what the
+// daemon's Stats, /metrics and log line render (docs/performance.md, "Metrics registry").
+TEST(Pipeline, RegistersEveryStageAndOutputMetric) {
+    FixedClock clock;
+    std::string error;
+    auto p = Pipeline::create(two_subjects(), clock, &error);
+    ASSERT_TRUE(p) << error;
+    p->add_output(std::make_unique<RecordingOutput>());
+    MetricsRegistry registry;
+    p->register_metrics(registry);
+    ASSERT_TRUE(p->start_outputs(&error)) << error;
+    for (std::uint64_t sync = 1; sync <= 3; ++sync) {
+        for (std::uint8_t node = 1; node <= 15; ++node)
+            p->process(raw_sample(1, node, sync, 0.1), static_cast<std::int64_t>(sync) * 10'000);
+    }
+    p->process(raw_sample(1, 200, 4, 0.0), 40'000);
+    p->flush(1'000'000);
+
+    const MetricsSnapshot s = registry.snapshot();
+    std::map<std::string, std::uint64_t> counters;
+    for (const auto& c : s.counters)
+        EXPECT_TRUE(counters.emplace(c.name, c.value).second) << "registered twice: " << c.name;
+    EXPECT_EQ(counters.at("route.samples_routed"), 45u);
+    EXPECT_EQ(counters.at("route.samples_unknown_node"), 1u);
+    EXPECT_EQ(counters.count("latency.ingest_negative"), 1u);
+    for (const char* component : {"worker_pool.", "assembler.", "skeleton."}) {
+        EXPECT_TRUE(std::any_of(counters.begin(), counters.end(), [&](const auto& c) {
+            return c.first.rfind(component, 0) == 0;
+        })) << component;
+    }
+    EXPECT_GE(counters.at("skeleton.frames_solved"), 3u);
+    std::vector<std::string> stages;
+    for (const auto& l : s.latencies)
+        stages.push_back(l.stage);
+    EXPECT_EQ(stages, (std::vector<std::string>{"ingest", "queue_wait", "filter", "assembly"}));
+    std::map<std::string, double> gauges;
+    for (const auto& g : s.gauges)
+        gauges[g.name] = g.value;
+    EXPECT_EQ(gauges.at("subjects_configured"), 2.0);
+    EXPECT_GE(gauges.at("test_frames"), 3.0);
 }
 
 }  // namespace

@@ -113,8 +113,8 @@ TEST(BvhServer, GreetingIsHierarchyMotionFrameTimeThenOneLinePerFrame) {
     ASSERT_TRUE(clip) << clip.error;
     EXPECT_EQ(clip.clip->frame_count, 5u);
     // The client can read the lines before the server's write completion has counted them.
-    EXPECT_TRUE(wait_until([&] { return server.counters().frames_sent.load() >= 5; }));
-    EXPECT_EQ(server.counters().frames_sent.load(), 5u);
+    EXPECT_TRUE(wait_until([&] { return server.counters().frames_sent.value() >= 5; }));
+    EXPECT_EQ(server.counters().frames_sent.value(), 5u);
 }
 
 TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
@@ -138,8 +138,8 @@ TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
     std::string text = conn.read_until_lines(g, 4);
     EXPECT_EQ(text.substr(text.size() - expect_7.size()), expect_7);  // only subject 7's lines
     conn.send_text("bogus\nsubject 2\n");
-    wait_until([&] { return server.counters().bad_client_lines.load() != 0; });
-    EXPECT_EQ(server.counters().bad_client_lines.load(), 1u);
+    wait_until([&] { return server.counters().bad_client_lines.value() != 0; });
+    EXPECT_EQ(server.counters().bad_client_lines.value(), 1u);
     std::this_thread::sleep_for(50ms);  // the switch is processed on the serve thread
     for (std::uint64_t k = 0; k < 3; ++k) {
         test::make_pose(7, 10 + k, n, f, p);
@@ -181,7 +181,7 @@ TEST(BvhServer, NoClientNoEncodingAndStopClosesClients) {
     skeleton::SkeletonPose p;
     test::make_pose(1, 1, static_cast<std::uint16_t>(encoder.model().size()), f, p);
     server->publish(f, p);
-    EXPECT_EQ(server->counters().frames_published.load(), 0u);
+    EXPECT_EQ(server->counters().frames_published.value(), 0u);
     Conn conn(server->port());
     ASSERT_TRUE(wait_clients(*server, 1));
     server->stop();
@@ -202,11 +202,11 @@ TEST(BvhServer, LaggingClientLosesOldestLinesNotThePipeline) {
         test::make_pose(1, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
         server.publish(f, p);
     }
-    for (int i = 0; i < 400 && server.counters().frames_dropped.load() + server.counters().backlog_dropped.load() == 0;
+    for (int i = 0; i < 400 && server.counters().frames_dropped.value() + server.counters().backlog_dropped.value() == 0;
          ++i) {
         std::this_thread::sleep_for(5ms);
     }
-    EXPECT_GT(server.counters().frames_dropped.load() + server.counters().backlog_dropped.load(), 0u);
+    EXPECT_GT(server.counters().frames_dropped.value() + server.counters().backlog_dropped.value(), 0u);
 }
 
 }  // namespace

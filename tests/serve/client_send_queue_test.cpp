@@ -33,7 +33,7 @@ Texts drain(ClientSendQueue& q) {
 
 class ClientSendQueueTest : public testing::Test {
 protected:
-    std::atomic<std::uint64_t> dropped_{0};  // the server's shared counter
+    Counter dropped_;  // the server's shared counter
 };
 
 TEST_F(ClientSendQueueTest, KeepsOrderBelowCapacityAndCountsNothing) {
@@ -43,7 +43,7 @@ TEST_F(ClientSendQueueTest, KeepsOrderBelowCapacityAndCountsNothing) {
     push_range(q, 0, 4);
     EXPECT_EQ(q.size(), 4u);
     EXPECT_EQ(drain(q), (Texts{"0", "1", "2", "3"}));
-    EXPECT_EQ(dropped_.load(), 0u);
+    EXPECT_EQ(dropped_.value(), 0u);
     EXPECT_EQ(q.dropped_total(), 0u);
     EXPECT_EQ(q.take_unreported_drops(), 0u);
 }
@@ -52,7 +52,7 @@ TEST_F(ClientSendQueueTest, FullQueueDropsTheOldestAndCountsIt) {
     ClientSendQueue q(3, dropped_);
     push_range(q, 0, 5);
     EXPECT_EQ(q.size(), 3u);
-    EXPECT_EQ(dropped_.load(), 2u);
+    EXPECT_EQ(dropped_.value(), 2u);
     EXPECT_EQ(q.dropped_total(), 2u);
     EXPECT_EQ(drain(q), (Texts{"2", "3", "4"}));
 }
@@ -75,7 +75,7 @@ TEST_F(ClientSendQueueTest, UnreportedDropsResetButTotalStays) {
     q.push(frame(5));
     EXPECT_EQ(q.take_unreported_drops(), 1u);
     EXPECT_EQ(q.dropped_total(), 4u);
-    EXPECT_EQ(dropped_.load(), 4u);
+    EXPECT_EQ(dropped_.value(), 4u);
 }
 
 TEST_F(ClientSendQueueTest, SharedCounterSumsOverQueues) {
@@ -85,14 +85,14 @@ TEST_F(ClientSendQueueTest, SharedCounterSumsOverQueues) {
     push_range(b, 0, 3);  // 1 dropped
     EXPECT_EQ(a.dropped_total(), 2u);
     EXPECT_EQ(b.dropped_total(), 1u);
-    EXPECT_EQ(dropped_.load(), 3u);
+    EXPECT_EQ(dropped_.value(), 3u);
 }
 
 TEST_F(ClientSendQueueTest, ZeroCapacityIsOne) {
     ClientSendQueue q(0, dropped_);
     EXPECT_EQ(q.capacity(), 1u);
     push_range(q, 0, 2);
-    EXPECT_EQ(dropped_.load(), 1u);
+    EXPECT_EQ(dropped_.value(), 1u);
     EXPECT_EQ(drain(q), (Texts{"1"}));
 }
 
@@ -101,11 +101,11 @@ TEST_F(ClientSendQueueTest, ClearDiscardsWithoutCounting) {
     push_range(q, 0, 3);
     q.clear();
     EXPECT_TRUE(q.empty());
-    EXPECT_EQ(dropped_.load(), 0u);
+    EXPECT_EQ(dropped_.value(), 0u);
     EXPECT_EQ(q.take_unreported_drops(), 0u);
     // Usable again at full capacity, no drop until it overflows.
     push_range(q, 3, 6);
-    EXPECT_EQ(dropped_.load(), 0u);
+    EXPECT_EQ(dropped_.value(), 0u);
     EXPECT_EQ(drain(q), (Texts{"3", "4", "5"}));
 }
 
@@ -138,7 +138,7 @@ TEST_F(ClientSendQueueTest, OrderSurvivesManyWrapArounds) {
     }
     // 334 frames read (the last at i = 999), 4 still queued, the rest dropped.
     EXPECT_EQ(q.size(), 4u);
-    EXPECT_EQ(dropped_.load(), 1000u - 334u - 4u);
+    EXPECT_EQ(dropped_.value(), 1000u - 334u - 4u);
     EXPECT_EQ(drain(q), (Texts{"996", "997", "998", "999"}));
 }
 

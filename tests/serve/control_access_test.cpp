@@ -56,10 +56,10 @@ TEST(ControlAccess, TokenEqual) {
 struct Counts {
     std::map<std::string, std::uint64_t> by_name;
     explicit Counts(const ControlCounters& c) {
-        std::vector<NamedCounter> v;
-        c.append_to(v, "x.");
-        for (const NamedCounter& n : v)
-            by_name[n.name] = n.value;
+        CounterGroup group("x");
+        c.register_in(group);
+        for (const CounterValue& n : group.snapshot())
+            by_name["x." + n.name] = n.value;
     }
 };
 
@@ -108,8 +108,8 @@ TEST(ControlAccess, OwnersKeepTheirExposedNames) {
     // Dashboards read these names: serve.control_* in Stats, http.control_* in /metrics.
     ServeCounters serve;
     std::vector<std::string> names;
-    for (const NamedCounter& n : serve.snapshot())
-        if (n.name.find("control_") != std::string::npos) names.push_back(n.name);
+    for (const CounterValue& n : serve.group.snapshot())
+        if (n.name.find("control_") != std::string::npos) names.push_back(serve.group.component() + "." + n.name);
     EXPECT_EQ(names, (std::vector<std::string>{"serve.control_ok", "serve.control_failed",
                                                "serve.control_refused_disabled", "serve.control_refused_not_loopback",
                                                "serve.control_refused_no_token", "serve.control_refused_bad_token"}));

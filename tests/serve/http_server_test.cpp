@@ -23,6 +23,10 @@ struct Fixture {
     std::atomic<bool> healthy{true};
     std::atomic<int> calibrations{0};
     std::atomic<std::uint32_t> calibrated_subject{0};
+    // As in the daemon: one registry holds another component's counters and the server's own.
+    Counter routed;
+    CounterGroup route{"route"};
+    MetricsRegistry registry;
     std::unique_ptr<HttpServer> server;
 
     explicit Fixture(std::string token, bool loopback_only = true, std::size_t queue = 4) {
@@ -42,13 +46,13 @@ struct Fixture {
             return ControlResult::success();
         };
         h.control.start_recording = [](const std::string&) { return ControlResult::failure("disk full"); };
-        h.metrics = [] {
-            MetricsSnapshot m;
-            m.counters.push_back({"route.samples_routed", 42});
-            return m;
-        };
+        routed.add(42);
+        route.add("samples_routed", routed);
+        registry.add(route);
+        h.metrics = [this] { return registry.snapshot(); };
         h.health = [this] { return HealthStatus{healthy.load(), healthy ? "ok" : "assembler thread stalled"}; };
         server = std::make_unique<HttpServer>(c, d, h);
+        server->register_metrics(registry);
         std::string err;
         EXPECT_TRUE(server->start(err)) << err;
     }
@@ -127,16 +131,16 @@ TEST(HttpServer, ControlNeedsTheToken) {
     EXPECT_EQ(failed.status, 409u);
     EXPECT_EQ(failed.body, "{\"ok\":false,\"error\":\"disk full\"}\n");
     EXPECT_EQ(http_request(f.port(), "/api/record/stop", verb::post, good).status, 501u);  // no handler
-    EXPECT_EQ(f.server->counters().control.refused_no_token.load(), 1u);
-    EXPECT_EQ(f.server->counters().control.refused_bad_token.load(), 1u);
-    EXPECT_EQ(f.server->counters().control.ok.load(), 1u);
-    EXPECT_EQ(f.server->counters().control.failed.load(), 1u);
+    EXPECT_EQ(f.server->counters().control.refused_no_token.value(), 1u);
+    EXPECT_EQ(f.server->counters().control.refused_bad_token.value(), 1u);
+    EXPECT_EQ(f.server->counters().control.ok.value(), 1u);
+    EXPECT_EQ(f.server->counters().control.failed.value(), 1u);
 }
 
 TEST(HttpServer, ControlRefusedWithoutConfiguredToken) {
     Fixture f("");
     EXPECT_EQ(http_request(f.port(), "/api/record/stop", verb::post, {{"X-Mocap-Token", ""}}).status, 403u);
-    EXPECT_EQ(f.server->counters().control.refused_disabled.load(), 1u);
+    EXPECT_EQ(f.server->counters().control.refused_disabled.value(), 1u);
 }
 
 TEST(HttpServer, WebSocketStreamsTheChosenSubject) {
@@ -195,9 +199,9 @@ TEST(HttpServer, StalledBrowserDropsOldestAndOthersKeepUp) {
         }
     }
     EXPECT_EQ(received, kFrames) << "the reading browser must not lose a frame to the stalled one";
-    EXPECT_TRUE(wait_until([&] { return f.server->counters().ws_frames_dropped.load() > 0; }))
+    EXPECT_TRUE(wait_until([&] { return f.server->counters().ws_frames_dropped.value() > 0; }))
         << "the stalled browser's queue must drop its oldest frames";
-    EXPECT_EQ(f.server->counters().ws_backlog_dropped.load(), 0u);
+    EXPECT_EQ(f.server->counters().ws_backlog_dropped.value(), 0u);
 }
 
 }  // namespace

@@ -168,9 +168,9 @@ TEST(PoseServer, FastClientsReceiveEveryFrameOfTheirSubjectsWithDecimation) {
         }
     }
     EXPECT_EQ(ra.client().drops_announced(), 0u);
-    EXPECT_EQ(s.server.counters().frames_dropped.load(), 0u);
+    EXPECT_EQ(s.server.counters().frames_dropped.value(), 0u);
     // One encoding per frame: both clients use the same field selection.
-    EXPECT_EQ(s.server.counters().frames_encoded.load(), 2 * kFrames);
+    EXPECT_EQ(s.server.counters().frames_encoded.value(), 2 * kFrames);
 }
 
 TEST(PoseServer, ClientThatNeverReadsDropsOldestWhileFastClientGetsEverything) {
@@ -202,7 +202,7 @@ TEST(PoseServer, ClientThatNeverReadsDropsOldestWhileFastClientGetsEverything) {
         ASSERT_EQ(got[i].second, i + 1);
     EXPECT_EQ(fast.client().drops_announced(), 0u);
 
-    const std::uint64_t dropped = s.server.counters().frames_dropped.load();
+    const std::uint64_t dropped = s.server.counters().frames_dropped.value();
     EXPECT_GT(dropped, 0u);
 
     // Now the slow client reads: every frame was either delivered or announced dropped,
@@ -233,7 +233,7 @@ TEST(PoseServer, ClientLimitRejectsWithReasonAndFreesSlotsOnClose) {
     EXPECT_FALSE(c.connect("127.0.0.1", s.server.port(), 2s, error));
     ASSERT_TRUE(c.goodbye().has_value()) << error;
     EXPECT_EQ(c.goodbye()->reason(), v1::GOODBYE_SERVER_FULL);
-    EXPECT_EQ(s.server.counters().connections_rejected_full.load(), 1u);
+    EXPECT_EQ(s.server.counters().connections_rejected_full.value(), 1u);
 
     a.close();
     ASSERT_TRUE(wait_until([&] { return s.server.client_count() == 1; }));
@@ -262,11 +262,11 @@ TEST(PoseServer, GarbageAndOversizedMessagesCloseTheConnectionAndAreCounted) {
     ASSERT_TRUE(bystander.subscribe({{1}, 1, 0}, 2s, error));
 
     expect_closed_after(s, std::string(8, '\xff'), v1::GOODBYE_MALFORMED);  // overlong varint
-    EXPECT_EQ(s.server.counters().malformed_messages.load(), 1u);
+    EXPECT_EQ(s.server.counters().malformed_messages.value(), 1u);
     expect_closed_after(s, std::string("\x03\xff\xff\xff", 4), v1::GOODBYE_MALFORMED);  // bad tag
-    EXPECT_EQ(s.server.counters().malformed_messages.load(), 2u);
+    EXPECT_EQ(s.server.counters().malformed_messages.value(), 2u);
     expect_closed_after(s, std::string("\x80\x80\x40", 3), v1::GOODBYE_MALFORMED);  // 1 MiB
-    EXPECT_EQ(s.server.counters().oversized_messages.load(), 1u);
+    EXPECT_EQ(s.server.counters().oversized_messages.value(), 1u);
 
     publish(s.server, 1, 7);  // the well-behaved client is unaffected
     v1::SkeletonFrame f;
@@ -301,7 +301,7 @@ TEST(PoseServer, SilentClientIsDroppedButSubscribedReaderAndPingingClientStay) {
     EXPECT_EQ(st, ReadStatus::kClosed);
     ASSERT_TRUE(silent.goodbye().has_value());
     EXPECT_EQ(silent.goodbye()->reason(), v1::GOODBYE_TIMEOUT);
-    EXPECT_EQ(s.server.counters().idle_timeouts.load(), 1u);
+    EXPECT_EQ(s.server.counters().idle_timeouts.value(), 1u);
 
     publish(s.server, 2, 99);  // the silent-but-subscribed client still receives
     v1::SkeletonFrame f;
@@ -330,7 +330,7 @@ TEST(PoseServer, RequestFloodIsRateLimited) {
     EXPECT_EQ(pongs, 5);
     ASSERT_TRUE(c.goodbye().has_value());
     EXPECT_EQ(c.goodbye()->reason(), v1::GOODBYE_RATE_LIMITED);
-    EXPECT_EQ(s.server.counters().rate_limited.load(), 1u);
+    EXPECT_EQ(s.server.counters().rate_limited.value(), 1u);
 }
 
 TEST(PoseServer, ControlNeedsTheRightToken) {
@@ -358,7 +358,7 @@ TEST(PoseServer, ControlNeedsTheRightToken) {
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;  // no token
     EXPECT_FALSE(reply.ok());
     EXPECT_NE(reply.error().find("token"), std::string::npos);
-    EXPECT_EQ(s.server.counters().control.refused_no_token.load(), 1u);
+    EXPECT_EQ(s.server.counters().control.refused_no_token.value(), 1u);
 
     request.set_token("s3cret-tokem");  // wrong, same length
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
@@ -366,7 +366,7 @@ TEST(PoseServer, ControlNeedsTheRightToken) {
     request.set_token("s3cret-token-and-more");  // right prefix, longer
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
-    EXPECT_EQ(s.server.counters().control.refused_bad_token.load(), 2u);
+    EXPECT_EQ(s.server.counters().control.refused_bad_token.value(), 2u);
     EXPECT_EQ(calls.load(), 0);
 
     request.set_token("s3cret-token");
@@ -387,8 +387,8 @@ TEST(PoseServer, ControlNeedsTheRightToken) {
     reload.mutable_reload();
     ASSERT_TRUE(c.control(reload, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
-    EXPECT_EQ(s.server.counters().control.ok.load(), 1u);
-    EXPECT_EQ(s.server.counters().control.failed.load(), 2u);
+    EXPECT_EQ(s.server.counters().control.ok.value(), 1u);
+    EXPECT_EQ(s.server.counters().control.failed.value(), 2u);
 }
 
 TEST(PoseServer, ControlIsRefusedWhenNoTokenIsConfigured) {
@@ -410,7 +410,7 @@ TEST(PoseServer, ControlIsRefusedWhenNoTokenIsConfigured) {
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
     EXPECT_EQ(calls.load(), 0);
-    EXPECT_EQ(s.server.counters().control.refused_disabled.load(), 1u);
+    EXPECT_EQ(s.server.counters().control.refused_disabled.value(), 1u);
 }
 
 // The first IPv4 address of this host that is not loopback, if any.
@@ -451,7 +451,7 @@ TEST(PoseServer, ControlFromANonLoopbackPeerIsRefusedByDefault) {
     ASSERT_TRUE(c.control(request, reply, 2s, error)) << error;
     EXPECT_FALSE(reply.ok());
     EXPECT_NE(reply.error().find("loopback"), std::string::npos);
-    EXPECT_EQ(s.server.counters().control.refused_not_loopback.load(), 1u);
+    EXPECT_EQ(s.server.counters().control.refused_not_loopback.value(), 1u);
     EXPECT_EQ(calls.load(), 0);
 
     PoseClient local = s.connect();  // the same request over loopback is accepted
@@ -463,9 +463,13 @@ TEST(PoseServer, ControlFromANonLoopbackPeerIsRefusedByDefault) {
 TEST(PoseServer, StatsCarryServeAndDaemonCounters) {
     ControlHandlers handlers;
     handlers.stats = [] {
-        StatsSnapshot snap;
+        // The daemon's registry holds the pose service's counters too; this one stands for it.
+        MetricsSnapshot snap;
         snap.counters.push_back({"ingest.malformed_packets", 3});
-        snap.latencies.push_back({"filter", 10, 1.5, 2.5, 4.0, 9.0});
+        snap.counters.push_back({"serve.connections_accepted", 1});
+        LatencyHistogram filter;
+        filter.record(4);
+        snap.latencies.push_back({"filter", filter.snapshot()});
         return snap;
     };
     Started s(test_config(), handlers);

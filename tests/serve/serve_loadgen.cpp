@@ -79,7 +79,9 @@ int main(int argc, char** argv) {
         }
         publish_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
-    const auto counters = server.counter_snapshot();
+    MetricsRegistry registry;
+    server.register_metrics(registry);
+    const auto counters = registry.snapshot().counters;
     server.stop();
     std::printf("{\"publish_cpu_s\":%.3f", publish_s);
     for (const auto& c : counters) {
