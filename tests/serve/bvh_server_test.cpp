@@ -137,10 +137,11 @@ TEST(BvhServer, FirstSubjectWithFramesThenSwitchOnRequest) {
     const std::size_t g = greeting_line_count(encoder);
     std::string text = conn.read_until_lines(g, 4);
     EXPECT_EQ(text.substr(text.size() - expect_7.size()), expect_7);  // only subject 7's lines
-    conn.send_text("bogus\nsubject 2\n");
-    wait_until([&] { return server.counters().bad_client_lines.value() != 0; });
+    // Lines are handled in order on the serve thread: once the bad line after the request is
+    // counted, the switch to subject 2 has happened.
+    conn.send_text("subject 2\nbogus\n");
+    ASSERT_TRUE(wait_until([&] { return server.counters().bad_client_lines.value() != 0; }));
     EXPECT_EQ(server.counters().bad_client_lines.value(), 1u);
-    std::this_thread::sleep_for(50ms);  // the switch is processed on the serve thread
     for (std::uint64_t k = 0; k < 3; ++k) {
         test::make_pose(7, 10 + k, n, f, p);
         server.publish(f, p);
@@ -157,9 +158,9 @@ TEST(BvhServer, AClientThatHalfClosesAfterChoosingASubjectStillReceives) {
     auto server = started(encoder);
     Conn conn(server->port());
     ASSERT_TRUE(wait_clients(*server, 1));
-    conn.send_text("subject 5\n");
+    conn.send_text("subject 5\nbogus\n");  // the bad line is counted after the switch
+    ASSERT_TRUE(wait_until([&] { return server->counters().bad_client_lines.value() != 0; }));
     conn.half_close();
-    std::this_thread::sleep_for(50ms);
     SubjectFrame f;
     skeleton::SkeletonPose p;
     std::string expect;
@@ -202,8 +203,8 @@ TEST(BvhServer, LaggingClientLosesOldestLinesNotThePipeline) {
         test::make_pose(1, k, static_cast<std::uint16_t>(encoder.model().size()), f, p);
         server.publish(f, p);
     }
-    for (int i = 0; i < 400 && server.counters().frames_dropped.value() + server.counters().backlog_dropped.value() == 0;
-         ++i) {
+    for (int i = 0;
+         i < 400 && server.counters().frames_dropped.value() + server.counters().backlog_dropped.value() == 0; ++i) {
         std::this_thread::sleep_for(5ms);
     }
     EXPECT_GT(server.counters().frames_dropped.value() + server.counters().backlog_dropped.value(), 0u);

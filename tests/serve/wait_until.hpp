@@ -1,5 +1,6 @@
 // wait_until.hpp — the serve tests' one bounded poll: true as soon as `pred` holds, false
-// once `limit` has passed without it. Sleeps 1 ms between polls.
+// once `limit` has passed without it (generous: a sanitizer build on a loaded machine is
+// slow, and the limit only matters when the test fails). Sleeps 1 ms between polls.
 #pragma once
 
 #include <chrono>
@@ -8,7 +9,7 @@
 namespace mocap::serve {
 
 template <typename Pred>
-bool wait_until(Pred pred, std::chrono::milliseconds limit = std::chrono::seconds(5)) {
+bool wait_until(Pred pred, std::chrono::milliseconds limit = std::chrono::seconds(30)) {
     const auto deadline = std::chrono::steady_clock::now() + limit;
     while (!pred()) {
         if (std::chrono::steady_clock::now() > deadline) return false;
