@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <string>
 
 #include "mocap/v1/mocap.pb.h"
 #include "serve/stats_reply.hpp"
@@ -88,7 +89,11 @@ void ClientSession::parse_messages() {
         }
         if (!take_request_token()) {
             ctx_.counters.rate_limited.add();
-            return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, "too many requests");
+            const std::string why = fmt::format(
+                "too many requests: more than client_message_burst ({}) at once or max_client_messages_per_s ({}) "
+                "sustained",
+                ctx_.config.client_message_burst, ctx_.config.max_client_messages_per_s);
+            return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, why);
         }
         if (!handle(*in_)) return;
     }
@@ -105,7 +110,7 @@ bool ClientSession::take_request_token() {
     return true;
 }
 
-void ClientSession::protocol_error(CloseReason reason, LogLimiter::Kind kind, const char* what) {
+void ClientSession::protocol_error(CloseReason reason, LogLimiter::Kind kind, std::string_view what) {
     std::uint64_t suppressed = 0;
     if (ctx_.log.allow(kind, suppressed)) {
         boost::system::error_code ec;
@@ -242,10 +247,12 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
 
 void ClientSession::send_reply(const v1::ServerMessage& message) {
     if (closing_) return;
-    if (replies_.size() >= kMaxPendingReplies) {
-        // The client asks but does not read its answers.
+    if (replies_.size() >= max_pending_replies()) {
+        // The client asks but does not read its answers: a whole burst of them waits.
         ctx_.counters.rate_limited.add();
-        return close();
+        const std::string why =
+            fmt::format("replies not read: {} answers waiting (client_message_burst)", replies_.size());
+        return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, why);
     }
     SharedBytes bytes = encode_server_message(message);
     if (!bytes) return;

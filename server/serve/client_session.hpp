@@ -10,7 +10,10 @@
 // and there is ONE write in flight per client. Frames wait in a ClientSendQueue of
 // queue_frames; when it is full the OLDEST frame is dropped, counted, and announced
 // to this client by a DropNotice written before its next frame. Replies (Subscribed,
-// Stats, ControlReply, Pong) use a separate small queue and are never dropped.
+// Stats, ControlReply, Pong) use a separate small queue and are never dropped; it holds
+// at most client_message_burst replies, the same number the request rate limit lets a
+// client send at once, so a client that pipelines its whole burst gets every answer, and
+// one that keeps asking without reading is closed with Goodbye(RATE_LIMITED) saying so.
 // Garbage, an oversized length, a flood of requests or silence before subscribing:
 // counted, logged (rate-limited), Goodbye written, FIN sent, further input discarded
 // until the client closes or close_grace_ms passes, then closed.
@@ -67,8 +70,6 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
 public:
     /// Most messages written in one batch (one writev).
     static constexpr std::size_t kMaxBatch = 32;
-    /// Replies that may wait for a client that does not read; beyond: closed.
-    static constexpr std::size_t kMaxPendingReplies = 16;
 
     /// `socket` must belong to the lane's io_context.
     ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, std::size_t lane, std::uint64_t id);
@@ -106,7 +107,9 @@ private:
     void handle_control(const v1::ClientMessage& message);
     void send_reply(const v1::ServerMessage& message);
     bool take_request_token();
-    void protocol_error(CloseReason reason, LogLimiter::Kind kind, const char* what);
+    /// Replies that may wait unwritten: one per request of a full burst (see above).
+    [[nodiscard]] std::size_t max_pending_replies() const { return ctx_.config.client_message_burst; }
+    void protocol_error(CloseReason reason, LogLimiter::Kind kind, std::string_view what);
     void unsubscribe();
 
     asio::ip::tcp::socket socket_;

@@ -333,6 +333,56 @@ TEST(PoseServer, RequestFloodIsRateLimited) {
     EXPECT_EQ(s.server.counters().rate_limited.value(), 1u);
 }
 
+// n Pings in one write: the server sees them at once, as a pipelining client sends them.
+void send_pipelined_pings(PoseClient& c, int n) {
+    v1::ClientMessage ping;
+    ping.mutable_ping()->set_nonce(1);
+    std::string bytes;
+    for (int i = 0; i < n; ++i)
+        ASSERT_TRUE(append_delimited(ping, bytes));
+    ASSERT_EQ(::send(c.fd(), bytes.data(), bytes.size(), MSG_NOSIGNAL), static_cast<ssize_t>(bytes.size()));
+}
+
+// Issue 13, item 12: the documented burst is 40 requests at once, but 20 pipelined requests
+// closed the connection: more than 16 unwritten replies counted as a client that does not
+// read. The reply cap is now the burst itself.
+TEST(PoseServer, FortyPipelinedRequestsWithTheDefaultLimitsAreAllAnswered) {
+    Started s(test_config());
+    ASSERT_EQ(s.server.config().client_message_burst, 40u);  // the documented default
+    PoseClient c = s.connect();
+    send_pipelined_pings(c, 40);
+    v1::ServerMessage m;
+    int pongs = 0;
+    while (pongs < 40 && c.next(m, 5s) == ReadStatus::kMessage)
+        pongs += m.has_pong() ? 1 : 0;
+    EXPECT_EQ(pongs, 40);
+    EXPECT_FALSE(c.goodbye().has_value());
+    EXPECT_EQ(s.server.counters().rate_limited.value(), 0u);
+    EXPECT_EQ(s.server.counters().connections_closed.value(), 0u);
+}
+
+// ... and the 41st and later requests of the burst get a Goodbye that names the limit. The
+// sustained rate is set near zero so that no request token refills while the server parses,
+// however slow the machine.
+TEST(PoseServer, RequestsBeyondTheBurstGetAGoodbyeThatSaysWhy) {
+    ServeConfig config = test_config();
+    config.max_client_messages_per_s = 0.01;
+    Started s(config);
+    PoseClient c = s.connect();
+    send_pipelined_pings(c, 45);
+    v1::ServerMessage m;
+    int pongs = 0;
+    ReadStatus st;
+    while ((st = c.next(m, 5s)) == ReadStatus::kMessage)
+        pongs += m.has_pong() ? 1 : 0;
+    EXPECT_EQ(st, ReadStatus::kClosed);
+    EXPECT_EQ(pongs, 40);
+    ASSERT_TRUE(c.goodbye().has_value());
+    EXPECT_EQ(c.goodbye()->reason(), v1::GOODBYE_RATE_LIMITED);
+    EXPECT_NE(c.goodbye()->message().find("client_message_burst (40)"), std::string::npos) << c.goodbye()->message();
+    EXPECT_EQ(s.server.counters().rate_limited.value(), 1u);
+}
+
 TEST(PoseServer, ControlNeedsTheRightToken) {
     std::atomic<int> calls{0};
     std::atomic<std::uint32_t> subject{0};
