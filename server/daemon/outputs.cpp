@@ -260,8 +260,8 @@ bool BvhRecorderOutput::start(std::string* error) {
 }
 
 bool BvhRecorderOutput::stop(std::string* error) {
-    if (!recorder_.recording()) return true;
-    return recorder_.stop(error, &frames_written_);  // patches the frame count
+    if (!recorder_.has_file()) return true;
+    return recorder_.stop(error, &frames_written_);  // patches the frame count; false after a write failure
 }
 
 std::span<const OutputEntry> output_registry() {

@@ -98,7 +98,11 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
                     break;
             }
         }
-        result->truncated = result->truncated || reader.truncated();
+        if (reader.truncated()) {
+            // What a crash or a full disk leaves: the file replays up to its last whole record.
+            spdlog::warn("replay: {}: {}", path, reader.truncation());
+            result->truncated = true;
+        }
     }
     pipeline->flush(now_us);
     result->frames = pipeline->solver().counters().value("frames_solved").value_or(0);

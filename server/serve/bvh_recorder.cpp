@@ -2,7 +2,6 @@
 
 #include <fcntl.h>
 #include <spdlog/spdlog.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -19,20 +18,6 @@ namespace mocap::serve {
 
 namespace {
 
-bool write_all_at(int fd, const char* data, std::size_t n, off_t offset) {
-    while (n > 0) {
-        const ssize_t w = ::pwrite(fd, data, n, offset);
-        if (w < 0) {
-            if (errno == EINTR) continue;
-            return false;
-        }
-        data += w;
-        n -= static_cast<std::size_t>(w);
-        offset += w;
-    }
-    return true;
-}
-
 std::string count_digits(std::uint64_t frames) {
     char buf[32];
     std::snprintf(buf, sizeof buf, "%0*llu", kBvhCountDigits, static_cast<unsigned long long>(frames));
@@ -41,18 +26,21 @@ std::string count_digits(std::uint64_t frames) {
 
 }  // namespace
 
-BvhRecorder::BvhRecorder(BvhRecorderConfig config, const BvhFrameEncoder& encoder)
-    : config_(std::move(config)), encoder_(encoder) {
+BvhRecorder::BvhRecorder(BvhRecorderConfig config, const BvhFrameEncoder& encoder, FileWriter& writer)
+    : config_(std::move(config)), encoder_(encoder), file_writer_(writer) {
     group_.add("recordings_started", started_);
     group_.add("frames_recorded", recorded_);
     group_.add("frames_dropped", dropped_);
+    group_.add("frames_lost", lost_);
     group_.add("write_errors", write_errors_);
+    group_.add("disk_full", disk_full_);
+    group_.add("recordings_failed", failed_);
     line_.reserve(16 * encoder_.values_per_frame());
 }
 
 BvhRecorder::~BvhRecorder() {
-    std::string ignored;
-    if (recording()) stop(&ignored);
+    std::lock_guard control(control_mutex_);
+    finish();
 }
 
 bool BvhRecorder::start(const std::string& requested, std::string* error, std::string* opened_path) {
@@ -61,6 +49,7 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
         *error = "a BVH recording is already running";
         return false;
     }
+    finish();  // a recording that stopped on a write failure (logged then)
     std::string path = requested;
     int fd = -1;
     if (path.empty()) {
@@ -79,14 +68,20 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
     }
     const std::string head = encoder_.hierarchy() + "MOTION\nFrames: ";
     const std::string header = head + count_digits(0) + "\n" + encoder_.frame_time_line();
-    if (!write_all_at(fd, header.data(), header.size(), 0)) {
-        *error = "cannot write " + path + ": " + errno_text(errno);
+    if (const int err = write_whole(file_writer_, fd, header.data(), header.size(), 0); err != 0) {
+        if (is_disk_full(err)) disk_full_.add();
+        write_errors_.add();
+        *error = "cannot write " + path + ": " + errno_text(err);
         ::close(fd);
+        ::unlink(path.c_str());  // a file without its header is no recording
         return false;
     }
     fd_ = fd;
+    path_ = path;
     count_offset_ = head.size();
+    file_end_ = header.size();
     frames_written_ = 0;
+    failure_.clear();
     {
         std::lock_guard lock(mutex_);
         pending_.clear();
@@ -107,10 +102,21 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
 
 bool BvhRecorder::stop(std::string* error, std::uint64_t* frames) {
     std::lock_guard control(control_mutex_);
-    if (!recording()) {
+    if (!writer_.joinable()) {
         *error = "no BVH recording is running";
         return false;
     }
+    finish();
+    if (frames) *frames = frames_written_;
+    if (!failure_.empty()) {
+        *error = failure_;
+        return false;
+    }
+    return true;
+}
+
+void BvhRecorder::finish() {
+    if (!writer_.joinable()) return;
     recording_.store(false, std::memory_order_release);
     {
         std::lock_guard lock(mutex_);
@@ -118,11 +124,16 @@ bool BvhRecorder::stop(std::string* error, std::uint64_t* frames) {
     }
     wake_.notify_one();
     writer_.join();
+    {
+        // Frames that arrived after a failed write stopped the writer.
+        std::lock_guard lock(mutex_);
+        lost_.add(pending_frames_);
+        pending_.clear();
+        pending_frames_ = 0;
+    }
     ::close(fd_);
     fd_ = -1;
-    spdlog::info("bvh record: closed after {} frames", frames_written_);
-    if (frames) *frames = frames_written_;
-    return true;
+    spdlog::info("bvh record: closed {} after {} frames", path_, frames_written_);
 }
 
 void BvhRecorder::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
@@ -138,10 +149,9 @@ void BvhRecorder::publish(const SubjectFrame& frame, const skeleton::SkeletonPos
     }
     pending_ += line_;
     ++pending_frames_;
-    recorded_.add();
 }
 
-bool BvhRecorder::write_pending(std::string& scratch, std::uint64_t& frames_in_file) {
+bool BvhRecorder::write_pending(std::string& scratch) {
     std::uint64_t frames = 0;
     {
         std::lock_guard lock(mutex_);
@@ -150,16 +160,33 @@ bool BvhRecorder::write_pending(std::string& scratch, std::uint64_t& frames_in_f
         pending_frames_ = 0;
     }
     if (scratch.empty()) return true;
-    struct stat st {};
-    bool ok = ::fstat(fd_, &st) == 0 && write_all_at(fd_, scratch.data(), scratch.size(), st.st_size);
-    if (ok) {
-        frames_in_file += frames;
-        const std::string digits = count_digits(frames_in_file);
-        ok = write_all_at(fd_, digits.data(), digits.size(), static_cast<off_t>(count_offset_));
+    // Lines first, then the count; a failure of either cuts the file back to its last
+    // whole line, so the count written before still matches the lines.
+    int err = write_whole(file_writer_, fd_, scratch.data(), scratch.size(), static_cast<off_t>(file_end_));
+    if (err == 0) {
+        const std::string digits = count_digits(frames_written_ + frames);
+        err = write_whole(file_writer_, fd_, digits.data(), digits.size(), static_cast<off_t>(count_offset_));
+        if (err != 0) {
+            while (file_writer_.ftruncate(fd_, static_cast<off_t>(file_end_)) != 0 && errno == EINTR) {
+            }
+        }
     }
-    if (!ok) write_errors_.add();
+    const std::size_t bytes = scratch.size();
     scratch.clear();
-    return ok;
+    if (err != 0) {
+        write_errors_.add();
+        if (is_disk_full(err)) disk_full_.add();
+        failed_.add();
+        lost_.add(frames);
+        failure_ = "BVH recording stopped early: write to " + path_ + " failed: " + errno_text(err) +
+                   "; the file holds " + std::to_string(frames_written_) + " whole frames";
+        spdlog::error("bvh record: {}", failure_);
+        return false;
+    }
+    file_end_ += bytes;
+    frames_written_ += frames;
+    recorded_.add(frames);
+    return true;
 }
 
 void BvhRecorder::writer_loop() {
@@ -172,7 +199,11 @@ void BvhRecorder::writer_loop() {
             wake_.wait_for(lock, interval, [this] { return stop_writer_; });
             stopping = stop_writer_;
         }
-        write_pending(scratch, frames_written_);
+        if (!write_pending(scratch)) {
+            // Stop taking frames; stop() (or the next start()) joins this thread and reports.
+            recording_.store(false, std::memory_order_release);
+            return;
+        }
         if (stopping) return;
     }
 }

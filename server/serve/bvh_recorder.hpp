@@ -11,6 +11,12 @@
 // daemon leaves a file that loads (up to the last flush). If it was killed between the
 // write and the patch, `mocap-bvh-repair FILE` (repair_bvh_file) counts the complete
 // MOTION lines, cuts a partial last line and rewrites the count.
+// Write failures (a full disk): lines go to a tracked offset and a failed write is cut back
+// to the last whole line (serve/record_file.hpp), so the file always holds whole lines and a
+// count that matches them. The recording then stops: the writer logs the reason ONCE, counts
+// the frames it could not write (frames_lost), and the next stop() answers false with that
+// reason and the number of frames the file holds. A new start() works again once there is
+// room (a file whose header cannot be written is removed).
 //
 // Threads: publish() on the assembler thread (cheap when not recording: one atomic load;
 // recording: encode one line, append it to a buffer under a short lock, never I/O).
@@ -29,6 +35,7 @@
 #include "core/frame.hpp"
 #include "core/metrics_registry.hpp"
 #include "serve/bvh_frame_encoder.hpp"
+#include "serve/record_file.hpp"
 #include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
@@ -42,8 +49,8 @@ struct BvhRecorderConfig {
 
 class BvhRecorder {
 public:
-    /// `encoder` must outlive the recorder.
-    BvhRecorder(BvhRecorderConfig config, const BvhFrameEncoder& encoder);
+    /// `encoder` and `writer` (how the file is written; tests inject failures) must outlive the recorder.
+    BvhRecorder(BvhRecorderConfig config, const BvhFrameEncoder& encoder, FileWriter& writer = system_file_writer());
     ~BvhRecorder();
     BvhRecorder(const BvhRecorder&) = delete;
     BvhRecorder& operator=(const BvhRecorder&) = delete;
@@ -52,22 +59,34 @@ public:
     /// Fails if one is running or the file cannot be created (an existing file is not
     /// overwritten). On success *opened_path (if given) is the file.
     bool start(const std::string& requested, std::string* error, std::string* opened_path = nullptr);
-    /// Any thread. Writes the rest, patches the count, closes. False if none is running.
+    /// Any thread. Writes the rest, patches the count, closes; *frames = whole frames in the
+    /// file. False if none is running, or if the recording had stopped on a write failure
+    /// (*error says why and how many frames the file holds; *frames is set as well).
     bool stop(std::string* error, std::uint64_t* frames = nullptr);
 
     /// Assembler thread.
     void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     [[nodiscard]] bool recording() const { return recording_.load(std::memory_order_acquire); }
-    /// Component "bvh_record": recordings_started, frames_recorded, frames_dropped,
-    /// write_errors.
+    /// Any thread. A file is open: recording, or stopped by a write failure and not yet
+    /// stop()ped.
+    [[nodiscard]] bool has_file() {
+        std::lock_guard control(control_mutex_);
+        return writer_.joinable();
+    }
+    /// Component "bvh_record": recordings_started, frames_recorded (written to the file),
+    /// frames_dropped (buffer full), frames_lost (the file could not take them),
+    /// write_errors, disk_full, recordings_failed (stopped by a write failure).
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
     /// Set-up: the counters above.
     void register_metrics(MetricsRegistry& registry) const { registry.add(group_); }
 
 private:
     void writer_loop();
-    bool write_pending(std::string& scratch, std::uint64_t& frames_in_file);
+    /// Writes what is pending; on a failure records it in failure_ and returns false.
+    bool write_pending(std::string& scratch);
+    /// Stops the writer thread and closes the file (control_mutex_ held).
+    void finish();
 
     BvhRecorderConfig config_;
     const BvhFrameEncoder& encoder_;
@@ -82,12 +101,16 @@ private:
     bool stop_writer_ = false;
 
     int fd_ = -1;
+    std::string path_;
     std::uint64_t count_offset_ = 0;  // file offset of the ten count digits
+    std::uint64_t file_end_ = 0;      // end of the last whole line written
     std::uint64_t frames_written_ = 0;
+    std::string failure_;  // why the writer stopped early (writer thread, read after join)
+    FileWriter& file_writer_;
     std::thread writer_;
     std::string line_;  // assembler thread scratch
 
-    Counter started_, recorded_, dropped_, write_errors_;
+    Counter started_, recorded_, dropped_, lost_, write_errors_, disk_full_, failed_;
     CounterGroup group_{"bvh_record"};
 };
 

@@ -44,19 +44,6 @@ std::string utc_stamp(std::int64_t us) {
     return buf;
 }
 
-bool write_all(int fd, const char* data, std::size_t n) {
-    while (n > 0) {
-        const ssize_t w = ::write(fd, data, n);
-        if (w < 0) {
-            if (errno == EINTR) continue;
-            return false;
-        }
-        data += w;
-        n -= static_cast<std::size_t>(w);
-    }
-    return true;
-}
-
 }  // namespace
 
 void append_raw_sample_record(const SegmentSample& s, std::string& out) {
@@ -82,14 +69,17 @@ void append_raw_sample_record(const SegmentSample& s, std::string& out) {
     append_record(record, out);
 }
 
-RawRecorder::RawRecorder(RawRecorderConfig config, const Clock& clock)
-    : config_(std::move(config)), clock_(clock), ring_(config_.ring_capacity) {
+RawRecorder::RawRecorder(RawRecorderConfig config, const Clock& clock, FileWriter& writer)
+    : config_(std::move(config)), clock_(clock), file_writer_(writer), ring_(config_.ring_capacity) {
     group_.add("samples_recorded", recorded_);
     group_.add("samples_dropped", dropped_);
+    group_.add("samples_lost", lost_);
     group_.add("bytes_written", bytes_);
     group_.add("files_opened", files_);
     group_.add("write_errors", write_errors_);
-    buffer_.reserve(1u << 20);
+    group_.add("disk_full", disk_full_);
+    group_.add("write_pauses", pauses_);
+    buffer_.reserve(std::min<std::size_t>(config_.max_buffer_bytes, 1u << 20));
 }
 
 RawRecorder::~RawRecorder() {
@@ -98,7 +88,10 @@ RawRecorder::~RawRecorder() {
 
 bool RawRecorder::start(std::string* error) {
     series_stamp_ = utc_stamp(clock_.now_us());
-    if (!open_next(error)) return false;
+    if (open_next(error) != 0) {
+        *error = "raw recording: " + *error;
+        return false;
+    }
     writer_ = std::thread([this] {
         pthread_setname_np(pthread_self(), "mocap-rawrec");
         writer_loop();
@@ -123,25 +116,35 @@ std::string RawRecorder::current_path() const {
     return path_;
 }
 
-bool RawRecorder::open_next(std::string* error) {
+int RawRecorder::open_next(std::string* error) {
     char name[64];
     std::snprintf(name, sizeof name, "/raw-%s-%u.mocapraw", series_stamp_.c_str(), file_index_);
     const std::string path = config_.directory + name;
     const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (fd < 0) {
-        *error = "raw recording: cannot create " + path + ": " + errno_text(errno);
-        return false;
+        const int err = errno;
+        *error = "cannot create " + path + ": " + errno_text(err);
+        return err;
     }
-    fd_ = fd;
-    file_bytes_ = 0;
-    file_opened_us_ = clock_.now_us();
-    buffer_.assign(kRawMagic, sizeof kRawMagic);
+    const std::int64_t opened_us = clock_.now_us();
+    std::string head(kRawMagic, sizeof kRawMagic);
     v1::RawRecord header;
     header.mutable_header()->set_format_version(kFormatVersion);
-    header.mutable_header()->set_created_us(file_opened_us_);
+    header.mutable_header()->set_created_us(opened_us);
     header.mutable_header()->set_producer("mocapd");
     header.mutable_header()->set_file_index(file_index_);
-    append_record(header, buffer_);
+    append_record(header, head);
+    if (const int err = write_whole(file_writer_, fd, head.data(), head.size(), 0); err != 0) {
+        // A file without its header is no recording: remove it, and try this name again later.
+        ::close(fd);
+        ::unlink(path.c_str());
+        *error = "cannot write " + path + ": " + errno_text(err);
+        return err;
+    }
+    fd_ = fd;
+    file_bytes_ = head.size();
+    bytes_.add(head.size());
+    file_opened_us_ = opened_us;
     ++file_index_;
     files_.add();
     {
@@ -149,23 +152,71 @@ bool RawRecorder::open_next(std::string* error) {
         path_ = path;
     }
     spdlog::info("raw recording: writing {}", path);
-    flush_buffer();
+    return 0;
+}
+
+void RawRecorder::buffer_sample(const SegmentSample& s) {
+    // The bound holds while writes fail; in normal running a flush interval's worth of
+    // samples is far below it.
+    if (buffer_.size() >= config_.max_buffer_bytes) {
+        lost_.add();
+        ++lost_in_pause_;
+        return;
+    }
+    append_raw_sample_record(s, buffer_);
+    ++buffer_samples_;
+}
+
+bool RawRecorder::flush_buffer() {
+    if (buffer_.empty()) return true;
+    if (fd_ < 0) return false;
+    if (const int err = write_whole(file_writer_, fd_, buffer_.data(), buffer_.size(), static_cast<off_t>(file_bytes_));
+        err != 0) {
+        on_failure(err, "write " + current_path());
+        return false;  // the buffer is kept (bounded) for the retry
+    }
+    bytes_.add(buffer_.size());
+    file_bytes_ += buffer_.size();
+    recorded_.add(buffer_samples_);
+    buffer_.clear();
+    buffer_samples_ = 0;
     return true;
 }
 
-void RawRecorder::flush_buffer() {
-    if (buffer_.empty() || fd_ < 0) return;
-    if (write_all(fd_, buffer_.data(), buffer_.size())) {
-        bytes_.add(buffer_.size());
-        file_bytes_ += buffer_.size();
+void RawRecorder::on_failure(int err, const std::string& what) {
+    write_errors_.add();
+    const std::int64_t now = clock_.now_us();
+    if (!paused_.load(std::memory_order_relaxed)) {
+        // One line per episode, with the reason; the retries that follow are only counted.
+        paused_.store(true, std::memory_order_relaxed);
+        pauses_.add();
+        if (is_disk_full(err)) disk_full_.add();
+        lost_in_pause_ = 0;
+        retry_delay_us_ = static_cast<std::int64_t>(config_.retry_min_s * 1e6);
+        spdlog::error(
+            "raw recording: {} failed: {}; recording paused, the file ends at its last whole record; up to {} "
+            "bytes of samples are kept, the rest counted as lost (raw_record.samples_lost); retrying every {}-{} s",
+            what, errno_text(err), config_.max_buffer_bytes, config_.retry_min_s, config_.retry_max_s);
     } else {
-        write_errors_.add();
+        retry_delay_us_ = std::min(retry_delay_us_ * 2, static_cast<std::int64_t>(config_.retry_max_s * 1e6));
     }
-    buffer_.clear();
+    retry_at_us_ = now + retry_delay_us_;
+}
+
+void RawRecorder::retry() {
+    if (fd_ < 0) {
+        std::string error;
+        if (const int err = open_next(&error); err != 0) {
+            on_failure(err, error);
+            return;
+        }
+    }
+    if (!flush_buffer()) return;
+    paused_.store(false, std::memory_order_relaxed);
+    spdlog::info("raw recording: writing {} again; {} samples were lost while paused", current_path(), lost_in_pause_);
 }
 
 void RawRecorder::close_file() {
-    flush_buffer();
     if (fd_ < 0) return;
     if (config_.fsync_on_rotate) ::fsync(fd_);
     ::close(fd_);
@@ -185,24 +236,32 @@ void RawRecorder::writer_loop() {
         const bool stopping = stop_.load(std::memory_order_acquire);
         std::size_t n = 0;
         while (ring_.try_pop(s)) {
-            append_raw_sample_record(s, buffer_);
-            recorded_.add();
+            buffer_sample(s);
             ++n;
         }
         const std::int64_t now = clock_.now_us();
-        const bool rotate =
-            fd_ >= 0 && ((config_.rotate_bytes != 0 && file_bytes_ + buffer_.size() >= config_.rotate_bytes) ||
-                         (rotate_us > 0 && now - file_opened_us_ >= rotate_us));
         if (stopping) {
+            // A paused recorder tries once more: the disk may have room again.
+            if (paused_.load(std::memory_order_relaxed)) {
+                retry();
+            } else {
+                flush_buffer();
+            }
+            lost_.add(buffer_samples_);  // what the file could not take
+            buffer_.clear();
+            buffer_samples_ = 0;
             close_file();
             return;
         }
-        if (rotate) {
-            close_file();
-            std::string error;
-            if (!open_next(&error)) {
-                write_errors_.add();
-                spdlog::error("{}", error);
+        if (paused_.load(std::memory_order_relaxed)) {
+            if (now >= retry_at_us_) retry();
+        } else if (fd_ >= 0 && ((config_.rotate_bytes != 0 && file_bytes_ + buffer_.size() >= config_.rotate_bytes) ||
+                                (rotate_us > 0 && now - file_opened_us_ >= rotate_us))) {
+            // Rotate only once this file holds everything so far; a failed write pauses.
+            if (flush_buffer()) {
+                close_file();
+                std::string error;
+                if (const int err = open_next(&error); err != 0) on_failure(err, error);
             }
         } else if (now - last_flush_us >= flush_us) {
             flush_buffer();
@@ -227,6 +286,11 @@ bool RawRecordingReader::open(const std::string& path, std::string* error) {
     return true;
 }
 
+void RawRecordingReader::cut_tail(const std::string& what) {
+    truncated_ = true;
+    truncation_ = what + " after sample " + std::to_string(samples_) + ", skipped";
+}
+
 int RawRecordingReader::next(SegmentSample& out, std::string* error) {
     v1::RawRecord record;
     for (;;) {
@@ -235,7 +299,7 @@ int RawRecordingReader::next(SegmentSample& out, std::string* error) {
         for (;;) {
             const int c = std::fgetc(file_.get());
             if (c == EOF) {
-                truncated_ = shift != 0;
+                if (shift != 0) cut_tail("a cut record length");
                 return 0;
             }
             len |= static_cast<std::uint64_t>(c & 0x7F) << shift;
@@ -251,11 +315,17 @@ int RawRecordingReader::next(SegmentSample& out, std::string* error) {
             return -1;
         }
         record_.resize(len);
-        if (std::fread(record_.data(), 1, len, file_.get()) != len) {
-            truncated_ = true;
+        if (const std::size_t got = std::fread(record_.data(), 1, len, file_.get()); got != len) {
+            cut_tail("a cut record (" + std::to_string(got) + " of " + std::to_string(len) + " bytes)");
             return 0;
         }
         if (!record.ParseFromString(record_)) {
+            // The last record of a file may be garbage a crash left (a tail the kernel had
+            // sized but not written); anywhere else it is corruption.
+            if (std::fgetc(file_.get()) == EOF) {
+                cut_tail("an unparseable last record of " + std::to_string(len) + " bytes");
+                return 0;
+            }
             *error = "unparseable record after sample " + std::to_string(samples_);
             return -1;
         }

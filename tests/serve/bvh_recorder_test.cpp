@@ -4,12 +4,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <thread>
 
 #include "bvh_outputs_fixture.hpp"
+#include "recorder_fixture.hpp"
 #include "serve/raw_recorder.hpp"
 #include "skeleton/bvh.hpp"
 
@@ -18,16 +18,11 @@ namespace {
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
-
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        char tmpl[] = "/tmp/mocap-bvhrec-XXXXXX";
-        path = ::mkdtemp(tmpl);
-    }
-    ~TempDir() { fs::remove_all(path); }
-    [[nodiscard]] std::string file(const char* name) const { return (path / name).string(); }
-};
+using test::expect_same;
+using test::raw_files;
+using test::sample;
+using test::StepClock;
+using test::TempDir;
 
 void publish_frames(BvhRecorder& r, const BvhFrameEncoder& e, std::uint32_t subject, std::uint64_t from,
                     std::uint64_t count) {
@@ -143,57 +138,6 @@ TEST(BvhRepair, RejectsAMalformedLineInTheMiddle) {
     EXPECT_FALSE(r.ok);
     EXPECT_NE(r.error.find("line 2"), std::string::npos) << r.error;
     EXPECT_EQ(test::slurp(path), text);  // untouched
-}
-
-class StepClock final : public Clock {
-public:
-    [[nodiscard]] std::int64_t now_us() const noexcept override { return now.load(); }
-    std::atomic<std::int64_t> now{1'700'000'000'000'000};
-};
-
-SegmentSample sample(std::uint64_t k, bool quat) {
-    SegmentSample s;
-    s.subject_id = 2;
-    s.node_id = static_cast<std::uint8_t>(1 + k % 15);
-    s.sync = 1000 + k / 15;
-    s.imu.t_us = static_cast<std::int64_t>(k) * 667;
-    s.imu.flags = static_cast<std::uint8_t>(k % 3);
-    s.imu.gyro_rad_s = {0.25f * static_cast<float>(k), -1.5f, 3.0f};
-    s.imu.accel_m_s2 = {0.1f, 9.81f, -0.3f};
-    s.imu.mag_ut = {20.5f, -3.25f, static_cast<float>(k)};
-    if (quat) {
-        s.has_node_quat = true;
-        s.node_q_wxyz = {0.5, 0.5, -0.5, 0.5};
-    }
-    s.times.sink_send_us = 5 + static_cast<std::int64_t>(k);
-    s.times.received_us = 9 + static_cast<std::int64_t>(k);
-    return s;
-}
-
-void expect_same(const SegmentSample& a, const SegmentSample& b) {
-    EXPECT_EQ(a.subject_id, b.subject_id);
-    EXPECT_EQ(a.node_id, b.node_id);
-    EXPECT_EQ(a.sync, b.sync);
-    EXPECT_EQ(a.imu.t_us, b.imu.t_us);
-    EXPECT_EQ(a.imu.flags, b.imu.flags);
-    EXPECT_EQ(a.has_node_quat, b.has_node_quat);
-    if (a.has_node_quat) {
-        EXPECT_EQ(a.node_q_wxyz, b.node_q_wxyz);
-    } else {
-        EXPECT_EQ(a.imu.gyro_rad_s, b.imu.gyro_rad_s);  // float32 values: exact
-        EXPECT_EQ(a.imu.accel_m_s2, b.imu.accel_m_s2);
-        EXPECT_EQ(a.imu.mag_ut, b.imu.mag_ut);
-    }
-    EXPECT_EQ(a.times.sink_send_us, b.times.sink_send_us);
-    EXPECT_EQ(a.times.received_us, b.times.received_us);
-}
-
-std::vector<std::string> raw_files(const fs::path& dir) {
-    std::vector<std::string> out;
-    for (const auto& e : fs::directory_iterator(dir))
-        out.push_back(e.path().string());
-    std::sort(out.begin(), out.end());
-    return out;
 }
 
 TEST(RawRecorder, EverySampleComesBackExactly) {
