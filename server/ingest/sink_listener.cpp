@@ -6,6 +6,7 @@
 #include <chrono>
 #include <exception>
 
+#include "core/saturating.hpp"
 #include "mocap_wire/mw_packet.h"
 
 namespace mocap::ingest {
@@ -145,6 +146,7 @@ SinkListener::SinkListener(asio::io_context& io, SinkListenerConfig config, cons
     group_.add("sequence_gaps", c_.sequence_gaps);
     group_.add("unknown_sink_packets", c_.unknown_sink);
     group_.add("sink_takeovers", c_.takeovers);
+    group_.add("implausible_timestamps", c_.implausible_timestamps);
     reassembly_.register_in(group_);
 }
 
@@ -255,10 +257,19 @@ void SinkListener::on_packet(SinkConnection& from, const mw_packet& packet, std:
         owner = &from;
         r->reset_stream();
     }
-    const auto ts = static_cast<std::int64_t>(packet.header.timestamp_us);
+    // The stamp is the sink's word: a plain cast of a stamp above 2^63 went negative and
+    // "ts + offset" or "received - ts" could overflow, which gave latencies of decades for
+    // the daemon's lifetime. Clamp the arithmetic, and keep a stamp that is implausibly far
+    // from the host clock out of every latency figure (sink_send_us = 0 means unknown); the
+    // sample times stay on the sink's own clock, which only its own subject's filters use.
+    const std::int64_t ts = saturating_int64(packet.header.timestamp_us);
+    const std::int64_t skew = saturating_sub(received_us, ts);
+    const bool plausible = skew >= -config_.max_clock_skew_us && skew <= config_.max_clock_skew_us;
+    if (!plausible) c_.implausible_timestamps.add();
+    const std::int64_t send_us = plausible ? ts : 0;
     for (std::uint16_t i = 0; i < packet.frame_count; ++i) {
         const mw_stamped_frame& f = packet.frames[i];
-        r->on_frame(f.frame, ts + f.offset_us, ts, received_us);
+        r->on_frame(f.frame, saturating_add(ts, f.offset_us), send_us, received_us);
     }
 }
 

@@ -38,6 +38,11 @@ struct SinkListenerConfig {
     std::uint32_t max_subjects = 64;          ///< sink ids 1..max_subjects are accepted
     double idle_timeout_s = 10.0;             ///< no bytes for this long closes the connection
     std::size_t max_garbage_bytes = 1 << 20;  ///< discarded bytes without a valid packet -> close
+    /// A packet stamped further than this from the host's receive time has an implausible
+    /// clock: counted (implausible_timestamps) and its samples carry sink_send_us = 0
+    /// (latency unknown), so no latency figure sees it. Larger than any real latency (a
+    /// sink is closed after idle_timeout) and than the clock steps a sink may take (NTP).
+    std::int64_t max_clock_skew_us = 60'000'000;
     FrameReassembler::Params reassembly{};
 };
 
@@ -65,8 +70,8 @@ public:
 
     /// Component "ingest_tcp": connections_accepted, connections_refused, connections_closed,
     /// idle_timeouts, garbage_closes, bytes, packets, malformed_packets, crc_failures,
-    /// bytes_discarded, sequence_gaps, unknown_sink_packets, sink_takeovers; plus the
-    /// reassembly counters of every sink.
+    /// bytes_discarded, sequence_gaps, unknown_sink_packets, sink_takeovers,
+    /// implausible_timestamps; plus the reassembly counters of every sink.
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
     /// Set-up: the counters and gauge "sinks_connected" (accepted - closed, read from the
     /// counters, so any thread may read it).
@@ -76,7 +81,7 @@ private:
     friend class SinkConnection;
     struct Counters {  // written on the io thread only (single writer)
         SingleWriterCounter accepted, refused, closed, idle_timeouts, garbage_closes, bytes, packets, malformed,
-            crc_failures, discarded, sequence_gaps, unknown_sink, takeovers;
+            crc_failures, discarded, sequence_gaps, unknown_sink, takeovers, implausible_timestamps;
     };
 
     void do_accept();

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 
+#include "core/saturating.hpp"
+
 namespace mocap::pipeline {
 
 std::unique_ptr<Pipeline> Pipeline::create(PipelineConfig config, const Clock& clock, std::string* error) {
@@ -24,6 +26,13 @@ Pipeline::~Pipeline() {
 bool Pipeline::build(std::string* error) {
     const auto& model = config_.model;
     node_to_segment_.fill(-1);
+    const std::uint32_t max_id =
+        config_.subjects.empty() ? 0 : *std::max_element(config_.subjects.begin(), config_.subjects.end());
+    subject_index_.assign(static_cast<std::size_t>(max_id) + 1, -1);
+    for (std::size_t i = 0; i < config_.subjects.size(); ++i) {
+        subject_index_[config_.subjects[i]] = static_cast<std::int32_t>(i);
+        ingest_latency_.push_back(std::make_unique<SingleWriterLatencyHistogram>());
+    }
     for (std::size_t i = 0; i < model.size(); ++i) {
         const int node = model.segments[i].node_id;
         if (node >= 0 && node < static_cast<int>(node_to_segment_.size())) {
@@ -106,11 +115,30 @@ void Pipeline::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& 
 }
 
 void Pipeline::note_sample(const SegmentSample& in) {
-    if (in.times.sink_send_us != 0) ingest_latency_.record(in.times.received_us - in.times.sink_send_us);
     for (Output* o : sample_outputs_)
         o->on_sample(in);  // every node, before the model filters it
+}
+
+void Pipeline::note_routed(const SegmentSample& in, std::size_t subject_index) {
+    // Saturated: the stamps are the sink's word (ingest keeps implausible ones out, replay
+    // reads them from a file).
+    if (in.times.sink_send_us != 0) {
+        ingest_latency_[subject_index]->record(saturating_sub(in.times.received_us, in.times.sink_send_us));
+    }
     if (first_sample_us_.load(std::memory_order_relaxed) == 0) first_sample_us_.store(in.times.received_us);
     last_sample_us_.store(in.times.received_us, std::memory_order_relaxed);
+}
+
+LatencySnapshot Pipeline::ingest_latency() const {
+    LatencySnapshot all;
+    for (const auto& h : ingest_latency_)
+        all.merge(h->snapshot());
+    return all;
+}
+
+LatencySnapshot Pipeline::ingest_latency(std::uint32_t subject_id) const {
+    const int i = subject_index_of(subject_id);
+    return i < 0 ? LatencySnapshot{} : ingest_latency_[static_cast<std::size_t>(i)]->snapshot();
 }
 
 void Pipeline::start_workers() {
@@ -124,6 +152,11 @@ bool Pipeline::route(const SegmentSample& in) {
     if (seg < 0) {
         unknown_nodes_.add();
         return false;
+    }
+    // A sample for a configured subject's segment arrives even when its ring is full: the
+    // subject is served and owes frames.
+    if (const int subject = subject_index_of(in.subject_id); subject >= 0) {
+        note_routed(in, static_cast<std::size_t>(subject));
     }
     SegmentSample s = in;
     s.segment_index = static_cast<std::uint16_t>(seg);
@@ -161,6 +194,7 @@ RouteResult Pipeline::process(const SegmentSample& in, std::int64_t now_us) {
         return RouteResult::kUnknownNode;
     }
     const auto subject_index = static_cast<std::size_t>(subject - config_.subjects.begin());
+    note_routed(in, subject_index);
     FilterProcessor& filter = *processors_[subject_index * config_.model.size() + static_cast<std::size_t>(seg)];
     PoseUpdate u;
     u.subject_id = in.subject_id;

@@ -16,8 +16,11 @@
 // created at construction, so nothing is allocated when a sink appears.
 //
 // Counters (component "route", written by the routing thread only): samples_routed,
-// samples_unknown_node, samples_rejected; the ingest latency histogram (sink_send_us ->
-// received_us).
+// samples_unknown_node, samples_rejected; one ingest latency histogram (sink_send_us ->
+// received_us) per subject, so one sink's clock never moves another subject's figure.
+// Only samples that reach a segment of a configured subject count as arriving (latency,
+// first/last sample time): samples for nodes outside the body model are counted and passed
+// to the sample outputs (the raw recorder), nothing else.
 #pragma once
 
 #include <array>
@@ -120,13 +123,18 @@ public:
     [[nodiscard]] const WorkerPool& pool() const { return *pool_; }
     [[nodiscard]] const AssemblerSet& assemblers() const { return *assemblers_; }
     [[nodiscard]] const CounterGroup& route_counters() const { return route_counters_; }
-    [[nodiscard]] LatencySnapshot ingest_latency() const { return ingest_latency_.snapshot(); }
+    /// Ingest latency of every subject, merged.
+    [[nodiscard]] LatencySnapshot ingest_latency() const;
+    /// Ingest latency of one subject's samples only (empty for an id not configured).
+    [[nodiscard]] LatencySnapshot ingest_latency(std::uint32_t subject_id) const;
     [[nodiscard]] const std::vector<std::unique_ptr<Output>>& outputs() const { return outputs_; }
     /// Set-up, after the outputs were added: the route counters and the ingest latency (with
     /// counter latency.ingest_negative), the worker pool's, the assemblers' and the solver's
     /// metrics, and every output's.
     void register_metrics(MetricsRegistry& registry) const;
-    /// Wall clock µs of the first and the latest received sample (0 = none yet).
+    /// Wall clock µs of the first and the latest sample routed to a segment of a configured
+    /// subject (0 = none yet). /healthz reads them as "samples arrive": samples for nodes the
+    /// body model does not have must not count, or they made a daemon without frames unhealthy.
     [[nodiscard]] std::int64_t first_sample_us() const { return first_sample_us_.load(std::memory_order_relaxed); }
     [[nodiscard]] std::int64_t last_sample_us() const { return last_sample_us_.load(std::memory_order_relaxed); }
     /// Clock µs of the assembler loop's last turn (start time before it runs).
@@ -138,6 +146,11 @@ private:
     Pipeline(PipelineConfig config, const Clock& clock);
     bool build(std::string* error);
     void note_sample(const SegmentSample& in);
+    void note_routed(const SegmentSample& in, std::size_t subject_index);
+    /// Index into config_.subjects, -1 = not configured.
+    [[nodiscard]] int subject_index_of(std::uint32_t subject_id) const {
+        return subject_id < subject_index_.size() ? subject_index_[subject_id] : -1;
+    }
     void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     PipelineConfig config_;
@@ -157,8 +170,11 @@ private:
     std::atomic<std::int64_t> first_sample_us_{0};  // routing thread
     std::atomic<std::int64_t> last_sample_us_{0};   // routing thread
 
+    std::vector<std::int32_t> subject_index_;  // subject id -> index into config_.subjects, -1 = none
+
     // Written by the routing thread only.
-    SingleWriterLatencyHistogram ingest_latency_;  // sink_send_us -> received_us
+    // sink_send_us -> received_us, one per subject (index as config_.subjects), made at build.
+    std::vector<std::unique_ptr<SingleWriterLatencyHistogram>> ingest_latency_;
     SingleWriterCounter unknown_nodes_, samples_routed_, samples_rejected_;
     CounterGroup route_counters_{"route"};
 };

@@ -4,7 +4,9 @@
 
 #include <atomic>
 #include <chrono>
+#include <limits>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -19,8 +21,9 @@ public:
     std::int64_t now_us() const noexcept override { return 777; }
 };
 
+/// stamp_us: the packet's timestamp (default: 1 s + 10 ms per counter).
 std::vector<std::uint8_t> make_packet(std::uint8_t sink_id, std::uint32_t seq, std::uint32_t counter,
-                                      std::uint8_t nodes) {
+                                      std::uint8_t nodes, std::optional<std::uint64_t> stamp_us = std::nullopt) {
     std::vector<mw_stamped_frame> frames;
     mw_stamped_frame f{};
     mw_sync s{counter};
@@ -38,7 +41,7 @@ std::vector<std::uint8_t> make_packet(std::uint8_t sink_id, std::uint32_t seq, s
             frames.push_back(f);
         }
     }
-    mw_packet_header h{sink_id, seq, 1'000'000ull + counter * 10'000ull};
+    mw_packet_header h{sink_id, seq, stamp_us.value_or(1'000'000ull + counter * 10'000ull)};
     std::vector<std::uint8_t> out(MW_PACKET_MAX_SIZE);
     const auto n = mw_packet_encode(&h, frames.data(), frames.size(), out.data(), out.size());
     out.resize(static_cast<std::size_t>(n));
@@ -127,6 +130,28 @@ TEST_F(SinkListenerTest, GarbageBetweenPacketsIsCountedAndSkipped) {
     EXPECT_GE(counter("crc_failures"), 1u);
     EXPECT_GT(counter("bytes_discarded"), 0u);
     EXPECT_EQ(counter("packets"), 2u);
+}
+
+TEST_F(SinkListenerTest, ImplausibleStampsAreCountedAndKeptOutOfLatency) {
+    start({});  // the host clock reads 777 µs
+    auto s = connect();
+    // Above INT64_MAX (a plain cast went negative), 2^63, 31 years ahead, 61 s ahead.
+    const std::vector<std::uint64_t> hostile{UINT64_MAX, 1ull << 63, 1'000'000'000'000'000'000ull, 61'000'777ull};
+    std::uint32_t seq = 0;
+    for (const std::uint64_t stamp : hostile) {
+        asio::write(s, asio::buffer(make_packet(1, seq, seq, 1, stamp)));
+        ++seq;
+    }
+    asio::write(s, asio::buffer(make_packet(1, seq, seq, 1, 500'000)));  // 0.5 s off: plausible
+    ASSERT_TRUE(wait_until([&] { return count() == hostile.size() + 1; }));
+    EXPECT_EQ(counter("implausible_timestamps"), hostile.size());
+    std::lock_guard lock(mu_);
+    for (std::size_t i = 0; i < hostile.size(); ++i) {
+        EXPECT_EQ(samples_[i].times.sink_send_us, 0) << "latency unknown, sample " << i;
+        EXPECT_GE(samples_[i].imu.t_us, 0) << "the sink's time saturates, never wraps: sample " << i;
+    }
+    EXPECT_EQ(samples_[0].imu.t_us, std::numeric_limits<std::int64_t>::max());
+    EXPECT_EQ(samples_.back().times.sink_send_us, 500'000);
 }
 
 TEST_F(SinkListenerTest, ReconnectTakesOverTheSubject) {

@@ -24,6 +24,7 @@
 #include <thread>
 
 #include "harness.hpp"
+#include "http_test_client.hpp"
 #include "mocap/v1/mocap.pb.h"
 #include "mocap_wire/mw_can.h"
 #include "mocap_wire/mw_packet.h"
@@ -163,13 +164,14 @@ public:
     }
     [[nodiscard]] int fd() const { return fd_; }
 
-    static std::vector<mw_stamped_frame> instant(std::uint32_t counter, int nodes = 15) {
+    /// SYNC + nodes first_node..first_node+nodes-1 (1..15 is the built-in body).
+    static std::vector<mw_stamped_frame> instant(std::uint32_t counter, int nodes = 15, int first_node = 1) {
         std::vector<mw_stamped_frame> out;
         mw_stamped_frame f{};
         const mw_sync sync{counter};
         mw_sync_encode(&sync, &f.frame);
         out.push_back(f);
-        for (int n = 1; n <= nodes; ++n) {
+        for (int n = first_node; n < first_node + nodes; ++n) {
             const std::array<std::pair<mw_function, std::array<std::int16_t, 3>>, 3> parts{{
                 {MW_FN_ACCEL, {0, 0, 2048}},  // +1 g at ±16 g
                 {MW_FN_GYRO, {0, 0, 0}},
@@ -732,6 +734,113 @@ TEST_F(Faults, SinkClockStepsOfTenSecondsDoNotStopTheSubject) {
         EXPECT_LT(l.p50_us(), 1.0e6) << "most packets are on time";
     }
     EXPECT_TRUE(found);
+}
+
+TEST_F(Faults, SamplesForNodesOutsideTheBodyKeepHealthzHealthy) {
+    ASSERT_NO_FATAL_FAILURE(start_daemon());
+    ASSERT_EQ(mocap::testing::http_request(http_port_, "/healthz").status, 200u);
+    // Valid instants of nodes 40..54 (the built-in body has 1..15) for 4 s: no frame can come
+    // of them, so they are not "samples that arrive". They made /healthz answer 503 after 2 s.
+    WireSink stranger(3);
+    ASSERT_TRUE(stranger.connect(sink_port_));
+    std::atomic<bool> done{false};
+    std::atomic<unsigned> worst{200};
+    std::string worst_body;
+    std::thread poll([&] {
+        while (!done.load()) {
+            const auto r = mocap::testing::http_request(http_port_, "/healthz");
+            if (r.status != 200) {
+                worst = r.status;
+                worst_body = r.body;
+            }
+            std::this_thread::sleep_for(100ms);
+        }
+    });
+    paced(400, [&](int i) {
+        ASSERT_TRUE(stranger.send(
+            stranger.encode(WireSink::instant(static_cast<std::uint32_t>(i + 1), 15, 40), realtime_us())));
+    });
+    done = true;
+    poll.join();
+    const auto after = mocap::testing::http_request(http_port_, "/healthz");
+    EXPECT_EQ(worst.load(), 200u) << worst_body;
+    EXPECT_EQ(after.status, 200u) << after.body;
+    EXPECT_GE(counters().at("route.samples_unknown_node"), 400u * 15u - 15u);
+    // Health still means something: a served subject's samples count, and they make frames.
+    Watcher ref(pose_port_, {1});
+    ASSERT_TRUE(ref.ok()) << ref.error();
+    WireSink real(1);
+    ASSERT_TRUE(real.connect(sink_port_));
+    paced(100, [&](int i) {
+        ASSERT_TRUE(real.send(real.encode(WireSink::instant(static_cast<std::uint32_t>(i + 1)), realtime_us())));
+    });
+    ASSERT_TRUE(wait_frames(ref, 1, 90, 10s));
+    const auto served = mocap::testing::http_request(http_port_, "/healthz");
+    EXPECT_EQ(served.status, 200u) << served.body;
+    EXPECT_EQ(served.body, "ok\n");
+}
+
+TEST_F(Faults, HostileSinkTimestampsDoNotMoveAnotherSinksLatency) {
+    ASSERT_NO_FATAL_FAILURE(start_daemon());
+    Watcher ref(pose_port_, {1, 2});
+    ASSERT_TRUE(ref.ok()) << ref.error();
+    WireSink honest(1), hostile(2);
+    ASSERT_TRUE(honest.connect(sink_port_));
+    ASSERT_TRUE(hostile.connect(sink_port_));
+    // Stamps that overflowed "received - sent" or wrapped negative, and clocks decades or an
+    // hour off (the p99 of 57 years); plus ±2 min, beyond the 60 s a real clock may be off.
+    const std::int64_t now = realtime_us();
+    constexpr std::int64_t kYear = 365LL * 24 * 3600 * 1'000'000;
+    const std::vector<std::uint64_t> stamps{0,
+                                            1,
+                                            UINT64_MAX,
+                                            1ull << 63,
+                                            static_cast<std::uint64_t>(INT64_MAX),
+                                            static_cast<std::uint64_t>(now + 57 * kYear),
+                                            static_cast<std::uint64_t>(now - 3'600'000'000LL),
+                                            static_cast<std::uint64_t>(now + 120'000'000LL),
+                                            static_cast<std::uint64_t>(now - 120'000'000LL)};
+    constexpr int kInstants = 450;
+    paced(kInstants, [&](int i) {
+        const auto counter = static_cast<std::uint32_t>(i + 1);
+        ASSERT_TRUE(honest.send(honest.encode(WireSink::instant(counter), realtime_us())));
+        // encode() takes the stamp as int64: the conversion keeps every bit of the uint64.
+        const Bytes p = hostile.encode(WireSink::instant(counter),
+                                       static_cast<std::int64_t>(stamps[static_cast<std::size_t>(i) % stamps.size()]));
+        ASSERT_TRUE(hostile.send(p));
+    });
+    ASSERT_TRUE(wait_frames(ref, 1, kInstants - 5, 10s));
+    v1::Stats stats;
+    const auto c = counters(&stats);
+    EXPECT_GE(c.at("ingest_tcp.implausible_timestamps"), static_cast<std::uint64_t>(kInstants))
+        << "every hostile packet";
+    EXPECT_EQ(c.at("latency.ingest_negative"), 0u) << "no hostile stamp reached a latency figure";
+    bool found = false;
+    for (const auto& l : stats.latencies()) {
+        if (l.stage() != "ingest") continue;
+        found = true;
+        std::cout << "[ metrics  ] ingest latency beside a hostile sink: p99 " << l.p99_us() << " us, max "
+                  << l.max_us() << " us over " << l.count() << " samples\n";
+        EXPECT_EQ(l.count(), static_cast<std::uint64_t>(kInstants) * 15u) << "the honest sink's samples only";
+        EXPECT_LT(l.max_us(), 2.0e6) << "was 57 years";
+        EXPECT_LT(l.p99_us(), 1.0e6);
+    }
+    EXPECT_TRUE(found);
+    // Every frame: the honest subject's stamps are its own, the hostile one's are "unknown".
+    ref.stop();
+    std::size_t hostile_frames = 0;
+    for (const auto& f : ref.frames()) {
+        const auto& t = f.times();
+        if (f.subject_id() == 1) {
+            ASSERT_GT(t.sink_send_us(), 0);
+            EXPECT_LT(t.received_us() - t.sink_send_us(), 2'000'000) << "sync " << f.sync();
+        } else {
+            ++hostile_frames;
+            EXPECT_EQ(t.sink_send_us(), 0) << "sync " << f.sync();
+        }
+    }
+    EXPECT_GT(hostile_frames, 0u) << "the hostile subject is still served";
+    EXPECT_EQ(gaps(ref.syncs(1)), 0u);
 }
 
 // ================================================================== signals

@@ -96,6 +96,57 @@ TEST(Pipeline, UnknownNodesAndSubjectsAreCountedNotFiltered) {
     EXPECT_TRUE(seen->frames.empty());
 }
 
+TEST(Pipeline, OnlySamplesOfServedSubjectsCountAsArriving) {
+    // /healthz reads "samples arrive" from last_sample_us(): valid samples for nodes outside
+    // the body model (or subjects not configured) produce no frame, so they must not count.
+    FixedClock clock;
+    std::string error;
+    auto p = Pipeline::create(two_subjects(), clock, &error);
+    ASSERT_TRUE(p) << error;
+    for (std::uint64_t sync = 1; sync <= 50; ++sync) {
+        p->process(raw_sample(1, 40, sync, 0.0), static_cast<std::int64_t>(sync) * 10'000);  // node not in the model
+        p->process(raw_sample(3, 1, sync, 0.0), static_cast<std::int64_t>(sync) * 10'000);   // subject not configured
+        // The live path: routed from the ingest thread (workers not started).
+        p->route(raw_sample(2, 41, sync, 0.0));
+    }
+    EXPECT_EQ(counter(*p, "samples_unknown_node"), 150u);
+    EXPECT_EQ(p->first_sample_us(), 0);
+    EXPECT_EQ(p->last_sample_us(), 0);
+    EXPECT_EQ(p->ingest_latency().count, 0u);
+    EXPECT_EQ(p->process(raw_sample(1, 1, 51, 0.0), 510'000), RouteResult::kProcessed);
+    EXPECT_EQ(p->first_sample_us(), 510'000);
+    EXPECT_EQ(p->last_sample_us(), 510'000);
+    p->route(raw_sample(2, 2, 52, 0.0));  // queued or not, subject 2's segment owes a frame
+    EXPECT_EQ(p->last_sample_us(), 520'000);
+}
+
+TEST(Pipeline, IngestLatencyIsPerSubjectAndSaturates) {
+    FixedClock clock;
+    std::string error;
+    auto p = Pipeline::create(two_subjects(), clock, &error);
+    ASSERT_TRUE(p) << error;
+    for (std::uint64_t sync = 1; sync <= 20; ++sync) {
+        auto honest = raw_sample(1, 1, sync, 0.0);
+        honest.times.sink_send_us = honest.times.received_us - 2'000;  // 2 ms
+        p->process(honest, honest.times.received_us);
+        // A replayed file (or anything past ingest's check) with a hostile stamp: the
+        // difference saturates instead of overflowing, and stays in subject 2's figure.
+        auto hostile = raw_sample(2, 1, sync, 0.0);
+        hostile.times.sink_send_us = sync % 2 ? std::numeric_limits<std::int64_t>::min() + 1 : 1;
+        p->process(hostile, hostile.times.received_us);
+    }
+    const LatencySnapshot one = p->ingest_latency(1);
+    EXPECT_EQ(one.count, 20u);
+    EXPECT_EQ(one.max_us, 2'000u);
+    EXPECT_EQ(one.percentile_us(99), 2'000u);
+    const LatencySnapshot two = p->ingest_latency(2);
+    EXPECT_EQ(two.count, 20u);
+    EXPECT_EQ(two.negative, 0u) << "no wrap to a negative value";
+    EXPECT_EQ(two.max_us, static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()));
+    EXPECT_EQ(p->ingest_latency().count, 40u) << "the merged figure holds both";
+    EXPECT_EQ(p->ingest_latency(7).count, 0u) << "not configured";
+}
+
 TEST(Pipeline, NonFiniteSamplesAreRejectedBeforeTheFilter) {
     FixedClock clock;
     std::string error;
