@@ -14,13 +14,13 @@ namespace mocap::daemon {
 
 namespace {
 
-/// Live BVH text over TCP (serve/bvh_server.hpp), [outputs].bvh_live.
-class BvhLiveOutput final : public pipeline::Output {
+/// A network server as an output: frames go to publish(), which never blocks; start() binds,
+/// stop() closes every client. `Server` is serve::PoseServer or serve::BvhServer.
+template <class Server>
+class ServerOutput : public pipeline::Output {
 public:
-    BvhLiveOutput(const serve::BvhServerConfig& config, const skeleton::BodyModel& model,
-                  const serve::BvhOutputOptions& options)
-        : encoder_(model, options), server_(config, encoder_) {}
-    [[nodiscard]] std::string_view name() const override { return "bvh_live"; }
+    template <class... Args>
+    explicit ServerOutput(Args&&... args) : server_(std::forward<Args>(args)...) {}
     bool start(std::string* error) override { return server_.start(*error); }
     bool stop(std::string* /*error*/) override {
         server_.stop();
@@ -32,9 +32,35 @@ public:
     void register_metrics(MetricsRegistry& registry) const override { server_.register_metrics(registry); }
     [[nodiscard]] std::uint16_t port() const override { return server_.port(); }
 
-private:
-    serve::BvhFrameEncoder encoder_;
-    serve::BvhServer server_;
+protected:
+    Server server_;
+};
+
+/// The protobuf pose service (serve/pose_server.hpp), [serve]: also the control and Stats
+/// endpoint.
+class PoseServiceOutput final : public ServerOutput<serve::PoseServer> {
+public:
+    PoseServiceOutput(const serve::ServeConfig& config, const serve::ControlHandlers& handlers,
+                      const serve::ServeDescription& description)
+        : ServerOutput(config, handlers) {
+        server_.set_description(description);
+    }
+    [[nodiscard]] std::string_view name() const override { return "pose"; }
+};
+
+/// Holds the BVH encoder in a base class, so it is built before the server that refers to it
+/// (bases are initialised in declaration order, before members).
+struct BvhEncoderHolder {
+    serve::BvhFrameEncoder encoder;
+};
+
+/// Live BVH text over TCP (serve/bvh_server.hpp), [outputs].bvh_live.
+class BvhLiveOutput final : private BvhEncoderHolder, public ServerOutput<serve::BvhServer> {
+public:
+    BvhLiveOutput(const serve::BvhServerConfig& config, const skeleton::BodyModel& model,
+                  const serve::BvhOutputOptions& options)
+        : BvhEncoderHolder{serve::BvhFrameEncoder(model, options)}, ServerOutput(config, encoder) {}
+    [[nodiscard]] std::string_view name() const override { return "bvh_live"; }
 };
 
 /// Every received sample to rotating raw files (serve/raw_recorder.hpp), [outputs].raw_record.
@@ -244,12 +270,6 @@ constexpr OutputEntry kOutputs[] = {
 };
 
 }  // namespace
-
-PoseServiceOutput::PoseServiceOutput(const serve::ServeConfig& config, const serve::ControlHandlers& handlers,
-                                     const serve::ServeDescription& description)
-    : server_(config, handlers) {
-    server_.set_description(description);
-}
 
 BvhRecorderOutput::BvhRecorderOutput(const serve::BvhRecorderConfig& config, const skeleton::BodyModel& model,
                                      const serve::BvhOutputOptions& options, std::string start_path)

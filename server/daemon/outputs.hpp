@@ -52,28 +52,6 @@ std::span<const OutputEntry> output_registry();
 /// Runs every factory of the registry; adds what they return to the pipeline.
 void add_outputs(const OutputContext& context, pipeline::Pipeline& pipeline);
 
-/// The protobuf pose service (serve/pose_server.hpp): also the control and Stats endpoint.
-class PoseServiceOutput final : public pipeline::Output {
-public:
-    PoseServiceOutput(const serve::ServeConfig& config, const serve::ControlHandlers& handlers,
-                      const serve::ServeDescription& description);
-    [[nodiscard]] std::string_view name() const override { return "pose"; }
-    bool start(std::string* error) override { return server_.start(*error); }
-    bool stop(std::string* /*error*/) override {
-        server_.stop();
-        return true;
-    }
-    void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
-        server_.publish(frame, pose);
-    }
-    void register_metrics(MetricsRegistry& registry) const override { server_.register_metrics(registry); }
-    [[nodiscard]] std::uint16_t port() const override { return server_.port(); }
-    [[nodiscard]] const serve::PoseServer& server() const { return server_; }
-
-private:
-    serve::PoseServer server_;
-};
-
 /// BVH file recorder (serve/bvh_recorder.hpp): live, started and stopped by control
 /// requests; in replay, records the whole run to the --bvh-out file.
 class BvhRecorderOutput final : public pipeline::Output {
