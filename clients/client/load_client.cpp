@@ -7,8 +7,10 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <thread>
 
 #include "pose_client.hpp"
 
@@ -50,6 +52,45 @@ double percentile_ms(std::vector<std::int32_t>& v, double p) {
     rank = std::clamp<std::size_t>(rank, 1, n) - 1;
     std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(rank), v.end());
     return v[rank] / 1000.0;
+}
+
+// The churn attack: each churner sends `churn_pipelined` Subscribes at once, naming one of
+// two disjoint lists of subject ids (from 1000 on, away from real subjects) in turn, so
+// every Subscribe changes every subject it names; then it reads their replies and starts
+// again, until `stop`.
+void run_churn(const LoadOptions& o, const std::atomic<bool>& stop, std::uint64_t& subscribes,
+               std::uint64_t& reconnects) {
+    v1::ClientMessage lists[2];
+    for (std::uint32_t i = 0; i < o.churn_subjects; ++i) {
+        lists[0].mutable_subscribe()->add_subject_ids(1000 + 2 * i);
+        lists[1].mutable_subscribe()->add_subject_ids(1001 + 2 * i);
+    }
+    std::vector<PoseClient> churners(o.churn_clients);
+    std::string error;
+    for (PoseClient& c : churners)
+        (void)c.connect(o.host, o.port, o.connect_timeout, error);
+    v1::ServerMessage reply;
+    for (std::uint64_t round = 0; !stop.load(std::memory_order_relaxed); ++round) {
+        for (PoseClient& c : churners) {
+            if (!c.is_open()) {
+                if (!c.connect(o.host, o.port, o.connect_timeout, error)) continue;
+                ++reconnects;
+            }
+            for (std::uint32_t k = 0; k < o.churn_pipelined && c.is_open(); ++k) {
+                if (!c.send(lists[round % 2], error, o.connect_timeout)) c.close();
+            }
+        }
+        for (PoseClient& c : churners) {
+            for (std::uint32_t k = 0; k < o.churn_pipelined && c.is_open();) {
+                if (c.next(reply, o.connect_timeout) != ReadStatus::kMessage) {
+                    c.close();  // e.g. Goodbye: more subjects than the server allows
+                } else if (reply.has_subscribed()) {
+                    ++k;
+                    ++subscribes;
+                }
+            }
+        }
+    }
 }
 
 }  // namespace
@@ -94,6 +135,12 @@ LoadResult run_load(const LoadOptions& options) {
         } else if (result.error.empty()) {
             result.error = "stalled client: " + error;
         }
+    }
+
+    std::atomic<bool> stop_churn{false};
+    std::thread churn;
+    if (options.churn_clients > 0) {
+        churn = std::thread([&] { run_churn(options, stop_churn, result.churn_subscribes, result.churn_reconnects); });
     }
 
     const int ep = epoll_create1(EPOLL_CLOEXEC);
@@ -161,6 +208,8 @@ LoadResult run_load(const LoadOptions& options) {
     }
     result.duration_s = std::chrono::duration<double>(Clock::now() - start).count();
     ::close(ep);
+    stop_churn = true;
+    if (churn.joinable()) churn.join();
 
     bool first = true;
     for (auto& s : states) {
@@ -200,7 +249,9 @@ std::string load_result_json(const LoadResult& r) {
                              {"p50_ms", opt(r.p50_ms)},
                              {"p90_ms", opt(r.p90_ms)},
                              {"p99_ms", opt(r.p99_ms)},
-                             {"max_ms", opt(r.max_ms)}};
+                             {"max_ms", opt(r.max_ms)},
+                             {"churn_subscribes", r.churn_subscribes},
+                             {"churn_reconnects", r.churn_reconnects}};
     if (!r.error.empty()) j["error"] = r.error;
     // An error text is not ours to trust as UTF-8: invalid bytes become U+FFFD, not an exception.
     return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);

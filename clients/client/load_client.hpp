@@ -29,6 +29,12 @@ struct LoadOptions {
     /// Extra connections that subscribe like the others and then never read (they test
     /// that a stalled client does not slow the measured ones); not measured themselves.
     std::size_t stalled = 0;
+    /// Extra connections that keep re-sending Subscribe naming `churn_subjects` subject ids
+    /// (the subscription-churn attack of issue 13, item 1), `churn_pipelined` at a time, from
+    /// a thread of their own; not measured. A churner the server closes connects again.
+    std::size_t churn_clients = 0;
+    std::uint32_t churn_subjects = 4096;
+    std::uint32_t churn_pipelined = 8;
 };
 
 struct LoadResult {
@@ -46,7 +52,9 @@ struct LoadResult {
     std::uint64_t latency_samples = 0;
     std::uint64_t negative_latencies = 0;                  ///< receive before send: clocks disagree
     std::optional<double> p50_ms, p90_ms, p99_ms, max_ms;  ///< empty without samples
-    std::string error;                                     ///< first connection error, if any
+    std::uint64_t churn_subscribes = 0;                    ///< Subscribed replies the churners received
+    std::uint64_t churn_reconnects = 0;  ///< churner connections made again after the server closed one
+    std::string error;                   ///< first connection error, if any
 };
 
 LoadResult run_load(const LoadOptions& options);

@@ -271,6 +271,13 @@ static int run(int argc, char** argv) {
     load->add_flag("--json", load_json, "one JSON object");
     load->add_option("--subject", load_options.subject_ids, "subject id (repeatable; default all)");
     load->add_option("--decimation", load_options.decimation, "every n-th frame per subject")->capture_default_str();
+    load->add_option("--churn-clients", load_options.churn_clients,
+                     "extra connections that keep re-sending Subscribe (not measured)")
+        ->capture_default_str();
+    load->add_option("--churn-subjects", load_options.churn_subjects, "subject ids each churn Subscribe names")
+        ->capture_default_str();
+    load->add_option("--churn-pipelined", load_options.churn_pipelined, "Subscribes a churner sends at once")
+        ->capture_default_str();
     load->add_option("--stalled", load_options.stalled, "extra subscribed connections that never read (not measured)")
         ->capture_default_str();
 

@@ -294,6 +294,7 @@ void read_serve(TableReader& r, DaemonConfig& c) {
     r.read("max_message_bytes", c.max_message_bytes, 64, 16 << 20);
     r.read("max_client_messages_per_s", c.max_client_messages_per_s, 0.1, 100000.0);
     r.read("client_message_burst", c.client_message_burst, 1, 100000);
+    r.read("max_subscribe_subjects", c.max_subscribe_subjects, 1, 65536);
 }
 
 void read_control(TableReader& r, DaemonConfig& c) {

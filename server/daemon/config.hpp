@@ -76,8 +76,9 @@ struct DaemonConfig {
     std::uint32_t client_queue_frames = 64;
     double handshake_timeout_s = 5.0;
     std::uint32_t max_message_bytes = 65536;
-    double max_client_messages_per_s = 20.0;  ///< sustained requests per client
-    std::uint32_t client_message_burst = 40;  ///< requests at once before the rate applies
+    double max_client_messages_per_s = 20.0;    ///< sustained requests per client
+    std::uint32_t client_message_burst = 40;    ///< requests at once before the rate applies
+    std::uint32_t max_subscribe_subjects = 64;  ///< subject ids one Subscribe may name
     // [control]
     std::string control_token;
     bool control_loopback_only = true;

@@ -175,6 +175,7 @@ std::unique_ptr<pipeline::Output> make_pose_service(const OutputContext& ctx) {
     sc.max_client_message_bytes = c.max_message_bytes;
     sc.max_client_messages_per_s = c.max_client_messages_per_s;
     sc.client_message_burst = c.client_message_burst;
+    sc.max_subscribe_subjects = c.max_subscribe_subjects;
     sc.control_token = c.control_token;
     sc.control_loopback_only = c.control_loopback_only;
     sc.io_threads = c.serve_threads;

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <optional>
 #include <string>
 
 #include "mocap/v1/mocap.pb.h"
@@ -13,7 +14,6 @@ namespace mocap::serve {
 
 namespace {
 
-constexpr std::uint32_t kMaxSubscribeSubjects = 4096;
 constexpr std::uint32_t kMaxDecimation = 100000;
 
 }  // namespace
@@ -68,35 +68,65 @@ void ClientSession::on_read(const boost::system::error_code& ec, std::size_t n) 
     // destroy the Goodbye before the client reads it.
     if (!closing_) {
         reader_.commit(n);
-        parse_messages();
+        parse_messages(false);
+        // The lane's turn is used up: no more reading (TCP pushes back on the client) until
+        // the budget resumes this session, which then reads on.
+        if (waiting_turn_ && !closing_) return;
     }
     do_read();
 }
 
-void ClientSession::parse_messages() {
+void ClientSession::resume_requests() {
+    waiting_turn_ = false;
+    if (closed_) return;
+    if (!closing_) parse_messages(true);
+    if (waiting_turn_ && !closing_) return;
+    do_read();
+}
+
+void ClientSession::parse_messages(bool granted) {
     for (;;) {
-        const FrameResult r = reader_.next();
-        if (r.status == FrameStatus::kNeedMore) return;
-        if (r.status == FrameStatus::kTooLarge) {
-            ctx_.counters.oversized_messages.add();
-            return protocol_error(CloseReason::kMalformed, LogLimiter::kOversized,
-                                  "message longer than max_client_message_bytes");
+        if (!held_) {
+            if (!parse_next()) return;
+            held_ = true;
         }
-        if (r.status == FrameStatus::kBadPrefix ||
-            !in_->ParseFromArray(r.payload.data(), static_cast<int>(r.payload.size()))) {
-            ctx_.counters.malformed_messages.add();
-            return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "unparseable message");
+        if (!granted && !budget().try_take()) {
+            // Frames handed to this lane meanwhile go first (request_budget.hpp).
+            waiting_turn_ = true;
+            ctx_.counters.requests_deferred.add();
+            budget().wait([self = shared_from_this()] { self->resume_requests(); });
+            return;
         }
-        if (!take_request_token()) {
-            ctx_.counters.rate_limited.add();
-            const std::string why = fmt::format(
-                "too many requests: more than client_message_burst ({}) at once or max_client_messages_per_s ({}) "
-                "sustained",
-                ctx_.config.client_message_burst, ctx_.config.max_client_messages_per_s);
-            return protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, why);
-        }
+        granted = false;
+        held_ = false;
         if (!handle(*in_)) return;
     }
+}
+
+bool ClientSession::parse_next() {
+    const FrameResult r = reader_.next();
+    if (r.status == FrameStatus::kNeedMore) return false;
+    if (r.status == FrameStatus::kTooLarge) {
+        ctx_.counters.oversized_messages.add();
+        protocol_error(CloseReason::kMalformed, LogLimiter::kOversized, "message longer than max_client_message_bytes");
+        return false;
+    }
+    if (r.status == FrameStatus::kBadPrefix ||
+        !in_->ParseFromArray(r.payload.data(), static_cast<int>(r.payload.size()))) {
+        ctx_.counters.malformed_messages.add();
+        protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "unparseable message");
+        return false;
+    }
+    if (!take_request_token()) {
+        ctx_.counters.rate_limited.add();
+        const std::string why = fmt::format(
+            "too many requests: more than client_message_burst ({}) at once or max_client_messages_per_s ({}) "
+            "sustained",
+            ctx_.config.client_message_burst, ctx_.config.max_client_messages_per_s);
+        protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, why);
+        return false;
+    }
+    return true;
 }
 
 bool ClientSession::take_request_token() {
@@ -155,18 +185,25 @@ bool ClientSession::handle(const v1::ClientMessage& message) {
 
 void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
     const v1::Subscribe& sub = message.subscribe();
-    if (static_cast<std::uint32_t>(sub.subject_ids_size()) > kMaxSubscribeSubjects) {
-        ctx_.counters.malformed_messages.add();
-        return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "too many subjects in Subscribe");
+    const auto named = static_cast<std::uint32_t>(sub.subject_ids_size());
+    if (named > ctx_.config.max_subscribe_subjects) {
+        // What one request may cost the serve thread is bounded by what it may name.
+        ctx_.counters.subscribe_too_many_subjects.add();
+        return protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed,
+                              fmt::format("Subscribe names {} subjects, more than max_subscribe_subjects ({}); an "
+                                          "empty list subscribes to every subject",
+                                          named, ctx_.config.max_subscribe_subjects));
     }
-    unsubscribe();
+    const std::optional<std::uint32_t> previous_fields = subscribed_ ? std::optional(fields_) : std::nullopt;
     subjects_.assign(sub.subject_ids().begin(), sub.subject_ids().end());
     std::sort(subjects_.begin(), subjects_.end());
     subjects_.erase(std::unique(subjects_.begin(), subjects_.end()), subjects_.end());
     decimation_ = std::clamp<std::uint32_t>(sub.decimation(), 1, kMaxDecimation);
     fields_ = normalize_fields(sub.fields());
     decimation_counts_.clear();
-    ctx_.broadcaster.subscribe(lane_, shared_from_this(), subjects_, fields_);
+    frames_.clear();  // queued frames belong to the replaced subscription
+    // Replaces the old subscription in place: only the subjects that change are touched.
+    ctx_.broadcaster.subscribe(lane_, shared_from_this(), subjects_, fields_, previous_fields);
     subscribed_ = true;
     ctx_.counters.subscriptions.add();
     timer_.cancel();  // a subscribed client may stay silent
@@ -183,7 +220,7 @@ void ClientSession::handle_subscribe(const v1::ClientMessage& message) {
 
 void ClientSession::unsubscribe() {
     if (!subscribed_) return;
-    ctx_.broadcaster.unsubscribe(lane_, this, subjects_, fields_);
+    ctx_.broadcaster.unsubscribe(lane_, this, fields_);
     subscribed_ = false;
     frames_.clear();
 }

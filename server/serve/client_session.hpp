@@ -37,6 +37,7 @@
 #include "serve/client_send_queue.hpp"
 #include "serve/framing.hpp"
 #include "serve/pose_broadcaster.hpp"
+#include "serve/request_budget.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_counters.hpp"
 
@@ -64,6 +65,8 @@ struct SessionContext {
     std::function<std::int64_t()> wall_clock_us;
     /// Called once on the lane thread when the session has closed.
     std::function<void(std::size_t lane, std::uint64_t id)> on_closed;
+    /// One per lane (index = lane): how many requests a lane handles per turn.
+    std::vector<RequestBudget*> request_budgets;
 };
 
 class ClientSession : public std::enable_shared_from_this<ClientSession> {
@@ -93,7 +96,15 @@ public:
 private:
     void do_read();
     void on_read(const boost::system::error_code& ec, std::size_t n);
-    void parse_messages();
+    /// Handles the buffered requests while the lane's turn lasts; `granted`: the budget
+    /// already admitted the held one. Stops (waiting_turn_) when the turn is used up.
+    void parse_messages(bool granted);
+    /// Parses the next buffered request into in_ and takes its rate-limit token; false when
+    /// more bytes are needed or the client was closed for what it sent.
+    bool parse_next();
+    /// The lane's budget resumed this session with one request admitted.
+    void resume_requests();
+    RequestBudget& budget() { return *ctx_.request_budgets[lane_]; }
     void do_write();
     void on_write(const boost::system::error_code& ec, std::size_t n);
     void arm_timer(std::chrono::milliseconds after);
@@ -121,6 +132,8 @@ private:
 
     DelimitedReader reader_;
     std::unique_ptr<v1::ClientMessage> in_;     ///< reused parse target
+    bool held_ = false;                         ///< in_ holds a parsed request waiting for the lane's next turn
+    bool waiting_turn_ = false;                 ///< reading stopped until the budget resumes this session
     std::unique_ptr<v1::ServerMessage> reply_;  ///< reused reply scratch
 
     bool subscribed_ = false;

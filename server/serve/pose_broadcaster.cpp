@@ -5,6 +5,7 @@
 #include <chrono>
 
 #include "serve/client_session.hpp"
+#include "serve/subscription_index.hpp"
 
 namespace mocap::serve {
 
@@ -15,8 +16,7 @@ struct PoseBroadcaster::Lane {
     bool wake_posted = false;
     // Lane thread only:
     std::vector<EncodedFrame> draining;  // swapped with pending, so neither reallocates
-    std::unordered_map<std::uint32_t, std::vector<std::shared_ptr<ClientSession>>> by_subject;
-    std::vector<std::shared_ptr<ClientSession>> all_subjects;
+    SubscriptionIndex<ClientSession> index;
 };
 
 PoseBroadcaster::PoseBroadcaster(const std::vector<asio::io_context*>& lanes, std::size_t backlog_frames,
@@ -92,50 +92,38 @@ void PoseBroadcaster::drain(Lane& lane) {
     // deliver() only queues and starts asynchronous writes; it never closes a session
     // synchronously, so the index cannot change while it is walked.
     for (const EncodedFrame& frame : lane.draining) {
-        if (auto it = lane.by_subject.find(frame.subject_id); it != lane.by_subject.end()) {
-            for (const auto& session : it->second)
-                session->deliver(frame);
-        }
-        for (const auto& session : lane.all_subjects)
-            session->deliver(frame);
+        lane.index.for_each(frame.subject_id, [&frame](ClientSession& session) { session.deliver(frame); });
     }
     lane.draining.clear();
 }
 
 void PoseBroadcaster::subscribe(std::size_t lane_index, const std::shared_ptr<ClientSession>& session,
-                                const std::vector<std::uint32_t>& subjects, std::uint32_t fields) {
+                                const std::vector<std::uint32_t>& subjects, std::uint32_t fields,
+                                std::optional<std::uint32_t> previous_fields) {
     Lane& lane = *lanes_.at(lane_index);
+    // The new selection is counted before the old one is released, so publish() never sees
+    // a moment in which neither is in use and skips an encoding this client needs.
     field_users_[normalize_fields(fields)].fetch_add(1, std::memory_order_relaxed);
-    if (subjects.empty()) {
-        all_subject_users_.fetch_add(1, std::memory_order_relaxed);
-        lane.all_subjects.push_back(session);
-        return;
-    }
-    for (std::uint32_t subject : subjects) {
-        subject_interest_[subject % kInterestSlots].fetch_add(1, std::memory_order_relaxed);
-        lane.by_subject[subject].push_back(session);
-    }
+    if (previous_fields) field_users_[normalize_fields(*previous_fields)].fetch_sub(1, std::memory_order_relaxed);
+    const int all_change = lane.index.assign(
+        session, subjects.empty(), subjects,
+        [this](std::uint32_t s) { subject_interest_[s % kInterestSlots].fetch_add(1, std::memory_order_relaxed); },
+        [this](std::uint32_t s) { subject_interest_[s % kInterestSlots].fetch_sub(1, std::memory_order_relaxed); });
+    count_all_subject_users(all_change);
 }
 
-void PoseBroadcaster::unsubscribe(std::size_t lane_index, const ClientSession* session,
-                                  const std::vector<std::uint32_t>& subjects, std::uint32_t fields) {
+void PoseBroadcaster::unsubscribe(std::size_t lane_index, const ClientSession* session, std::uint32_t fields) {
     Lane& lane = *lanes_.at(lane_index);
     field_users_[normalize_fields(fields)].fetch_sub(1, std::memory_order_relaxed);
-    auto remove_from = [session](std::vector<std::shared_ptr<ClientSession>>& list) {
-        std::erase_if(list, [session](const auto& s) { return s.get() == session; });
-    };
-    if (subjects.empty()) {
-        all_subject_users_.fetch_sub(1, std::memory_order_relaxed);
-        remove_from(lane.all_subjects);
-        return;
-    }
-    for (std::uint32_t subject : subjects) {
-        subject_interest_[subject % kInterestSlots].fetch_sub(1, std::memory_order_relaxed);
-        auto it = lane.by_subject.find(subject);
-        if (it == lane.by_subject.end()) continue;
-        remove_from(it->second);
-        if (it->second.empty()) lane.by_subject.erase(it);
-    }
+    const int all_change = lane.index.remove(session, [this](std::uint32_t s) {
+        subject_interest_[s % kInterestSlots].fetch_sub(1, std::memory_order_relaxed);
+    });
+    count_all_subject_users(all_change);
+}
+
+void PoseBroadcaster::count_all_subject_users(int change) {
+    if (change > 0) all_subject_users_.fetch_add(1, std::memory_order_relaxed);
+    if (change < 0) all_subject_users_.fetch_sub(1, std::memory_order_relaxed);
 }
 
 }  // namespace mocap::serve

@@ -5,9 +5,10 @@
 // then hands
 // the shared buffers to every serve thread ("lane") through a small mutex-guarded
 // backlog and one wake-up post. On its own thread, each lane walks its subscription
-// index and gives the frame to each subscribed session, which queues it (bounded,
-// drop-oldest) and writes it when its previous write has completed. publish() never
-// waits for a client: its cost is the encoding plus one short lock per lane.
+// index (subscription_index.hpp) and gives the frame to each subscribed session, which
+// queues it (bounded, drop-oldest) and writes it when its previous write has completed.
+// publish() never waits for a client: its cost is the encoding plus one short lock per
+// lane. A (re)subscription costs what that client changes, never what others subscribed.
 //
 // Thread-safety: publish() and the field-user counts from any thread; subscribe(),
 // unsubscribe() and drain only on the owning lane's io_context thread.
@@ -22,7 +23,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <unordered_map>
+#include <optional>
 #include <vector>
 
 #include "core/asio.hpp"
@@ -59,18 +60,22 @@ public:
     /// After stop(), publish() is a no-op (used while the server shuts down).
     void stop() { stopped_.store(true, std::memory_order_release); }
 
-    /// Lane thread only. `subjects` empty = every subject. `fields` normalised.
+    /// Lane thread only. Makes `session`'s subscription `subjects` (sorted, unique; empty =
+    /// every subject) with `fields` (normalised), replacing the one it had with
+    /// `previous_fields` (nullopt = not subscribed). Costs O(old + new subjects) comparisons
+    /// and O(1) per subject that changes.
     void subscribe(std::size_t lane, const std::shared_ptr<ClientSession>& session,
-                   const std::vector<std::uint32_t>& subjects, std::uint32_t fields);
-    /// Lane thread only; undoes subscribe() for the same arguments.
-    void unsubscribe(std::size_t lane, const ClientSession* session, const std::vector<std::uint32_t>& subjects,
-                     std::uint32_t fields);
+                   const std::vector<std::uint32_t>& subjects, std::uint32_t fields,
+                   std::optional<std::uint32_t> previous_fields);
+    /// Lane thread only; removes `session` (subscribed with `fields`) from the index.
+    void unsubscribe(std::size_t lane, const ClientSession* session, std::uint32_t fields);
 
     [[nodiscard]] std::size_t lane_count() const { return lanes_.size(); }
 
 private:
     struct Lane;
     void drain(Lane& lane);
+    void count_all_subject_users(int change);
 
     std::vector<std::unique_ptr<Lane>> lanes_;
     std::size_t backlog_frames_;

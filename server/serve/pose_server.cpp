@@ -29,15 +29,17 @@ PoseServer::PoseServer(ServeConfig config, ControlHandlers handlers)
     }
     const std::size_t lane_count = std::max<std::size_t>(config_.io_threads, 1);
     std::vector<asio::io_context*> ios;
+    std::vector<RequestBudget*> budgets;
     for (std::size_t i = 0; i < lane_count; ++i) {
-        lanes_.push_back(std::make_unique<Lane>());
+        lanes_.push_back(std::make_unique<Lane>(config_.requests_per_turn));
         ios.push_back(&lanes_.back()->io);
+        budgets.push_back(&lanes_.back()->requests);
     }
     broadcaster_ = std::make_unique<PoseBroadcaster>(std::move(ios), config_.publish_backlog_frames,
                                                      config_.wall_clock_us, counters_);
     session_context_ = std::make_unique<SessionContext>(SessionContext{
         config_, handlers_, counters_, log_, *broadcaster_, [this] { return hello(); }, config_.wall_clock_us,
-        [this](std::size_t lane, std::uint64_t id) { on_session_closed(lane, id); }});
+        [this](std::size_t lane, std::uint64_t id) { on_session_closed(lane, id); }, std::move(budgets)});
     goodbye_full_ = encode_goodbye(CloseReason::kServerFull, "client limit reached");
     set_description({});
 }

@@ -36,6 +36,7 @@
 #include "core/metrics_registry.hpp"
 #include "serve/client_session.hpp"
 #include "serve/pose_broadcaster.hpp"
+#include "serve/request_budget.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_counters.hpp"
 #include "skeleton/skeleton_pose.hpp"
@@ -76,8 +77,10 @@ public:
 private:
     struct Lane {
         asio::io_context io{1};
+        RequestBudget requests;  ///< lane thread; declared after io, destroyed before it
         std::unordered_map<std::uint64_t, std::shared_ptr<ClientSession>> sessions;  // lane thread
         std::thread thread;
+        explicit Lane(std::size_t requests_per_turn) : requests(io, requests_per_turn) {}
     };
 
     void do_accept();

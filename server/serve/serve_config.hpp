@@ -28,6 +28,14 @@ struct ServeConfig {
     std::uint32_t max_client_message_bytes = 4096;  ///< longer ClientMessages close the link
     double max_client_messages_per_s = 20.0;        ///< sustained request rate per client
     std::uint32_t client_message_burst = 40;        ///< requests allowed at once before the rate applies
+    /// Subject ids one Subscribe may name (an empty list means every subject, so a client
+    /// never needs more ids than there are subjects); more: Goodbye(MALFORMED), counted in
+    /// serve.subscribe_too_many_subjects. Bounds what one request costs the serve thread.
+    std::uint32_t max_subscribe_subjects = 64;
+    /// Client requests one serve thread handles per turn; frames handed over meanwhile are
+    /// delivered before the next turn (request_budget.hpp), so requests can delay a frame
+    /// by at most two turns.
+    std::size_t requests_per_turn = 32;
     /// SO_SNDBUF per client (0 = kernel default, which grows to MiBs: tens of seconds of
     /// one subject's frames held in the kernel for a stalled client before its queue
     /// drops anything). Bounded, a lagging client's data stays fresh.

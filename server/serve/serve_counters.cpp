@@ -23,6 +23,8 @@ ServeCounters::ServeCounters() {
     group.add("rate_limited", rate_limited);
     group.add("write_errors", write_errors);
     group.add("stats_requests", stats_requests);
+    group.add("subscribe_too_many_subjects", subscribe_too_many_subjects);
+    group.add("requests_deferred", requests_deferred);
     control.register_in(group);
 }
 

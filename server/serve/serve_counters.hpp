@@ -34,7 +34,9 @@ struct ServeCounters {
     Counter rate_limited;        ///< clients closed for sending too many messages
     Counter write_errors;
     Counter stats_requests;
-    ControlCounters control;  ///< serve.control_* (control_access.hpp)
+    Counter subscribe_too_many_subjects;  ///< Subscribes naming more than max_subscribe_subjects
+    Counter requests_deferred;            ///< requests that waited for their serve thread's next turn
+    ControlCounters control;              ///< serve.control_* (control_access.hpp)
 
     /// Component "serve": every counter above by its member name (the metrics registry's
     /// entry, core/metrics_registry.hpp).

@@ -215,11 +215,15 @@ TEST(ConfigServe, RateLimitKeysDefaultsMatchTheServeLayerAndRangesAreChecked) {
     const serve::ServeConfig s;
     EXPECT_DOUBLE_EQ(d->max_client_messages_per_s, s.max_client_messages_per_s);
     EXPECT_EQ(d->client_message_burst, s.client_message_burst);
+    EXPECT_EQ(d->max_subscribe_subjects, s.max_subscribe_subjects);
 
     const auto c = parse("[serve]\nmax_client_messages_per_s = 2.5\nclient_message_burst = 3\n", &err);
     ASSERT_TRUE(c) << err;
     EXPECT_DOUBLE_EQ(c->max_client_messages_per_s, 2.5);
     EXPECT_EQ(c->client_message_burst, 3u);
+    EXPECT_EQ(parse("[serve]\nmax_subscribe_subjects = 8\n", &err)->max_subscribe_subjects, 8u);
+    EXPECT_FALSE(parse("[serve]\nmax_subscribe_subjects = 0\n", &err));
+    EXPECT_NE(err.find("serve.max_subscribe_subjects: must be between"), std::string::npos) << err;
 
     EXPECT_FALSE(parse("[serve]\nmax_client_messages_per_s = 0.0\n", &err));
     EXPECT_NE(err.find("test.toml:2: serve.max_client_messages_per_s: must be between"), std::string::npos) << err;

@@ -40,6 +40,7 @@ struct Harness {
     serve::ServeCounters counters;
     serve::LogLimiter log;
     serve::PoseBroadcaster broadcaster{{&io}, 64, [] { return std::int64_t{1}; }, counters};
+    serve::RequestBudget requests{io, 4};  // small, so the fuzzer reaches the waiting path
     serve::SharedBytes hello;
     std::unique_ptr<serve::SessionContext> context;
     std::uint64_t closed = 0;
@@ -65,9 +66,15 @@ struct Harness {
         mocap::v1::ServerMessage m;
         m.mutable_hello()->set_max_client_message_bytes(config.max_client_message_bytes);
         hello = serve::encode_server_message(m);
-        context.reset(new serve::SessionContext{config, handlers, counters, log, broadcaster, [this] { return hello; },
+        context.reset(new serve::SessionContext{config,
+                                                handlers,
+                                                counters,
+                                                log,
+                                                broadcaster,
+                                                [this] { return hello; },
                                                 [] { return std::int64_t{1'700'000'000'000'000}; },
-                                                [this](std::size_t, std::uint64_t) { ++closed; }});
+                                                [this](std::size_t, std::uint64_t) { ++closed; },
+                                                {&requests}});
     }
 };
 

@@ -565,6 +565,120 @@ TEST(PoseServer, SeveralServeThreadsShareTheClients) {
     }
 }
 
+// Issue 13, item 1: connections that keep re-sending Subscribe for thousands of subject ids
+// starved normal clients. Here a few connections with raised per-connection limits stand for
+// the few hundred of the attack, and max_subscribe_subjects is raised to 4096 (an operator's
+// choice the server must survive). Delay is measured in work, not time: after frame n is
+// published the test lets the churn advance by kChurnWindow Subscribes (the server's own
+// counter); by then frame n must have been written to the normal client (frames_sent: the
+// churners never subscribe to its subject). The lane's request budget lets at most
+// 4 x requests_per_turn requests pass between a frame's hand-over and its write completing
+// (two turns before the hand-over runs, two before the write's completion), so the check
+// cannot fail on a slow or loaded machine; before the budget, one pass of the lane handled
+// every Subscribe that all churners had buffered.
+TEST(PoseServer, SubscriptionChurnDoesNotDelayANormalClientsFrames) {
+    constexpr std::size_t kPerTurn = 8;
+    constexpr std::uint64_t kChurnWindow = 8 * kPerTurn;
+    constexpr int kChurners = 16;
+    constexpr int kPipelined = 8;
+    constexpr std::uint64_t kFrames = 60;
+    ServeConfig config = test_config();
+    config.max_client_message_bytes = 64 * 1024;
+    config.max_client_messages_per_s = 1e6;
+    config.client_message_burst = 1'000'000;
+    config.max_subscribe_subjects = 4096;
+    config.requests_per_turn = kPerTurn;
+    config.queue_frames = 1024;
+    Started s(config);
+    std::string error;
+    PoseClient normal_client = s.connect();
+    ASSERT_TRUE(normal_client.subscribe({{1}, 1, 0}, 2s, error)) << error;
+    Reader normal(std::move(normal_client));
+
+    // Each churner re-subscribes to 4096 subjects (never subject 1), kPipelined at a time,
+    // alternating two lists so that every Subscribe changes every subject it names.
+    std::string batch[2];
+    for (int variant = 0; variant < 2; ++variant) {
+        v1::ClientMessage m;
+        for (std::uint32_t i = 0; i < 4096; ++i)
+            m.mutable_subscribe()->add_subject_ids(2 + i * 2 + static_cast<std::uint32_t>(variant));
+        for (int k = 0; k < kPipelined; ++k)
+            ASSERT_TRUE(append_delimited(m, batch[variant]));
+    }
+    std::atomic<bool> stop{false};
+    std::vector<std::thread> churners;
+    for (int c = 0; c < kChurners; ++c) {
+        churners.emplace_back([&] {
+            PoseClient client;
+            std::string err;
+            if (!client.connect("127.0.0.1", s.server.port(), 5s, err)) return;
+            v1::ServerMessage m;
+            for (int round = 0; !stop.load(); ++round) {
+                const std::string& bytes = batch[round % 2];
+                if (::send(client.fd(), bytes.data(), bytes.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(bytes.size()))
+                    return;
+                for (int k = 0; k < kPipelined;) {
+                    if (client.next(m, 30s) != ReadStatus::kMessage) return;
+                    k += m.has_subscribed() ? 1 : 0;
+                }
+            }
+        });
+    }
+    const Counter& subscribes = s.server.counters().subscriptions;
+    const Counter& sent = s.server.counters().frames_sent;
+    for (std::uint64_t n = 1; n <= kFrames; ++n) {
+        // The churn is running now: it has advanced since the previous frame.
+        const std::uint64_t before = subscribes.value();
+        ASSERT_TRUE(wait_until([&] { return subscribes.value() >= before + 2 * kPerTurn; })) << "churn stalled";
+        publish(s.server, 1, n);
+        const std::uint64_t at_publish = subscribes.value();
+        ASSERT_TRUE(wait_until([&] { return sent.value() >= n || subscribes.value() >= at_publish + kChurnWindow; }));
+        ASSERT_GE(sent.value(), n) << "frame " << n << " still waited after " << kChurnWindow
+                                   << " Subscribes of other clients";
+    }
+    stop = true;
+    ASSERT_TRUE(wait_until([&] { return normal.count() == kFrames; })) << normal.count();
+    for (auto& t : churners)
+        t.join();
+    normal.stop();
+    const auto got = normal.frames();
+    for (std::uint64_t i = 0; i < kFrames; ++i)
+        EXPECT_EQ(got[i].second, i + 1);
+    EXPECT_EQ(normal.client().drops_announced(), 0u);
+    EXPECT_GT(s.server.counters().requests_deferred.value(), 0u) << "the churn never used up a turn";
+}
+
+// A Subscribe may name at most max_subscribe_subjects ids (64 by default): one more is
+// refused with a Goodbye that names the limit, and counted.
+TEST(PoseServer, SubscribeNamingTooManySubjectsGetsAGoodbyeThatNamesTheLimit) {
+    Started s(test_config());
+    ASSERT_EQ(s.server.config().max_subscribe_subjects, 64u);
+    std::string error;
+    std::vector<std::uint32_t> ids(64);
+    for (std::uint32_t i = 0; i < ids.size(); ++i)
+        ids[i] = i + 1;
+    PoseClient fits = s.connect();
+    ASSERT_TRUE(fits.subscribe({ids, 1, 0}, 2s, error)) << error;
+    EXPECT_EQ(fits.subscribed().subject_ids_size(), 64);
+
+    ids.push_back(65);
+    PoseClient greedy = s.connect();
+    EXPECT_FALSE(greedy.subscribe({ids, 1, 0}, 2s, error));
+    v1::ServerMessage m;
+    while (greedy.next(m, 2s) == ReadStatus::kMessage) {
+    }
+    ASSERT_TRUE(greedy.goodbye().has_value());
+    EXPECT_EQ(greedy.goodbye()->reason(), v1::GOODBYE_MALFORMED);
+    EXPECT_NE(greedy.goodbye()->message().find("max_subscribe_subjects (64)"), std::string::npos)
+        << greedy.goodbye()->message();
+    EXPECT_EQ(s.server.counters().subscribe_too_many_subjects.value(), 1u);
+
+    publish(s.server, 64, 1);  // the client within the limit is unaffected
+    v1::SkeletonFrame f;
+    ASSERT_EQ(fits.next_frame(f, 2s), ReadStatus::kMessage);
+    EXPECT_EQ(f.subject_id(), 64u);
+}
+
 TEST(PoseServer, StopClosesEveryClient) {
     Started s(test_config());
     std::string error;

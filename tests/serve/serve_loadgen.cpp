@@ -32,6 +32,8 @@ int main(int argc, char** argv) {
     app.add_option("--threads", config.io_threads)->capture_default_str();
     app.add_option("--max-clients", config.max_clients)->capture_default_str();
     app.add_option("--queue", config.queue_frames)->capture_default_str();
+    app.add_option("--max-subscribe-subjects", config.max_subscribe_subjects)->capture_default_str();
+    app.add_option("--requests-per-turn", config.requests_per_turn)->capture_default_str();
     app.add_option("--subjects", subjects)->capture_default_str();
     app.add_option("--segments", segments)->check(CLI::Range(1, 32))->capture_default_str();
     app.add_option("--rate", rate_hz)->check(CLI::Range(1.0, 10000.0))->capture_default_str();
