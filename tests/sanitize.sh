@@ -8,8 +8,9 @@
 #         replayed under ASan/UBSan built by g++ as well.
 #   tsan  -DMOCAP_SANITIZE=thread; the threaded code's tests: core (rings, worker pool,
 #         assembler), ingest (sink listener), serve (pose server, broadcaster, clients, live
-#         BVH, HTTP/WebSocket) and the integration tests, which run the TSan-built mocapd
-#         itself (the wired pipeline: ingest, workers, assembler, servers, signals).
+#         BVH, HTTP/WebSocket, recorders) and the integration tests, which run the TSan-built
+#         mocapd itself (the wired pipeline: ingest, workers, assembler, servers, recorder
+#         writers on a full disk, signals).
 #         ctest -R selects their test suites by name.
 #   all   both (default).
 #
@@ -28,7 +29,8 @@ export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 export TSAN_OPTIONS="${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}"
 
 tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_http_tests
-                  daemon_integration_tests faults_integration_tests http_integration_tests)
+                  daemon_integration_tests faults_integration_tests http_integration_tests
+                  disk_integration_tests)
 
 status=0
 phase() {  # phase NAME COMMAND... — runs, times and reports one step
