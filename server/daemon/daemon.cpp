@@ -43,6 +43,12 @@ serve::ControlHandlers Daemon::control_handlers() {
 }
 
 bool Daemon::start(std::string* error) {
+    // Catch the signals before any port opens: a SIGTERM from a service manager (or a test)
+    // that sees a port and stops the daemon at once must drain it, not kill it with the
+    // default action. Asio keeps a signal that arrives before run() waits for it.
+    signals_.add(SIGTERM);
+    signals_.add(SIGINT);
+    signals_.add(SIGHUP);
     auto pc = pipeline_config_from_config(config_, error);
     if (!pc) return false;
     pipeline_ = pipeline::Pipeline::create(std::move(*pc), clock_, error);
@@ -106,9 +112,6 @@ bool Daemon::start(std::string* error) {
         });
     });
 
-    signals_.add(SIGTERM);
-    signals_.add(SIGINT);
-    signals_.add(SIGHUP);
     spdlog::info("mocapd ready: sinks on {}, poses on {}, {} segments x {} subjects, {} workers",
                  config_.sink_listen.str(), config_.pose_listen.str(), pipeline_->model().size(),
                  pipeline_->subjects().size(), pipeline_->pool().worker_count());

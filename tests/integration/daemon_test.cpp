@@ -225,6 +225,24 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
     EXPECT_EQ(stale, 0u) << "no node was cut, nothing may be stale";
 }
 
+// A service manager (or a script) may stop mocapd the moment it sees a port: the signal must
+// drain it (exit 0), never kill it with the default action. The pose port opens first, so
+// each round stops the daemon as soon as that port answers, while it is still starting.
+TEST_F(Daemon, SigtermRightAfterTheFirstPortOpensDrains) {
+    for (int round = 0; round < 5; ++round) {
+        const std::uint16_t pose = free_port();
+        const std::string cfg = dir_.file("early-" + std::to_string(round) + ".toml");
+        write_file(cfg, "[log]\nlevel = \"info\"\n[ingest]\nsink_listen = \"127.0.0.1:" + std::to_string(free_port()) +
+                            "\"\n[skeleton]\ncalibration_dir = \"" + dir_.path().string() +
+                            "\"\n[serve]\npose_listen = \"127.0.0.1:" + std::to_string(pose) +
+                            "\"\n[outputs]\nbvh_listen = \"127.0.0.1:" + std::to_string(free_port()) +
+                            "\"\n[http]\nlisten = \"127.0.0.1:" + std::to_string(free_port()) + "\"\n");
+        Process early({MOCAPD_BIN, "--config", cfg}, dir_.file("early-" + std::to_string(round) + ".log"));
+        ASSERT_TRUE(wait_for_port(pose, 20s)) << early.log();
+        EXPECT_EQ(early.stop(20s), 0) << "round " << round << ": killed instead of drained\n" << early.log();
+    }
+}
+
 TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
     auto c = connect_client({1});
     // Node 5 (segment index 4) is silent from 3 s to 5 s.
