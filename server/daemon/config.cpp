@@ -370,6 +370,26 @@ void read_http(TableReader& r, DaemonConfig& c) {
     r.read("listen", c.http_listen);
     r.read("max_clients", c.http_max_clients, 1, 10000);
     r.read("ws_queue_frames", c.http_ws_queue_frames, 1, 4096);
+    if (const auto* arr = r.array("allowed_origins")) {
+        for (const auto& item : *arr) {
+            const auto origin = item.value<std::string>();
+            if (!origin || origin->empty())
+                r.fail("allowed_origins", &item, "expected origin strings like \"https://host:port\"");
+            c.http_allowed_origins.push_back(*origin);
+        }
+    }
+}
+
+void read_limits(TableReader& r, DaemonConfig& c) {
+    r.read("sink_per_address", c.sink_per_address, 0, 100000);
+    r.read("pose_per_address", c.pose_per_address, 0, 100000);
+    r.read("bvh_per_address", c.bvh_per_address, 0, 100000);
+    r.read("http_per_address", c.http_per_address, 0, 100000);
+    if (const auto* n = r.take("loopback")) {
+        if (!n->is_boolean()) r.fail("loopback", n, "expected true or false");
+        c.limits_on_loopback = n->value<bool>().value();
+    }
+    r.read("stall_evict_s", c.stall_evict_s, 0.1, 3600.0);
 }
 
 // An IPv4 or IPv6 literal, as make_address accepts it (an IPv6 link-local address may carry
@@ -447,6 +467,7 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
             {"log", read_log},         {"ingest", read_ingest},     {"pipeline", read_pipeline},
             {"filter", read_filter},   {"skeleton", read_skeleton}, {"serve", read_serve},
             {"control", read_control}, {"outputs", read_outputs},   {"http", read_http},
+            {"limits", read_limits},
         };
         for (const auto& [name, fn] : sections) {
             if (const auto* t = top.sub_table(name)) {

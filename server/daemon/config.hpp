@@ -99,8 +99,18 @@ struct DaemonConfig {
     // [http] (docs/viewer.md): viewer page, pose WebSocket, /metrics, /healthz
     bool http_enabled = true;
     Endpoint http_listen{"0.0.0.0", 8080};
-    std::uint32_t http_max_clients = 64;      ///< HTTP + WebSocket connections at once
-    std::uint32_t http_ws_queue_frames = 16;  ///< per-WebSocket frame queue (oldest dropped)
+    std::uint32_t http_max_clients = 64;            ///< HTTP + WebSocket connections at once
+    std::uint32_t http_ws_queue_frames = 16;        ///< per-WebSocket frame queue (oldest dropped)
+    std::vector<std::string> http_allowed_origins;  ///< origins besides the served host that may open /ws
+    // [limits] (docs/security.md, "Connection slots"): connections one peer address may
+    // hold per port (0 = no limit), whether that applies to loopback peers, and how long a
+    // connection may go without progress before a new one may take its slot.
+    std::uint32_t sink_per_address = 8;
+    std::uint32_t pose_per_address = 64;
+    std::uint32_t bvh_per_address = 16;
+    std::uint32_t http_per_address = 16;
+    bool limits_on_loopback = false;
+    double stall_evict_s = 5.0;
 
     bool operator==(const DaemonConfig&) const = default;
 };

@@ -6,6 +6,7 @@
 #include <chrono>
 
 #include "daemon/config_check.hpp"
+#include "daemon/peer_limits.hpp"
 
 namespace mocap::daemon {
 
@@ -70,6 +71,7 @@ bool Daemon::start(std::string* error) {
     lc.max_sinks = config_.max_sinks;
     lc.max_subjects = std::min<std::uint32_t>(config_.max_subjects, 255);
     lc.idle_timeout_s = config_.sink_idle_timeout_s;
+    lc.limits = peer_limits(config_, config_.sink_per_address);
     const auto sink = [this](const SegmentSample& s) { route(s); };
     sink_listener_ = std::make_unique<ingest::SinkListener>(ingest_io_, lc, clock_, sink);
     for (const auto& can : config_.socketcan) {

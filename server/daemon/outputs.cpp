@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <limits>
 
+#include "daemon/peer_limits.hpp"
 #include "daemon/pipeline_config.hpp"
 #include "serve/angles_csv.hpp"
 #include "serve/bvh_server.hpp"
@@ -170,6 +171,7 @@ std::unique_ptr<pipeline::Output> make_pose_service(const OutputContext& ctx) {
     sc.bind_address = c.pose_listen.host;
     sc.port = c.pose_listen.port;
     sc.max_clients = c.max_clients;
+    sc.limits = peer_limits(c, c.pose_per_address);
     sc.queue_frames = c.client_queue_frames;
     sc.subscribe_timeout_ms = static_cast<std::uint32_t>(c.handshake_timeout_s * 1000.0);
     sc.max_client_message_bytes = c.max_message_bytes;
@@ -203,6 +205,7 @@ std::unique_ptr<pipeline::Output> make_bvh_live(const OutputContext& ctx) {
     bc.max_clients = ctx.config.bvh_max_clients;
     bc.queue_frames = ctx.config.client_queue_frames;
     bc.subject = ctx.config.bvh_subject;
+    bc.limits = peer_limits(ctx.config, ctx.config.bvh_per_address);
     return std::make_unique<BvhLiveOutput>(bc, ctx.pipeline.model(), bvh_options_from_config(ctx.config));
 }
 
@@ -247,6 +250,8 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     hc.ws_queue_frames = ctx.config.http_ws_queue_frames;
     hc.control_token = ctx.config.control_token;
     hc.control_loopback_only = ctx.config.control_loopback_only;
+    hc.allowed_origins = ctx.config.http_allowed_origins;
+    hc.limits = peer_limits(ctx.config, ctx.config.http_per_address);
     hc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
     serve::HttpDescription hd;
     for (const auto& seg : ctx.pipeline.model().segments)

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <exception>
 
+#include "core/peer_address.hpp"
 #include "core/saturating.hpp"
 #include "mocap_wire/mw_packet.h"
 
@@ -14,12 +15,22 @@ namespace mocap::ingest {
 using boost::system::error_code;
 using tcp = asio::ip::tcp;
 
+namespace {
+// The clock of packet deadlines and connection slots: steady (the idle timer's own), so a
+// wall-clock step neither closes every sink nor keeps a silent one open.
+std::int64_t steady_us() {
+    return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+}
+}  // namespace
+
 // One sink's TCP connection: reads, decodes, hands packets to the listener.
 class SinkConnection : public std::enable_shared_from_this<SinkConnection> {
 public:
-    SinkConnection(SinkListener& owner, tcp::socket socket)
+    SinkConnection(SinkListener& owner, tcp::socket socket, std::shared_ptr<ConnectionSlots::Slot> slot)
         : owner_(owner),
           socket_(std::move(socket)),
+          slot_(std::move(slot)),
           idle_timer_(socket_.get_executor()),
           decoder_(std::make_unique<mw_stream_decoder>()),
           packet_(std::make_unique<mw_packet>()) {
@@ -31,8 +42,15 @@ public:
     }
 
     void start() {
-        arm_idle_timer();
+        last_packet_us_ = steady_us();
+        arm_idle_timer(owner_.config_.idle_timeout_s);
         do_read();
+    }
+
+    /// A whole valid packet arrived: it moves the packet deadline and proves the slot.
+    void on_valid_packet() {
+        last_packet_us_ = steady_us();
+        slot_->progress(last_packet_us_);
     }
 
     void close() {
@@ -46,6 +64,7 @@ public:
     }
 
     [[nodiscard]] const std::string& peer() const { return peer_; }
+    [[nodiscard]] std::uint64_t slot_id() const { return slot_->id(); }
     bool has_sequence = false;
     std::uint32_t last_sequence = 0;
 
@@ -59,14 +78,19 @@ private:
         close();
     }
 
-    void arm_idle_timer() {
-        idle_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-            std::chrono::duration<double>(owner_.config_.idle_timeout_s)));
+    // The timer is not re-armed per packet (100 a second per sink): when it fires it checks
+    // the time of the last valid packet and sleeps for what is left of its deadline.
+    void arm_idle_timer(double after_s) {
+        idle_timer_.expires_after(
+            std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(after_s)));
         idle_timer_.async_wait([self = shared_from_this()](const error_code& ec) {
             if (ec || self->closed_) return;
+            const double timeout_s = self->owner_.config_.idle_timeout_s;
+            const double since_s = static_cast<double>(steady_us() - self->last_packet_us_) * 1e-6;
+            if (since_s < timeout_s) return self->arm_idle_timer(timeout_s - since_s);
             self->owner_.c_.idle_timeouts.add();
             if (self->owner_.log_allowed())
-                spdlog::warn("sink {}: nothing received for {} s, closing", self->peer_,
+                spdlog::warn("sink {}: no valid packet for {} s, closing", self->peer_,
                              self->owner_.config_.idle_timeout_s);
             self->close();
         });
@@ -81,7 +105,6 @@ private:
     void on_read(const error_code& ec, std::size_t n) {
         if (ec) return fail(ec, "read");
         if (closed_) return;
-        arm_idle_timer();
         const std::int64_t received_us = owner_.clock_.now_us();
         auto& c = owner_.c_;
         c.bytes.add(n);
@@ -96,6 +119,7 @@ private:
             if (r == MW_STREAM_NEED_MORE) break;
             if (r == MW_STREAM_PACKET) {
                 garbage_since_packet_ = 0;
+                on_valid_packet();
                 owner_.on_packet(*this, *packet_, received_us);
             } else if (!logged_malformed_ && owner_.log_allowed()) {
                 logged_malformed_ = true;  // one line per connection: no log flood
@@ -121,6 +145,8 @@ private:
 
     SinkListener& owner_;
     tcp::socket socket_;
+    std::shared_ptr<ConnectionSlots::Slot> slot_;
+    std::int64_t last_packet_us_ = 0;  // connection start until the first valid packet
     asio::steady_timer idle_timer_;
     std::unique_ptr<mw_stream_decoder> decoder_;
     std::unique_ptr<mw_packet> packet_;
@@ -132,10 +158,19 @@ private:
 };
 
 SinkListener::SinkListener(asio::io_context& io, SinkListenerConfig config, const Clock& clock, SampleSink sink)
-    : io_(io), config_(std::move(config)), clock_(clock), sink_(std::move(sink)), acceptor_(io) {
+    : io_(io),
+      config_(std::move(config)),
+      clock_(clock),
+      sink_(std::move(sink)),
+      acceptor_(io),
+      slots_(SlotPolicy{config_.max_sinks, config_.limits}),
+      backoff_(std::make_unique<AcceptBackoff>(io.get_executor(), "sink listener", c_.accept_errors)) {
     group_.add("connections_accepted", c_.accepted);
     group_.add("connections_refused", c_.refused);
+    group_.add("connections_refused_per_address", c_.refused_per_address);
+    group_.add("connections_evicted", c_.evicted);
     group_.add("connections_closed", c_.closed);
+    group_.add("accept_errors", c_.accept_errors);
     group_.add("idle_timeouts", c_.idle_timeouts);
     group_.add("garbage_closes", c_.garbage_closes);
     group_.add("bytes", c_.bytes);
@@ -195,6 +230,7 @@ void SinkListener::stop() {
     stopped_ = true;
     error_code ec;
     acceptor_.close(ec);
+    backoff_->cancel();
     // Moved, not copied: stop() runs in the destructor, where a copy's allocation could throw.
     // close() looks the connection up in connections_ and finds nothing to erase.
     auto conns = std::move(connections_);
@@ -209,21 +245,47 @@ void SinkListener::do_accept() {
 
 void SinkListener::on_accept(const error_code& ec, tcp::socket socket) {
     if (ec == asio::error::operation_aborted || stopped_) return;
-    if (ec) {
-        if (log_allowed()) spdlog::warn("sink listener: accept: {}", ec.message());
-    } else if (connections_.size() >= config_.max_sinks) {
-        c_.refused.add();
-        if (log_allowed())
-            spdlog::warn("sink listener: refusing a connection: max_sinks ({}) reached", config_.max_sinks);
+    if (ec) return backoff_->on_error(ec, [this] { do_accept(); });
+    const PeerAddress peer = peer_address(socket);
+    ConnectionSlots::Admission a = slots_.admit(peer.ip, peer.loopback, steady_us());
+    if (!a.admitted()) {
+        const bool per_address = a.verdict == ConnectionSlots::Verdict::kRefusedPerAddress;
+        (per_address ? c_.refused_per_address : c_.refused).add();
+        if (log_allowed()) {
+            if (per_address) {
+                spdlog::warn("sink listener: refusing a connection from {}: {} connections from that address", peer.ip,
+                             config_.limits.max_per_address);
+            } else {
+                spdlog::warn(
+                    "sink listener: refusing a connection from {}: max_sinks ({}) reached, every one "
+                    "delivering packets",
+                    peer.ip, config_.max_sinks);
+            }
+        }
         error_code ignored;
         socket.close(ignored);
-    } else {
-        c_.accepted.add();
-        auto conn = std::make_shared<SinkConnection>(*this, std::move(socket));
-        if (log_allowed()) spdlog::info("sink {}: connected", conn->peer());
-        connections_.insert(conn);
-        conn->start();
+        return do_accept();
     }
+    if (a.verdict == ConnectionSlots::Verdict::kAdmittedEvicting) {
+        c_.evicted.add();
+        const auto victim = std::find_if(connections_.begin(), connections_.end(),
+                                         [&](const auto& c) { return c->slot_id() == a.evicted; });
+        if (victim != connections_.end()) {
+            if (log_allowed())
+                spdlog::warn(
+                    "sink {}: closed to make room for {}: max_sinks reached and it delivered no valid "
+                    "packet yet, or none for longest",
+                    (*victim)->peer(), peer.ip);
+            // Keep it alive through close(), which erases it from connections_.
+            const std::shared_ptr<SinkConnection> closing = *victim;
+            closing->close();
+        }
+    }
+    c_.accepted.add();
+    auto conn = std::make_shared<SinkConnection>(*this, std::move(socket), std::move(a.slot));
+    if (log_allowed()) spdlog::info("sink {}: connected", conn->peer());
+    connections_.insert(conn);
+    conn->start();
     do_accept();
 }
 
@@ -294,6 +356,7 @@ bool SinkListener::log_allowed() {
 
 void SinkListener::on_closed(SinkConnection& c) {
     c_.closed.add();
+    slots_.release(c.slot_id());
     for (auto& o : owners_) {
         if (o == &c) o = nullptr;
     }

@@ -5,8 +5,13 @@
 // A sink that reconnects (or whose packets arrive on a new connection) takes its subject
 // over: the old connection is closed and the reassembler starts a new counter stream, so
 // nothing restarts. Malformed bytes are counted; the decoder resynchronises by itself, and
-// a connection that sends only garbage (max_garbage_bytes without one valid packet) or
-// nothing for idle_timeout is closed with one log line.
+// a connection that sends only garbage (max_garbage_bytes without one valid packet) or no
+// whole valid packet for idle_timeout is closed with one log line. The deadline is per
+// packet, not per read: bytes that never make a packet (one every two seconds) do not
+// extend it. Slots follow core/connection_slots.hpp: when max_sinks are open, a new
+// connection takes the slot of one that has not delivered a valid packet yet (or has
+// delivered none for longest, beyond limits.stall_evict_s), which is closed; failed
+// accepts (EMFILE...) are retried after a pause (core/accept_backoff.hpp).
 //
 // Threading: every method and handler runs on the io_context passed in, which must be run
 // by ONE thread (the ingest thread: SampleSink is called from it, in packet order).
@@ -22,8 +27,10 @@
 #include <string>
 #include <unordered_set>
 
+#include "core/accept_backoff.hpp"
 #include "core/asio.hpp"
 #include "core/clock.hpp"
+#include "core/connection_slots.hpp"
 #include "core/counters.hpp"
 #include "core/metrics_registry.hpp"
 #include "ingest/frame_reassembler.hpp"
@@ -34,9 +41,10 @@ namespace mocap::ingest {
 struct SinkListenerConfig {
     std::string host = "0.0.0.0";
     std::uint16_t port = 7000;                ///< 0 = any free port (see port())
-    std::uint32_t max_sinks = 64;             ///< connections at once; more are refused
+    std::uint32_t max_sinks = 64;             ///< connection slots (see above for who gets one)
     std::uint32_t max_subjects = 64;          ///< sink ids 1..max_subjects are accepted
-    double idle_timeout_s = 10.0;             ///< no bytes for this long closes the connection
+    double idle_timeout_s = 10.0;             ///< no whole valid packet for this long closes the connection
+    PeerLimits limits{};                      ///< [limits] sink_per_address, loopback, stall_evict_s
     std::size_t max_garbage_bytes = 1 << 20;  ///< discarded bytes without a valid packet -> close
     /// A packet stamped further than this from the host's receive time has an implausible
     /// clock: counted (implausible_timestamps) and its samples carry sink_send_us = 0
@@ -68,10 +76,11 @@ public:
     /// Connections open now (io thread).
     [[nodiscard]] std::size_t connections() const { return connections_.size(); }
 
-    /// Component "ingest_tcp": connections_accepted, connections_refused, connections_closed,
-    /// idle_timeouts, garbage_closes, bytes, packets, malformed_packets, crc_failures,
-    /// bytes_discarded, sequence_gaps, unknown_sink_packets, sink_takeovers,
-    /// implausible_timestamps; plus the reassembly counters of every sink.
+    /// Component "ingest_tcp": connections_accepted, connections_refused (every slot held by
+    /// a sink delivering packets), connections_refused_per_address, connections_evicted,
+    /// connections_closed, accept_errors, idle_timeouts, garbage_closes, bytes, packets,
+    /// malformed_packets, crc_failures, bytes_discarded, sequence_gaps, unknown_sink_packets,
+    /// sink_takeovers, implausible_timestamps; plus the reassembly counters of every sink.
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
     /// Set-up: the counters and gauge "sinks_connected" (accepted - closed, read from the
     /// counters, so any thread may read it).
@@ -80,8 +89,10 @@ public:
 private:
     friend class SinkConnection;
     struct Counters {  // written on the io thread only (single writer)
-        SingleWriterCounter accepted, refused, closed, idle_timeouts, garbage_closes, bytes, packets, malformed,
-            crc_failures, discarded, sequence_gaps, unknown_sink, takeovers, implausible_timestamps;
+        SingleWriterCounter accepted, refused, refused_per_address, evicted, closed, idle_timeouts, garbage_closes,
+            bytes, packets, malformed, crc_failures, discarded, sequence_gaps, unknown_sink, takeovers,
+            implausible_timestamps;
+        Counter accept_errors;  // the type AcceptBackoff takes; written on the io thread too
     };
 
     void do_accept();
@@ -103,6 +114,8 @@ private:
     const Clock& clock_;
     SampleSink sink_;
     asio::ip::tcp::acceptor acceptor_;
+    ConnectionSlots slots_;
+    std::unique_ptr<AcceptBackoff> backoff_;  // made with c_.accept_errors, after c_
     std::uint16_t port_ = 0;
     bool stopped_ = false;
     std::unordered_set<std::shared_ptr<SinkConnection>> connections_;

@@ -14,7 +14,10 @@ constexpr std::size_t kMaxClientLine = 64;  // "subject <id>" fits easily
 BvhServerCounters::BvhServerCounters() {
     group.add("connections_accepted", connections_accepted);
     group.add("connections_rejected_full", connections_rejected_full);
+    group.add("connections_refused_per_address", connections_refused_per_address);
+    group.add("connections_evicted", connections_evicted);
     group.add("connections_closed", connections_closed);
+    group.add("accept_errors", accept_errors);
     group.add("frames_published", frames_published);
     group.add("frames_sent", frames_sent);
     group.add("frames_dropped", frames_dropped);
@@ -32,10 +35,11 @@ void BvhServer::register_metrics(MetricsRegistry& registry) const {
 // One client. Lives on the serve thread only: no locks.
 class BvhServer::Session : public std::enable_shared_from_this<Session> {
 public:
-    Session(asio::ip::tcp::socket socket, BvhServer& server, std::uint64_t id)
+    Session(asio::ip::tcp::socket socket, BvhServer& server, ServeThread::SlotPtr slot)
         : socket_(std::move(socket)),
           server_(server),
-          id_(id),
+          slot_(std::move(slot)),
+          id_(slot_->id()),
           subject_(server.config_.subject),
           queue_(server.config_.queue_frames, server.counters_.frames_dropped) {}
 
@@ -58,7 +62,7 @@ public:
         boost::system::error_code ignored;
         socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
         socket_.close(ignored);
-        server_.sessions_.remove(id_);
+        server_.on_closed(id_);
     }
 
 private:
@@ -86,6 +90,10 @@ private:
         // The greeting is not a frame; every other buffer is one MOTION line.
         const std::size_t lines = in_flight_.size() - (in_flight_.front() == server_.greeting_ ? 1 : 0);
         server_.counters_.frames_sent.add(lines);
+        // Lines the kernel took are progress: with the bounded send buffer a client that stops
+        // reading stops making it within seconds. The greeting alone is not (a dead
+        // connection takes it too), so idle connections stay unproven while no frame flows.
+        if (lines > 0) slot_->progress(ServeThread::now_us());
         do_write();
     }
 
@@ -124,6 +132,7 @@ private:
             const char* last = line.data() + line.size();
             const auto [ptr, err] = std::from_chars(first, last, id);
             if (err == std::errc() && ptr == last) {
+                slot_->progress(ServeThread::now_us());
                 if (id != subject_) queue_.clear();  // lines of the old subject are not wanted
                 subject_ = id;
                 return;
@@ -141,6 +150,7 @@ private:
 
     asio::ip::tcp::socket socket_;
     BvhServer& server_;
+    ServeThread::SlotPtr slot_;
     std::uint64_t id_;
     std::uint32_t subject_;
     bool greeted_ = false;
@@ -156,10 +166,11 @@ private:
 BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
     : config_(std::move(config)),
       encoder_(encoder),
-      serve_({"bvh", "mocap-bvh", "live BVH"}, config_.max_clients,
-             {counters_.connections_accepted, counters_.connections_rejected_full},
-             {[this] { return sessions_.size(); }, [this](asio::ip::tcp::socket s) { admit(std::move(s)); },
-              [this] { sessions_.close_all(); }}),
+      serve_({"bvh", "mocap-bvh", "live BVH"}, {{config_.max_clients, config_.limits}, config_.send_buffer_bytes},
+             {counters_.connections_accepted, counters_.connections_rejected_full,
+              counters_.connections_refused_per_address, counters_.connections_evicted, counters_.accept_errors},
+             {[this](asio::ip::tcp::socket s, ServeThread::SlotPtr slot) { admit(std::move(s), std::move(slot)); },
+              [this](std::uint64_t id) { sessions_.close(id); }, [this] { sessions_.close_all(); }}),
       sessions_(counters_.connections_closed),
       backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& line) { deliver(line); }) {
     greeting_ = std::make_shared<const std::string>(encoder_.hierarchy() + "MOTION\n" + encoder_.frame_time_line());
@@ -177,11 +188,16 @@ void BvhServer::stop() {
     serve_.stop();
 }
 
-void BvhServer::admit(asio::ip::tcp::socket socket) {
-    const std::uint64_t id = sessions_.next_id();
-    auto s = std::make_shared<Session>(std::move(socket), *this, id);
+void BvhServer::admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot) {
+    const std::uint64_t id = slot->id();
+    auto s = std::make_shared<Session>(std::move(socket), *this, std::move(slot));
     sessions_.put(id, s);
     s->start();
+}
+
+void BvhServer::on_closed(std::uint64_t id) {
+    sessions_.remove(id);
+    serve_.release(id);
 }
 
 void BvhServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {

@@ -46,16 +46,23 @@ namespace mocap::serve {
 struct BvhServerConfig {
     std::string bind_address = "0.0.0.0";
     std::uint16_t port = 7002;      ///< 0 = any free port (tests)
-    std::size_t max_clients = 64;   ///< more are closed at once (counted)
+    std::size_t max_clients = 64;   ///< slots; see ServeThread for who gets one when full
     std::size_t queue_frames = 64;  ///< per-client queue; the oldest line is dropped beyond it
     std::uint32_t subject = 0;      ///< 0 = first subject with a frame (per client)
     std::size_t publish_backlog_frames = 1024;
+    PeerLimits limits{};  ///< [limits] bvh_per_address, loopback, stall_evict_s
+    /// SO_SNDBUF per client: bounded, so a stalled reader's lines are dropped from its
+    /// queue (counted) instead of piling up in the kernel (0 = kernel default).
+    std::uint32_t send_buffer_bytes = 128 * 1024;
 };
 
 struct BvhServerCounters {
     Counter connections_accepted;
-    Counter connections_rejected_full;
+    Counter connections_rejected_full;        ///< every slot held by a client making progress
+    Counter connections_refused_per_address;  ///< [limits] bvh_per_address reached
+    Counter connections_evicted;              ///< closed to give their slot to a new client
     Counter connections_closed;
+    Counter accept_errors;     ///< failed accepts (EMFILE...), retried after a pause
     Counter frames_published;  ///< frames handed to publish() while clients were connected
     Counter frames_sent;       ///< lines written (sum over clients)
     Counter frames_dropped;    ///< oldest lines dropped from lagging clients
@@ -95,7 +102,8 @@ public:
     class Session;  // one client (bvh_server.cpp)
 
 private:
-    void admit(asio::ip::tcp::socket socket);
+    void admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
+    void on_closed(std::uint64_t id);
     void deliver(const SubjectText& line);
 
     BvhServerConfig config_;

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "mocap/v1/mocap.pb.h"
+#include "serve/serve_thread.hpp"
 #include "serve/stats_reply.hpp"
 
 namespace mocap::serve {
@@ -99,6 +100,7 @@ void ClientSession::parse_messages(bool granted) {
         }
         granted = false;
         held_ = false;
+        if (slot_) slot_->progress(ServeThread::now_us());
         if (!handle(*in_)) return;
     }
 }
@@ -359,6 +361,7 @@ void ClientSession::on_write(const boost::system::error_code& ec, std::size_t n)
     }
     ctx_.counters.bytes_sent.add(n);
     ctx_.counters.frames_sent.add(in_flight_frames_);
+    if (slot_ && in_flight_frames_ > 0) slot_->progress(ServeThread::now_us());
     in_flight_.clear();  // release the shared buffers now, not at the next write
     do_write();
 }

@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "core/asio.hpp"
+#include "core/connection_slots.hpp"
 #include "serve/client_send_queue.hpp"
 #include "serve/framing.hpp"
 #include "serve/pose_broadcaster.hpp"
@@ -91,6 +92,9 @@ public:
     void close_with_goodbye(CloseReason reason, std::string_view text);
 
     [[nodiscard]] std::uint64_t id() const { return id_; }
+    /// Before start(): the connection slot to report progress on (valid messages, frames
+    /// written; core/connection_slots.hpp). Without one nothing is reported.
+    void set_slot(std::shared_ptr<ConnectionSlots::Slot> slot) { slot_ = std::move(slot); }
     [[nodiscard]] std::uint64_t dropped_total() const { return frames_.dropped_total(); }
 
 private:
@@ -128,6 +132,7 @@ private:
     SessionContext& ctx_;
     const std::size_t lane_;
     const std::uint64_t id_;
+    std::shared_ptr<ConnectionSlots::Slot> slot_;
     bool peer_is_loopback_ = false;
 
     DelimitedReader reader_;

@@ -9,6 +9,7 @@
 
 #include "core/parse_number.hpp"
 #include "serve/control_access.hpp"
+#include "serve/origin_check.hpp"
 #include "serve/pose_json.hpp"
 #include "serve/viewer_assets.hpp"
 
@@ -44,8 +45,8 @@ std::optional<std::uint32_t> parse_u32(std::string_view s) {
 
 }  // namespace
 
-HttpServer::HttpSession::HttpSession(asio::ip::tcp::socket socket, HttpServer& server, std::uint64_t id)
-    : stream_(std::move(socket)), server_(server), id_(id) {}
+HttpServer::HttpSession::HttpSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot)
+    : stream_(std::move(socket)), server_(server), slot_(std::move(slot)), id_(slot_->id()) {}
 
 template <class Body>
 void HttpServer::HttpSession::send(http::response<Body>&& response) {
@@ -78,6 +79,7 @@ void HttpServer::HttpSession::on_read(const beast::error_code& ec) {
     if (ec == http::error::end_of_stream) return close();
     if (ec) return fail(ec, "read");
     server_.counters_.requests.add();
+    slot_->progress(ServeThread::now_us());
     Request request = parser_->release();
     const std::string_view target(request.target().data(), request.target().size());
     const std::size_t q = target.find('?');
@@ -95,10 +97,28 @@ void HttpServer::HttpSession::upgrade(Request request, std::string_view query) {
         if (!parsed) return send_text(request, http::status::bad_request, "subject must be a number\n");
         subject = *parsed;
     }
+    // A browser sends the page's origin; a page from elsewhere must not read poses
+    // (docs/security.md, "Origin of WebSocket requests").
+    const auto header = [&request](http::field f) {
+        const auto it = request.find(f);
+        return it == request.end() ? std::string_view() : std::string_view(it->value().data(), it->value().size());
+    };
+    if (!websocket_origin_allowed(header(http::field::origin), header(http::field::host),
+                                  server_.config_.allowed_origins)) {
+        server_.counters_.ws_origin_refused.add();
+        std::uint64_t suppressed = 0;
+        if (server_.log_.allow(LogLimiter::kOriginRefused, suppressed)) {
+            spdlog::warn(
+                "http: WebSocket from origin '{}' refused: not the served host {} nor in allowed_origins "
+                "({} suppressed)",
+                header(http::field::origin), header(http::field::host), suppressed);
+        }
+        return send_text(request, http::status::forbidden, "origin not allowed\n");
+    }
     // The WebSocket session takes the socket and this connection's id and slot.
     stream_.expires_never();
     closed_ = true;
-    auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, id_, subject);
+    auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, slot_, subject);
     server_.sessions_.put(id_, ws);
     ws->run(std::move(request));
 }

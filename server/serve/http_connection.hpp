@@ -18,7 +18,8 @@ namespace mocap::serve {
 
 class HttpServer::HttpSession : public Session, public std::enable_shared_from_this<HttpSession> {
 public:
-    HttpSession(asio::ip::tcp::socket socket, HttpServer& server, std::uint64_t id);
+    /// The session's id is its slot's.
+    HttpSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot);
 
     void start() { do_read(); }
     void close() override;
@@ -40,6 +41,7 @@ private:
 
     boost::beast::tcp_stream stream_;
     HttpServer& server_;
+    ServeThread::SlotPtr slot_;  // progress: every whole request read
     std::uint64_t id_;
     boost::beast::flat_buffer buffer_;
     std::optional<boost::beast::http::request_parser<boost::beast::http::string_body>> parser_;

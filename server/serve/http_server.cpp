@@ -15,12 +15,16 @@ namespace mocap::serve {
 HttpServerCounters::HttpServerCounters() {
     group.add("connections_accepted", connections_accepted);
     group.add("connections_rejected_full", connections_rejected_full);
+    group.add("connections_refused_per_address", connections_refused_per_address);
+    group.add("connections_evicted", connections_evicted);
     group.add("connections_closed", connections_closed);
+    group.add("accept_errors", accept_errors);
     group.add("requests", requests);
     group.add("bad_requests", bad_requests);
     group.add("metrics_scrapes", metrics_scrapes);
     group.add("health_checks", health_checks);
     group.add("ws_connections", ws_connections);
+    group.add("ws_origin_refused", ws_origin_refused);
     group.add("ws_frames_encoded", ws_frames_encoded);
     group.add("ws_frames_sent", ws_frames_sent);
     group.add("ws_frames_dropped", ws_frames_dropped);
@@ -36,10 +40,12 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
     : config_(std::move(config)),
       description_(std::move(description)),
       handlers_(std::move(handlers)),
-      serve_({"http", "mocap-http", "viewer, /metrics and /healthz"}, config_.max_clients,
-             {counters_.connections_accepted, counters_.connections_rejected_full},
-             {[this] { return sessions_.size(); }, [this](asio::ip::tcp::socket s) { admit(std::move(s)); },
-              [this] { sessions_.close_all(); }}),
+      serve_({"http", "mocap-http", "viewer, /metrics and /healthz"},
+             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes},
+             {counters_.connections_accepted, counters_.connections_rejected_full,
+              counters_.connections_refused_per_address, counters_.connections_evicted, counters_.accept_errors},
+             {[this](asio::ip::tcp::socket s, ServeThread::SlotPtr slot) { admit(std::move(s), std::move(slot)); },
+              [this](std::uint64_t id) { sessions_.close(id); }, [this] { sessions_.close_all(); }}),
       sessions_(counters_.connections_closed),
       backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& frame) { deliver(frame); }) {
     register_metrics(own_metrics_);
@@ -64,9 +70,9 @@ void HttpServer::stop() {
     serve_.stop();
 }
 
-void HttpServer::admit(asio::ip::tcp::socket socket) {
-    const std::uint64_t id = sessions_.next_id();
-    auto s = std::make_shared<HttpSession>(std::move(socket), *this, id);
+void HttpServer::admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot) {
+    const std::uint64_t id = slot->id();
+    auto s = std::make_shared<HttpSession>(std::move(socket), *this, std::move(slot));
     sessions_.put(id, s);
     s->start();
 }
@@ -79,6 +85,7 @@ void HttpServer::on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& 
 
 void HttpServer::on_closed(std::uint64_t id) {
     sessions_.remove(id);
+    serve_.release(id);
     ws_sessions_.erase(id);
     ws_clients_.store(ws_sessions_.size());
 }

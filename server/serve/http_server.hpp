@@ -65,12 +65,19 @@ namespace mocap::serve {
 struct HttpServerConfig {
     std::string bind_address = "0.0.0.0";
     std::uint16_t port = 8080;         ///< 0 = any free port (tests)
-    std::size_t max_clients = 64;      ///< HTTP + WebSocket connections at once
+    std::size_t max_clients = 64;      ///< HTTP + WebSocket slots; see ServeThread for who gets one when full
     std::size_t ws_queue_frames = 16;  ///< per WebSocket; oldest dropped beyond it
     std::size_t publish_backlog_frames = 1024;
     std::uint32_t idle_timeout_s = 30;  ///< an HTTP connection idle this long is closed
     std::string control_token;          ///< empty = control refused
     bool control_loopback_only = true;
+    /// Origins besides the served host that may open /ws (origin_check.hpp), e.g.
+    /// "https://viewer.lab:8443".
+    std::vector<std::string> allowed_origins;
+    PeerLimits limits{};  ///< [limits] http_per_address, loopback, stall_evict_s
+    /// SO_SNDBUF per connection: bounded, so a stalled browser's frames are dropped from its
+    /// queue (counted) instead of piling up in the kernel (0 = kernel default).
+    std::uint32_t send_buffer_bytes = 128 * 1024;
     /// Wall clock (CLOCK_REALTIME µs) for encoded_us; empty = system_clock.
     std::function<std::int64_t()> wall_clock_us;
 };
@@ -104,13 +111,17 @@ struct HttpHandlers {
 
 struct HttpServerCounters {
     Counter connections_accepted;
-    Counter connections_rejected_full;
+    Counter connections_rejected_full;        ///< every slot held by a connection making progress
+    Counter connections_refused_per_address;  ///< [limits] http_per_address reached
+    Counter connections_evicted;              ///< closed to give their slot to a new connection
     Counter connections_closed;
+    Counter accept_errors;  ///< failed accepts (EMFILE...), retried after a pause
     Counter requests;
     Counter bad_requests;  ///< unparseable, unknown path or method (4xx)
     Counter metrics_scrapes;
     Counter health_checks;
     Counter ws_connections;
+    Counter ws_origin_refused;  ///< /ws upgrades refused with 403: a foreign Origin
     Counter ws_frames_encoded;
     Counter ws_frames_sent;
     Counter ws_frames_dropped;   ///< oldest frames dropped from lagging browsers
@@ -160,7 +171,7 @@ public:
 private:
     friend class HttpSession;
     friend class WsSession;
-    void admit(asio::ip::tcp::socket socket);
+    void admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
     void deliver(const SubjectText& frame);
     void on_closed(std::uint64_t id);
     void on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& session);

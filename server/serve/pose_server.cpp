@@ -6,6 +6,7 @@
 
 #include <chrono>
 
+#include "core/peer_address.hpp"
 #include "mocap/v1/mocap.pb.h"
 #include "serve/tcp_listen.hpp"
 
@@ -41,6 +42,7 @@ PoseServer::PoseServer(ServeConfig config, ControlHandlers handlers)
         config_, handlers_, counters_, log_, *broadcaster_, [this] { return hello(); }, config_.wall_clock_us,
         [this](std::size_t lane, std::uint64_t id) { on_session_closed(lane, id); }, std::move(budgets)});
     goodbye_full_ = encode_goodbye(CloseReason::kServerFull, "client limit reached");
+    goodbye_per_address_ = encode_goodbye(CloseReason::kServerFull, "connection limit of your address reached");
     set_description({});
 }
 
@@ -94,7 +96,7 @@ bool PoseServer::start(std::string& error) {
     if (!acceptor_) return false;
     boost::system::error_code ec;
     bound_port_ = acceptor_->local_endpoint(ec).port();
-    accept_retry_ = std::make_unique<asio::steady_timer>(lanes_[0]->io);
+    accept_backoff_ = std::make_unique<AcceptBackoff>(lanes_[0]->io.get_executor(), "serve", counters_.accept_errors);
     running_ = true;
     do_accept();
     for (std::size_t i = 0; i < lanes_.size(); ++i) {
@@ -120,7 +122,7 @@ void PoseServer::stop() {
             boost::system::error_code ignored;
             if (i == 0) {
                 acceptor_->close(ignored);
-                accept_retry_->cancel();
+                accept_backoff_->cancel();
             }
             // Copy: close() erases from the table through on_session_closed().
             std::vector<std::shared_ptr<ClientSession>> sessions;
@@ -147,63 +149,88 @@ void PoseServer::do_accept() {
 
 void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
     if (ec == asio::error::operation_aborted || !running_.load()) return;
-    if (ec) {
-        // E.g. EMFILE: back off briefly instead of spinning on a failing accept.
-        counters_.accept_errors.add();
-        std::uint64_t suppressed = 0;
-        if (log_.allow(LogLimiter::kAcceptError, suppressed)) {
-            spdlog::warn("serve: accept: {} ({} suppressed)", ec.message(), suppressed);
-        }
-        accept_retry_->expires_after(std::chrono::milliseconds(100));
-        accept_retry_->async_wait([this](const boost::system::error_code& wait_ec) {
-            if (wait_ec) return;
-            do_accept();
-        });
-        return;
-    }
+    if (ec) return accept_backoff_->on_error(ec, [this] { do_accept(); });
     const std::size_t lane = next_lane_;
     next_lane_ = (next_lane_ + 1) % lanes_.size();
-    if (active_clients_.load() >= config_.max_clients) {
-        counters_.connections_rejected_full.add();
-        std::uint64_t suppressed = 0;
-        if (log_.allow(LogLimiter::kClientFull, suppressed)) {
-            spdlog::warn("serve: client limit {} reached, connection refused ({} suppressed)", config_.max_clients,
-                         suppressed);
-        }
-        reject(socket);
-    } else {
-        active_clients_.fetch_add(1);
-        counters_.connections_accepted.add();
-        asio::post(lanes_[lane]->io,
-                   [this, lane, s = std::move(socket)]() mutable { start_session(lane, std::move(s)); });
+    const PeerAddress peer = peer_address(socket);
+    ConnectionSlots::Admission a = slots_.admit(peer.ip, peer.loopback, ServeThread::now_us());
+    std::uint64_t suppressed = 0;
+    switch (a.verdict) {
+        case ConnectionSlots::Verdict::kRefusedPerAddress:
+            counters_.connections_refused_per_address.add();
+            if (log_.allow(LogLimiter::kClientFull, suppressed)) {
+                spdlog::warn("serve: connection from {} refused: {} connections from that address ({} suppressed)",
+                             peer.ip, config_.limits.max_per_address, suppressed);
+            }
+            reject(socket, *goodbye_per_address_);
+            break;
+        case ConnectionSlots::Verdict::kRefusedFull:
+            counters_.connections_rejected_full.add();
+            if (log_.allow(LogLimiter::kClientFull, suppressed)) {
+                spdlog::warn(
+                    "serve: client limit {} reached, every client making progress, connection refused ({} "
+                    "suppressed)",
+                    config_.max_clients, suppressed);
+            }
+            reject(socket, *goodbye_full_);
+            break;
+        case ConnectionSlots::Verdict::kAdmittedEvicting:
+            counters_.connections_evicted.add();
+            if (log_.allow(LogLimiter::kClientFull, suppressed)) {
+                spdlog::warn("serve: client limit {} reached, closing a client without progress for {} ({} suppressed)",
+                             config_.max_clients, peer.ip, suppressed);
+            }
+            evict(a.evicted);
+            [[fallthrough]];
+        case ConnectionSlots::Verdict::kAdmitted:
+            active_clients_.fetch_add(1);
+            counters_.connections_accepted.add();
+            asio::post(lanes_[lane]->io, [this, lane, s = std::move(socket), slot = std::move(a.slot)]() mutable {
+                start_session(lane, std::move(s), std::move(slot));
+            });
+            break;
     }
     do_accept();
 }
 
-void PoseServer::reject(asio::ip::tcp::socket& socket) {
+void PoseServer::evict(std::uint64_t id) {
+    // The victim may be on any lane; only its own lane may touch it.
+    for (auto& lane : lanes_) {
+        asio::post(lane->io, [l = lane.get(), id] {
+            const auto it = l->sessions.find(id);
+            if (it == l->sessions.end()) return;
+            const std::shared_ptr<ClientSession> session = it->second;
+            session->close_with_goodbye(CloseReason::kServerFull, "client limit reached: slot given to a new client");
+        });
+    }
+}
+
+void PoseServer::reject(asio::ip::tcp::socket& socket, const std::string& goodbye) {
     // A fresh socket's send buffer always has room for a few dozen bytes: one
     // non-blocking write, no session, no state.
     boost::system::error_code ignored;
     socket.non_blocking(true, ignored);
-    socket.write_some(asio::buffer(*goodbye_full_), ignored);
+    socket.write_some(asio::buffer(goodbye), ignored);
     socket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
     socket.close(ignored);
 }
 
-void PoseServer::start_session(std::size_t lane, asio::ip::tcp::socket socket) {
+void PoseServer::start_session(std::size_t lane, asio::ip::tcp::socket socket, ServeThread::SlotPtr slot) {
     boost::system::error_code ignored;
     socket.set_option(asio::ip::tcp::no_delay(true), ignored);  // frames are small and urgent
     if (config_.send_buffer_bytes > 0) {
         socket.set_option(asio::socket_base::send_buffer_size(static_cast<int>(config_.send_buffer_bytes)), ignored);
     }
-    const std::uint64_t id = next_id_.fetch_add(1);
+    const std::uint64_t id = slot->id();
     auto session = std::make_shared<ClientSession>(std::move(socket), *session_context_, lane, id);
+    session->set_slot(std::move(slot));
     lanes_[lane]->sessions.emplace(id, session);
     session->start();
 }
 
 void PoseServer::on_session_closed(std::size_t lane, std::uint64_t id) {
     if (lanes_[lane]->sessions.erase(id) > 0) active_clients_.fetch_sub(1);
+    slots_.release(id);
 }
 
 }  // namespace mocap::serve

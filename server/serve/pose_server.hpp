@@ -39,6 +39,7 @@
 #include "serve/request_budget.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_counters.hpp"
+#include "serve/serve_thread.hpp"
 #include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
@@ -85,8 +86,9 @@ private:
 
     void do_accept();
     void on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket);
-    void start_session(std::size_t lane, asio::ip::tcp::socket socket);
-    void reject(asio::ip::tcp::socket& socket);
+    void start_session(std::size_t lane, asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
+    void reject(asio::ip::tcp::socket& socket, const std::string& goodbye);
+    void evict(std::uint64_t id);
     void on_session_closed(std::size_t lane, std::uint64_t id);
     SharedBytes hello() const;
 
@@ -98,6 +100,7 @@ private:
     mutable std::mutex hello_mutex_;
     SharedBytes hello_;
     SharedBytes goodbye_full_;
+    SharedBytes goodbye_per_address_;
 
     // Lanes (io_contexts) are declared before the broadcaster and the session context,
     // which refer to them, and destroyed after them.
@@ -105,10 +108,10 @@ private:
     std::unique_ptr<PoseBroadcaster> broadcaster_;
     std::unique_ptr<SessionContext> session_context_;
     std::unique_ptr<asio::ip::tcp::acceptor> acceptor_;  // lane 0
-    std::unique_ptr<asio::steady_timer> accept_retry_;   // lane 0: back-off after errors
+    std::unique_ptr<AcceptBackoff> accept_backoff_;      // lane 0: pause after EMFILE and the like
 
-    std::size_t next_lane_ = 0;  // lane 0 thread only
-    std::atomic<std::uint64_t> next_id_{1};
+    std::size_t next_lane_ = 0;                                               // lane 0 thread only
+    ConnectionSlots slots_{SlotPolicy{config_.max_clients, config_.limits}};  // lane 0 admits; any lane releases
     std::atomic<std::size_t> active_clients_{0};
     std::atomic<std::uint16_t> bound_port_{0};
     std::atomic<bool> running_{false};

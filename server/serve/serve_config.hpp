@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "core/connection_slots.hpp"
+
 #include "core/metrics_registry.hpp"
 
 namespace mocap::serve {
@@ -20,7 +22,8 @@ struct ServeConfig {
     std::string bind_address = "0.0.0.0";           ///< IPv4/IPv6 literal to listen on
     std::uint16_t port = 7001;                      ///< 0 = any free port (tests); see PoseServer::port()
     std::size_t io_threads = 1;                     ///< serve threads; each owns a share of the clients
-    std::size_t max_clients = 256;                  ///< connections beyond this get Goodbye(SERVER_FULL)
+    std::size_t max_clients = 256;                  ///< slots; a client refused gets Goodbye(SERVER_FULL)
+    PeerLimits limits{};                            ///< [limits] pose_per_address, loopback, stall_evict_s
     std::size_t queue_frames = 64;                  ///< per-client frame queue; the oldest frame is
                                                     ///< dropped (and announced) when it is full
     std::uint32_t subscribe_timeout_ms = 5000;      ///< an unsubscribed client must send a valid

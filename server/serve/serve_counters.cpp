@@ -7,6 +7,8 @@ namespace mocap::serve {
 ServeCounters::ServeCounters() {
     group.add("connections_accepted", connections_accepted);
     group.add("connections_rejected_full", connections_rejected_full);
+    group.add("connections_refused_per_address", connections_refused_per_address);
+    group.add("connections_evicted", connections_evicted);
     group.add("connections_closed", connections_closed);
     group.add("accept_errors", accept_errors);
     group.add("frames_published", frames_published);

@@ -17,9 +17,11 @@ namespace mocap::serve {
 
 struct ServeCounters {
     Counter connections_accepted;
-    Counter connections_rejected_full;  ///< client limit reached
+    Counter connections_rejected_full;        ///< every slot held by a client making progress
+    Counter connections_refused_per_address;  ///< [limits] pose_per_address reached
+    Counter connections_evicted;              ///< closed to give their slot to a new client
     Counter connections_closed;
-    Counter accept_errors;
+    Counter accept_errors;     ///< failed accepts (EMFILE...), retried after a pause
     Counter frames_published;  ///< frames handed to publish()
     Counter frames_encoded;    ///< encodings (one per frame and field selection in use)
     Counter frames_sent;       ///< frame deliveries written to clients (sum over clients)
@@ -55,8 +57,8 @@ public:
         kRateLimited,
         kControlRefused,
         kClientFull,
-        kAcceptError,
         kIoError,
+        kOriginRefused,
         kKinds
     };
     explicit LogLimiter(std::chrono::milliseconds interval = std::chrono::seconds(10))

@@ -1,20 +1,38 @@
-// serve_thread.cpp — acceptor with a client limit and the thread that runs it.
+// serve_thread.cpp — acceptor with connection slots and the thread that runs it.
 #include "serve/serve_thread.hpp"
 
 #include <pthread.h>
 #include <spdlog/spdlog.h>
 
+#include <chrono>
 #include <utility>
 
+#include "core/peer_address.hpp"
 #include "serve/tcp_listen.hpp"
 
 namespace mocap::serve {
 
-ServeThread::ServeThread(Names names, std::size_t max_clients, Counters counters, Hooks hooks)
-    : names_(std::move(names)), max_clients_(max_clients), counters_(counters), hooks_(std::move(hooks)) {}
+namespace {
+// Refusals and evictions are logged at most once per interval (a connect flood would
+// otherwise flood the log); the counters have every one.
+constexpr std::chrono::seconds kRefusalLogInterval{10};
+}  // namespace
+
+ServeThread::ServeThread(Names names, Options options, Counters counters, Hooks hooks)
+    : names_(std::move(names)),
+      options_(options),
+      counters_(counters),
+      hooks_(std::move(hooks)),
+      slots_(options_.slots),
+      backoff_(io_.get_executor(), names_.service, counters_.accept_errors) {}
 
 ServeThread::~ServeThread() {
     stop();
+}
+
+std::int64_t ServeThread::now_us() {
+    return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
 }
 
 bool ServeThread::start(const std::string& bind_address, std::uint16_t port, std::string& error) {
@@ -43,6 +61,7 @@ void ServeThread::stop() {
     asio::post(io_, [this] {
         boost::system::error_code ignored;
         acceptor_->close(ignored);
+        backoff_.cancel();
         hooks_.close_all();
         io_.stop();
     });
@@ -55,18 +74,50 @@ void ServeThread::do_accept() {
     });
 }
 
+void ServeThread::log_refusal(const char* what, const std::string& ip) {
+    const auto now = std::chrono::steady_clock::now();
+    if (refusal_logged_ && now - last_refusal_log_ < kRefusalLogInterval) {
+        ++refusals_unlogged_;
+        return;
+    }
+    spdlog::warn("{}: connection from {}: {} ({} more such events since the last line)", names_.service, ip, what,
+                 refusals_unlogged_);
+    refusal_logged_ = true;
+    last_refusal_log_ = now;
+    refusals_unlogged_ = 0;
+}
+
 void ServeThread::on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
     if (ec == asio::error::operation_aborted || !running_.load()) return;
-    if (!ec) {
-        boost::system::error_code ignored;
-        if (hooks_.open_clients() >= max_clients_) {
-            counters_.rejected_full.add();
+    if (ec) return backoff_.on_error(ec, [this] { do_accept(); });
+    boost::system::error_code ignored;
+    const PeerAddress peer = peer_address(socket);
+    ConnectionSlots::Admission a = slots_.admit(peer.ip, peer.loopback, now_us());
+    switch (a.verdict) {
+        case ConnectionSlots::Verdict::kRefusedPerAddress:
+            counters_.refused_per_address.add();
+            log_refusal("refused, per-address limit reached", peer.ip);
             socket.close(ignored);
-        } else {
+            break;
+        case ConnectionSlots::Verdict::kRefusedFull:
+            counters_.rejected_full.add();
+            log_refusal("refused, every slot is taken by a connection making progress", peer.ip);
+            socket.close(ignored);
+            break;
+        case ConnectionSlots::Verdict::kAdmittedEvicting:
+            counters_.evicted.add();
+            log_refusal("admitted in place of a connection without progress, which is closed", peer.ip);
+            hooks_.evict(a.evicted);
+            [[fallthrough]];
+        case ConnectionSlots::Verdict::kAdmitted:
             counters_.accepted.add();
             socket.set_option(asio::ip::tcp::no_delay(true), ignored);
-            hooks_.admit(std::move(socket));
-        }
+            if (options_.send_buffer_bytes > 0) {
+                socket.set_option(asio::socket_base::send_buffer_size(static_cast<int>(options_.send_buffer_bytes)),
+                                  ignored);
+            }
+            hooks_.admit(std::move(socket), std::move(a.slot));
+            break;
     }
     do_accept();
 }

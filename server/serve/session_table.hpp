@@ -1,4 +1,5 @@
-// session_table.hpp — the open sessions of one serve thread, by id: what the live BVH
+// session_table.hpp — the open sessions of one serve thread, by id (the id of the
+// connection slot, serve_thread.hpp): what the live BVH
 // server and the HTTP server keep for their ServeThread (the pose server has one table
 // per lane in pose_server.cpp).
 //
@@ -27,8 +28,6 @@ public:
     /// `closed_counter` (e.g. connections_closed) must outlive the table.
     explicit SessionTable(Counter& closed_counter) : closed_counter_(closed_counter) {}
 
-    /// A fresh id for a new session (never 0, never reused).
-    [[nodiscard]] std::uint64_t next_id() { return next_id_++; }
     /// Lists `session` under `id`, or replaces the one listed there (an HTTP connection
     /// that became a WebSocket keeps its id and its slot).
     void put(std::uint64_t id, std::shared_ptr<Session> session) {
@@ -39,6 +38,13 @@ public:
     void remove(std::uint64_t id) {
         if (sessions_.erase(id) != 0) closed_counter_.add();
         open_.store(sessions_.size(), std::memory_order_relaxed);
+    }
+    /// Closes session `id` if it is listed (its close() removes it).
+    void close(std::uint64_t id) {
+        const auto it = sessions_.find(id);
+        if (it == sessions_.end()) return;
+        const std::shared_ptr<Session> session = it->second;
+        session->close();
     }
     /// Closes every session (each close() removes it).
     void close_all() {
@@ -65,7 +71,6 @@ public:
 private:
     std::unordered_map<std::uint64_t, std::shared_ptr<Session>> sessions_;
     Counter& closed_counter_;
-    std::uint64_t next_id_ = 1;
     std::atomic<std::size_t> open_{0};
 };
 

@@ -16,11 +16,12 @@ namespace {
 constexpr std::size_t kMaxWsMessageBytes = std::size_t{4} * 1024;
 }  // namespace
 
-HttpServer::WsSession::WsSession(asio::ip::tcp::socket socket, HttpServer& server, std::uint64_t id,
+HttpServer::WsSession::WsSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot,
                                  std::uint32_t subject)
     : ws_(std::move(socket)),
       server_(server),
-      id_(id),
+      slot_(std::move(slot)),
+      id_(slot_->id()),
       subject_(subject),
       frames_(server.config_.ws_queue_frames, server.counters_.ws_frames_dropped) {}
 
@@ -101,7 +102,11 @@ void HttpServer::WsSession::on_write(const beast::error_code& ec) {
         }
         return fail(ec, "write");
     }
-    if (in_flight_is_frame_) server_.counters_.ws_frames_sent.add();
+    if (in_flight_is_frame_) {
+        server_.counters_.ws_frames_sent.add();
+        // With the bounded send buffer, a browser that stops reading stops this within seconds.
+        slot_->progress(ServeThread::now_us());
+    }
     in_flight_.reset();
     do_write();
 }

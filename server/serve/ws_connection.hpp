@@ -25,7 +25,8 @@ public:
 
 class HttpServer::WsSession : public Session, public std::enable_shared_from_this<WsSession> {
 public:
-    WsSession(asio::ip::tcp::socket socket, HttpServer& server, std::uint64_t id, std::uint32_t subject);
+    /// Takes over the HTTP connection's slot (and so its id).
+    WsSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot, std::uint32_t subject);
 
     /// Completes the handshake of `request` (the Upgrade), then sends the hello.
     void run(boost::beast::http::request<boost::beast::http::string_body> request);
@@ -43,6 +44,7 @@ private:
 
     boost::beast::websocket::stream<boost::beast::tcp_stream> ws_;
     HttpServer& server_;
+    ServeThread::SlotPtr slot_;  // progress: frames the kernel took for this browser
     std::uint64_t id_;
     std::uint32_t subject_;
     boost::beast::http::request<boost::beast::http::string_body> request_;

@@ -45,56 +45,7 @@ std::int64_t realtime_us() {
 }
 
 // ------------------------------------------------------------------ raw sockets
-
-/// Blocking connect with a 200 ms receive timeout; rcvbuf > 0 shrinks the receive buffer
-/// before the handshake (a client that reads nothing then fills up quickly).
-int tcp_connect(std::uint16_t port, const std::string& host = "127.0.0.1", int rcvbuf = 0) {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    if (rcvbuf > 0) ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    ::inet_pton(AF_INET, host.c_str(), &a.sin_addr);
-    a.sin_port = htons(port);
-    if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-        ::close(fd);
-        return -1;
-    }
-    const int one = 1;
-    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-    timeval tv{0, 200'000};
-    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-    return fd;
-}
-
-bool send_all(int fd, const void* data, std::size_t n) {
-    const auto* p = static_cast<const std::uint8_t*>(data);
-    while (n > 0) {
-        const ssize_t w = ::send(fd, p, n, MSG_NOSIGNAL);
-        if (w <= 0) return false;
-        p += w;
-        n -= static_cast<std::size_t>(w);
-    }
-    return true;
-}
-bool send_all(int fd, const Bytes& b) {
-    return send_all(fd, b.data(), b.size());
-}
-bool send_all(int fd, const std::string& s) {
-    return send_all(fd, s.data(), s.size());
-}
-
-/// True once the peer has closed the connection (EOF or reset), reading and discarding
-/// whatever it sends, within `limit`.
-bool closed_by_peer(int fd, std::chrono::milliseconds limit) {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    std::array<char, 4096> buf{};
-    while (std::chrono::steady_clock::now() < end) {
-        const ssize_t r = ::recv(fd, buf.data(), buf.size(), 0);
-        if (r == 0) return true;
-        if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) return true;
-    }
-    return false;
-}
+// (tcp_connect, send_all, closed_by_peer: harness.hpp)
 
 Bytes random_bytes(std::mt19937& rng, std::size_t n) {
     Bytes b(n);
@@ -112,14 +63,6 @@ std::string delimited(const v1::ClientMessage& m) {
 /// The sink's own 32-bit SYNC counter inside the daemon's 64-bit sync line.
 std::uint32_t low32(std::uint64_t sync) {
     return static_cast<std::uint32_t>(sync & 0xFFFFFFFFu);
-}
-
-std::size_t count_lines(const std::string& text, const std::string& needle) {
-    std::size_t n = 0;
-    std::istringstream in(text);
-    for (std::string line; std::getline(in, line);)
-        n += line.find(needle) != std::string::npos ? 1 : 0;
-    return n;
 }
 
 // ------------------------------------------------------------------ /proc
@@ -1085,11 +1028,14 @@ TEST_F(Faults, ClientLimitRateLimitAndLoopbackOnlyControl) {
         std::cout << "[ note     ] no non-loopback IPv4 address: the loopback-only refusal is not exercised\n";
     }
 
-    // Client limit: max_clients = 4; the fifth gets Goodbye(SERVER_FULL).
+    // Client limit: max_clients = 4, every one subscribed (so none is evictable: see
+    // docs/security.md, "Connection slots"); the fifth gets Goodbye(SERVER_FULL).
     std::this_thread::sleep_for(300ms);  // the clients above are gone
     std::vector<client::PoseClient> held(4);
-    for (auto& c : held)
+    for (auto& c : held) {
         ASSERT_TRUE(c.connect("127.0.0.1", pose_port_, 5s, err)) << err;
+        ASSERT_TRUE(c.subscribe({}, 5s, err)) << err;
+    }
     {
         client::PoseClient fifth;
         EXPECT_FALSE(fifth.connect("127.0.0.1", pose_port_, 5s, err));

@@ -56,5 +56,19 @@ std::uint16_t free_port();
 bool wait_for_port(std::uint16_t port, std::chrono::milliseconds limit);
 void write_file(const std::string& path, const std::string& text);
 std::string read_file(const std::string& path);
+/// Lines of `text` that contain `needle`.
+std::size_t count_lines(const std::string& text, const std::string& needle);
+
+// Raw TCP sockets, for clients that misbehave on purpose.
+
+/// Blocking connect with a 200 ms receive timeout; rcvbuf > 0 shrinks the receive buffer
+/// before the handshake (a client that reads nothing then fills up quickly). -1 on failure.
+int tcp_connect(std::uint16_t port, const std::string& host = "127.0.0.1", int rcvbuf = 0);
+bool send_all(int fd, const void* data, std::size_t n);
+bool send_all(int fd, const std::string& s);
+bool send_all(int fd, const std::vector<std::uint8_t>& b);
+/// True once the peer has closed the connection (EOF or reset), reading and discarding
+/// whatever it sends, within `limit`.
+bool closed_by_peer(int fd, std::chrono::milliseconds limit);
 
 }  // namespace mocap::itest

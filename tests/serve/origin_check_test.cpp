@@ -1,0 +1,39 @@
+// websocket_origin_allowed: Origin against Host and [http] allowed_origins.
+#include "serve/origin_check.hpp"
+
+#include <gtest/gtest.h>
+
+namespace mocap::serve {
+namespace {
+
+TEST(OriginCheck, SameHostAndPortOrNoOriginAreAllowed) {
+    const std::vector<std::string> none;
+    EXPECT_TRUE(websocket_origin_allowed("", "127.0.0.1:8080", none)) << "not a browser";
+    EXPECT_TRUE(websocket_origin_allowed("http://127.0.0.1:8080", "127.0.0.1:8080", none));
+    EXPECT_TRUE(websocket_origin_allowed("http://Viewer.Lab:8080", "viewer.lab:8080", none)) << "host case";
+    EXPECT_TRUE(websocket_origin_allowed("http://viewer.lab", "viewer.lab", none)) << "both on port 80";
+    EXPECT_TRUE(websocket_origin_allowed("http://viewer.lab:80", "viewer.lab", none));
+    EXPECT_TRUE(websocket_origin_allowed("http://[::1]:8080", "[::1]:8080", none));
+}
+
+TEST(OriginCheck, ForeignOriginsAreRefused) {
+    const std::vector<std::string> none;
+    EXPECT_FALSE(websocket_origin_allowed("http://evil.example", "127.0.0.1:8080", none));
+    EXPECT_FALSE(websocket_origin_allowed("http://127.0.0.1:8081", "127.0.0.1:8080", none)) << "other port";
+    EXPECT_FALSE(websocket_origin_allowed("https://127.0.0.1:8080", "127.0.0.1", none)) << "443 is not 80";
+    EXPECT_FALSE(websocket_origin_allowed("null", "127.0.0.1:8080", none));
+    EXPECT_FALSE(websocket_origin_allowed("file://", "127.0.0.1:8080", none));
+    EXPECT_FALSE(websocket_origin_allowed("http://127.0.0.1:8080@evil", "127.0.0.1:8080", none));
+    EXPECT_FALSE(websocket_origin_allowed("http://127.0.0.1:8080", "", none)) << "no Host to compare with";
+}
+
+TEST(OriginCheck, TheAllowListAdmitsExactOrigins) {
+    const std::vector<std::string> allowed{"https://dash.example:8443/", "null"};
+    EXPECT_TRUE(websocket_origin_allowed("https://dash.example:8443", "10.0.0.5:8080", allowed));
+    EXPECT_TRUE(websocket_origin_allowed("HTTPS://DASH.EXAMPLE:8443", "10.0.0.5:8080", allowed));
+    EXPECT_TRUE(websocket_origin_allowed("null", "10.0.0.5:8080", allowed));
+    EXPECT_FALSE(websocket_origin_allowed("https://dash.example", "10.0.0.5:8080", allowed)) << "other port";
+}
+
+}  // namespace
+}  // namespace mocap::serve
