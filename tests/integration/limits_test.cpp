@@ -118,8 +118,7 @@ protected:
             << "[outputs]\nbvh_listen = \"127.0.0.1:" << bvh_port_ << "\"\nbvh_subject = 1\n"
             << "record_dir = \"" << dir_.path().string() << "\"\n"
             << more("outputs") << "[http]\nlisten = \"127.0.0.1:" << http_port_ << "\"\n"
-            << more("http") << "[limits]\n"
-            << more("limits");
+            << more("http") << (extra.count("limits") ? "[limits]\n" + more("limits") : std::string());
         write_file(dir_.file("mocapd.toml"), cfg.str());
         std::vector<std::string> argv = wrapper;
         argv.insert(argv.end(), {MOCAPD_BIN, "--config", dir_.file("mocapd.toml")});

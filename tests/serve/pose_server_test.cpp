@@ -226,10 +226,16 @@ TEST(PoseServer, ClientLimitRejectsWithReasonAndFreesSlotsOnClose) {
     ServeConfig config = test_config();
     config.max_clients = 2;
     Started s(config);
+    std::string error;
+    // An idle connection that never sent a valid message gives its slot up to a newcomer
+    // (core/connection_slots.hpp); subscribed clients do not.
+    PoseClient idle = s.connect();
     PoseClient a = s.connect();
     PoseClient b = s.connect();
+    EXPECT_EQ(s.server.counters().connections_evicted.value(), 1u);
+    ASSERT_TRUE(a.subscribe({{1}, 1, 0}, 2s, error)) << error;
+    ASSERT_TRUE(b.subscribe({{1}, 1, 0}, 2s, error)) << error;
     PoseClient c;
-    std::string error;
     EXPECT_FALSE(c.connect("127.0.0.1", s.server.port(), 2s, error));
     ASSERT_TRUE(c.goodbye().has_value()) << error;
     EXPECT_EQ(c.goodbye()->reason(), v1::GOODBYE_SERVER_FULL);
