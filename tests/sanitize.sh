@@ -30,7 +30,7 @@ export TSAN_OPTIONS="${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}"
 
 tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_http_tests
                   daemon_integration_tests faults_integration_tests http_integration_tests
-                  disk_integration_tests)
+                  disk_integration_tests limits_integration_tests)
 
 status=0
 phase() {  # phase NAME COMMAND... — runs, times and reports one step
