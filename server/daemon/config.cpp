@@ -3,6 +3,7 @@
 #include <arpa/inet.h>
 #include <net/if.h>
 #include <toml++/toml.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -392,6 +393,45 @@ void read_limits(TableReader& r, DaemonConfig& c) {
     r.read("stall_evict_s", c.stall_evict_s, 0.1, 3600.0);
 }
 
+void read_bool(TableReader& r, std::string_view key, bool& out) {
+    if (const auto* n = r.take(key)) {
+        if (!n->is_boolean()) r.fail(key, n, "expected true or false");
+        out = n->value<bool>().value();
+    }
+}
+
+// A NATS subject token: non-empty, no '.', no wildcard ('*', '>') and no whitespace or
+// control character, so "mocap.<site>.<subject>.pose" always has exactly four tokens.
+bool is_subject_token(const std::string& t) {
+    return !t.empty() && std::none_of(t.begin(), t.end(), [](char ch) {
+        const auto u = static_cast<unsigned char>(ch);
+        return ch == '.' || ch == '*' || ch == '>' || std::isspace(u) != 0 || std::iscntrl(u) != 0;
+    });
+}
+
+void read_cluster(TableReader& r, DaemonConfig& c) {
+    r.read("nats_url", c.cluster_nats_url);
+    r.read("site", c.cluster_site);
+    if (!is_subject_token(c.cluster_site)) {
+        r.fail("site", r.take("site"), "must be one NATS subject token: not empty, no '.', '*', '>' or whitespace");
+    }
+    r.read("host_id", c.cluster_host_id);
+    if (!c.cluster_host_id.empty() && !is_subject_token(c.cluster_host_id)) {
+        r.fail("host_id", r.take("host_id"),
+               "must be \"\" (the host name) or one NATS subject token: no '.', '*', '>' or whitespace");
+    }
+    r.read("user", c.cluster_user);
+    r.read("password", c.cluster_password);
+    r.read("creds_file", c.cluster_creds_file);
+    r.read("nkey_seed_file", c.cluster_nkey_seed_file);
+    read_bool(r, "allow_anonymous", c.cluster_allow_anonymous);
+    r.read("tls_ca_file", c.cluster_tls_ca_file);
+    r.read("tls_cert_file", c.cluster_tls_cert_file);
+    r.read("tls_key_file", c.cluster_tls_key_file);
+    r.read("raw_replicas", c.cluster_raw_replicas, 1, 5);
+    r.read("queue_frames", c.cluster_queue_frames, 1, 1 << 20);
+}
+
 // An IPv4 or IPv6 literal, as make_address accepts it (an IPv6 link-local address may carry
 // "%interface", which must name an interface of this host).
 bool is_address_literal(const std::string& host) {
@@ -419,6 +459,18 @@ bool has_settings(std::string_view text) {
 
 std::string Endpoint::str() const {
     return (host.find(':') != std::string::npos ? "[" + host + "]" : host) + ":" + std::to_string(port);
+}
+
+std::string cluster_host_id(const DaemonConfig& config) {
+    if (!config.cluster_host_id.empty()) return config.cluster_host_id;
+    std::array<char, 256> name{};
+    if (::gethostname(name.data(), name.size() - 1) != 0) return {};
+    std::string id(name.data());
+    id = id.substr(0, id.find('.'));
+    for (char& ch : id) {
+        if (!is_subject_token(std::string(1, ch))) ch = '_';
+    }
+    return id;
 }
 
 std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error) {
@@ -467,7 +519,7 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
             {"log", read_log},         {"ingest", read_ingest},     {"pipeline", read_pipeline},
             {"filter", read_filter},   {"skeleton", read_skeleton}, {"serve", read_serve},
             {"control", read_control}, {"outputs", read_outputs},   {"http", read_http},
-            {"limits", read_limits},
+            {"limits", read_limits},   {"cluster", read_cluster},
         };
         for (const auto& [name, fn] : sections) {
             if (const auto* t = top.sub_table(name)) {

@@ -111,6 +111,20 @@ struct DaemonConfig {
     std::uint32_t http_per_address = 16;
     bool limits_on_loopback = false;
     double stall_evict_s = 5.0;
+    // [cluster] (docs/outputs.md, "Cluster publisher"): poses to a NATS cluster
+    std::string cluster_nats_url;  ///< "" = off; one URL or a comma-separated list
+    std::string cluster_site = "venue";
+    std::string cluster_host_id;  ///< "" = the host name
+    std::string cluster_user;
+    std::string cluster_password;
+    std::string cluster_creds_file;
+    std::string cluster_nkey_seed_file;
+    bool cluster_allow_anonymous = false;
+    std::string cluster_tls_ca_file;
+    std::string cluster_tls_cert_file;
+    std::string cluster_tls_key_file;
+    std::uint32_t cluster_raw_replicas = 1;
+    std::uint32_t cluster_queue_frames = 1024;  ///< frames between the pipeline and the publisher
 
     bool operator==(const DaemonConfig&) const = default;
 };
@@ -127,6 +141,10 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
 /// blanks or comments only) are refused. What the text alone cannot show (filters, ports
 /// shared by two listeners, directories) is checked by check_config (daemon/config_check.hpp).
 std::optional<DaemonConfig> load_config_file(const std::string& path, std::string* error);
+
+/// [cluster].host_id, or when empty the host name up to its first '.' with any character a NATS
+/// subject token cannot hold ('*', '>', whitespace) replaced by '_'; "" if there is no host name.
+std::string cluster_host_id(const DaemonConfig& config);
 
 /// Parses "host:port" or "[v6]:port".
 std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error);

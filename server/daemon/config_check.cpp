@@ -68,6 +68,56 @@ bool check_listeners(const DaemonConfig& c, std::string* error) {
     return true;
 }
 
+bool readable_file(const std::string& path) {
+    struct stat st {};
+    return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode) && ::access(path.c_str(), R_OK) == 0;
+}
+
+// [cluster]: only with nats_url set. A publisher without credentials would connect to any
+// server that accepts anonymous clients, which an operator must ask for explicitly; the files
+// it names are read at connect time, so a missing one is refused here, not at the first
+// reconnect.
+bool check_cluster(const DaemonConfig& c, std::string* error) {
+    if (c.cluster_nats_url.empty()) return true;
+    const bool user = !c.cluster_user.empty() || !c.cluster_password.empty();
+    if (user && (c.cluster_user.empty() || c.cluster_password.empty())) {
+        *error = "cluster.user: user and password go together (both set or both empty)";
+        return false;
+    }
+    const int methods =
+        (user ? 1 : 0) + (c.cluster_creds_file.empty() ? 0 : 1) + (c.cluster_nkey_seed_file.empty() ? 0 : 1);
+    if (methods == 0 && !c.cluster_allow_anonymous) {
+        *error =
+            "cluster.nats_url: set credentials (user + password, creds_file or nkey_seed_file), or "
+            "allow_anonymous = true to connect without any";
+        return false;
+    }
+    if (methods > 1) {
+        *error = "cluster: give one kind of credentials: user + password, creds_file or nkey_seed_file";
+        return false;
+    }
+    if ((c.cluster_tls_cert_file.empty()) != (c.cluster_tls_key_file.empty())) {
+        *error = "cluster.tls_cert_file: tls_cert_file and tls_key_file go together";
+        return false;
+    }
+    const std::pair<const char*, const std::string*> files[] = {{"cluster.creds_file", &c.cluster_creds_file},
+                                                                {"cluster.nkey_seed_file", &c.cluster_nkey_seed_file},
+                                                                {"cluster.tls_ca_file", &c.cluster_tls_ca_file},
+                                                                {"cluster.tls_cert_file", &c.cluster_tls_cert_file},
+                                                                {"cluster.tls_key_file", &c.cluster_tls_key_file}};
+    for (const auto& [key, path] : files) {
+        if (!path->empty() && !readable_file(*path)) {
+            *error = std::string(key) + ": \"" + *path + "\" is not a readable file";
+            return false;
+        }
+    }
+    if (cluster_host_id(c).empty()) {
+        *error = "cluster.host_id: the host name gives no usable id; set host_id";
+        return false;
+    }
+    return true;
+}
+
 bool check_config_impl(const DaemonConfig& c, std::string* error) {
     std::string err;
     if (!check_filter("filter.name", c.filter_name, c.filter_params, error)) return false;
@@ -91,6 +141,7 @@ bool check_config_impl(const DaemonConfig& c, std::string* error) {
         }
     }
     if (!check_listeners(c, error)) return false;
+    if (!check_cluster(c, error)) return false;
     if (c.raw_record) {
         struct stat st {};
         if (::stat(c.record_dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) {

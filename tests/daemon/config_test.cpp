@@ -442,5 +442,48 @@ TEST_F(ConfigCheck, StatsIntervalBelowATenthOfASecondIsRefused) {
     EXPECT_EQ(refusal("[log]\nstats_interval_s = 0\n"), "");
 }
 
+TEST_F(ConfigCheck, ClusterDefaultsMatchTheStructAndOffNeedsNothing) {
+    std::string err;
+    const auto d = parse_config(embedded_default_config(), "mocapd.toml", &err);
+    ASSERT_TRUE(d) << err;
+    const DaemonConfig s;
+    EXPECT_TRUE(d->cluster_nats_url.empty()) << "the README's run command needs no NATS server";
+    EXPECT_EQ(d->cluster_site, s.cluster_site);
+    EXPECT_EQ(d->cluster_host_id, s.cluster_host_id);
+    EXPECT_EQ(d->cluster_allow_anonymous, s.cluster_allow_anonymous);
+    EXPECT_EQ(d->cluster_raw_replicas, s.cluster_raw_replicas);
+    EXPECT_EQ(d->cluster_queue_frames, s.cluster_queue_frames);
+    EXPECT_EQ(refusal("[cluster]\nsite = \"hall\"\n"), "") << "no nats_url: credentials are not needed";
+}
+
+TEST_F(ConfigCheck, ClusterRefusesAnonymousUnlessAllowed) {
+    const std::string url = "[cluster]\nnats_url = \"nats://127.0.0.1:4222\"\n";
+    EXPECT_REFUSED(url, "cluster.nats_url: set credentials");
+    EXPECT_EQ(refusal(url + "allow_anonymous = true\n"), "");
+    EXPECT_EQ(refusal(url + "user = \"mocap\"\npassword = \"pw\"\n"), "");
+    EXPECT_REFUSED(url + "user = \"mocap\"\n", "cluster.user: user and password go together");
+    EXPECT_REFUSED(url + "user = \"mocap\"\npassword = \"pw\"\ncreds_file = \"/etc/hostname\"\n",
+                   "cluster: give one kind of credentials");
+    const std::string missing = (dir_ / "gone.creds").string();
+    EXPECT_REFUSED(url + "creds_file = \"" + missing + "\"\n",
+                   "cluster.creds_file: \"" + missing + "\" is not a readable");
+    EXPECT_REFUSED(url + "allow_anonymous = true\ntls_cert_file = \"/etc/hostname\"\n",
+                   "cluster.tls_cert_file: tls_cert_file and tls_key_file go together");
+}
+
+TEST_F(ConfigCheck, ClusterSiteAndHostIdMustBeSubjectTokens) {
+    for (const char* bad : {"", "a.b", "ven*", ">", "two words"}) {
+        EXPECT_REFUSED(std::string("[cluster]\nsite = \"") + bad + "\"\n",
+                       "c.toml:2: cluster.site: must be one NATS subject token");
+    }
+    EXPECT_REFUSED("[cluster]\nhost_id = \"h.1\"\n", "c.toml:2: cluster.host_id: must be");
+    EXPECT_EQ(refusal("[cluster]\nsite = \"arena-2\"\nhost_id = \"rack_7\"\n"), "");
+    DaemonConfig c;
+    EXPECT_EQ(cluster_host_id(c).find_first_of(".*> \t"), std::string::npos) << cluster_host_id(c);
+    EXPECT_FALSE(cluster_host_id(c).empty());
+    c.cluster_host_id = "rack_7";
+    EXPECT_EQ(cluster_host_id(c), "rack_7");
+}
+
 }  // namespace
 }  // namespace mocap::daemon
