@@ -1,6 +1,7 @@
 // mocap-client — command-line client of mocapd's pose service.
 //
 //   mocap-client --connect HOST:PORT cat [--frames N] [--json] [--subject ID]...
+//   mocap-client --nats URL [--site S] cat ...      (the same, from a NATS cluster)
 //   mocap-client --connect HOST:PORT stats [--json]
 //   mocap-client --connect HOST:PORT control --token T calibrate --subject ID [--pose T|N]
 //   mocap-client --connect HOST:PORT control --token T record-start [--path FILE]
@@ -10,7 +11,8 @@
 //   mocap-client --connect HOST:PORT angles --out FILE.csv --frames N [--subject ID]
 //
 // Exit codes: 0 success, 1 refused/failed request or bad data, 2 connection problem.
-// The token may also come from the environment (MOCAP_TOKEN) to keep it out of `ps`.
+// The token may also come from the environment (MOCAP_TOKEN) to keep it out of `ps`, and the
+// NATS password likewise (MOCAP_NATS_PASSWORD).
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
@@ -21,6 +23,7 @@
 
 #include "core/guarded_main.hpp"
 #include "load_client.hpp"
+#include "nats_pose_client.hpp"
 #include "output_commands.hpp"
 #include "pose_client.hpp"
 
@@ -125,7 +128,9 @@ std::string frame_text(const v1::SkeletonFrame& f, const v1::Hello& hello, std::
     return line;
 }
 
-int run_cat(PoseClient& client, const mocap::client::SubscribeOptions& sub, std::uint64_t frames, bool json,
+// `Client` is PoseClient (the pose service) or NatsPoseClient (the cluster): same output.
+template <class Client>
+int run_cat(Client& client, const mocap::client::SubscribeOptions& sub, std::uint64_t frames, bool json,
             double idle_timeout_s) {
     std::string error;
     if (!client.subscribe(sub, 3s, error)) {
@@ -225,6 +230,12 @@ static int run(int argc, char** argv) {
     app.add_option("--connect", connect, "HOST:PORT of mocapd's pose service")->capture_default_str();
     double connect_timeout_s = 3.0;
     app.add_option("--connect-timeout", connect_timeout_s, "seconds to connect and get Hello")->capture_default_str();
+    mocap::client::NatsOptions nats;
+    app.add_option("--nats", nats.url, "read poses from this NATS cluster instead (nats://HOST:PORT[,...]); cat only");
+    app.add_option("--site", nats.site, "the cluster's [cluster] site")->capture_default_str();
+    app.add_option("--nats-user", nats.user, "NATS user (password: --nats-password or MOCAP_NATS_PASSWORD)");
+    app.add_option("--nats-password", nats.password, "NATS password");
+    app.add_option("--nats-creds", nats.creds_file, "NATS .creds file");
     app.require_subcommand(1);
 
     mocap::client::SubscribeOptions sub;
@@ -297,6 +308,24 @@ static int run(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
 
     std::string error;
+    if (!nats.url.empty()) {
+        if (!*cat) {
+            std::cerr << "mocap-client: --nats serves cat only\n";
+            return kExitFailed;
+        }
+        if (nats.password.empty()) {
+            // Single-threaded here: no other thread exists yet to change the environment.
+            // NOLINTNEXTLINE(concurrency-mt-unsafe)
+            if (const char* env = std::getenv("MOCAP_NATS_PASSWORD")) nats.password = env;
+        }
+        mocap::client::NatsPoseClient client;
+        if (!client.connect(nats, std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000)), error)) {
+            std::cerr << "mocap-client: " << error << "\n";
+            return kExitConnection;
+        }
+        sub.fields = parse_fields(field_names);
+        return run_cat(client, sub, cat_frames, cat_json, cat_idle_s);
+    }
     const auto endpoint = mocap::client::parse_endpoint(connect, error);
     if (!endpoint) {
         std::cerr << "mocap-client: --connect: " << error << "\n";

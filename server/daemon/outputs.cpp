@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <limits>
 
+#include "cluster/cluster_publisher.hpp"
 #include "daemon/peer_limits.hpp"
 #include "daemon/pipeline_config.hpp"
 #include "serve/angles_csv.hpp"
@@ -265,6 +266,28 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
         std::make_unique<serve::HttpServer>(std::move(hc), std::move(hd), std::move(hh)));
 }
 
+std::unique_ptr<pipeline::Output> make_cluster(const OutputContext& ctx) {
+    const DaemonConfig& c = ctx.config;
+    if (ctx.replay || c.cluster_nats_url.empty()) return nullptr;
+    cluster::ClusterConfig cc;
+    cc.nats_url = c.cluster_nats_url;
+    cc.site = c.cluster_site;
+    cc.host_id = cluster_host_id(c);
+    cc.user = c.cluster_user;
+    cc.password = c.cluster_password;
+    cc.creds_file = c.cluster_creds_file;
+    cc.nkey_seed_file = c.cluster_nkey_seed_file;
+    cc.tls_ca_file = c.cluster_tls_ca_file;
+    cc.tls_cert_file = c.cluster_tls_cert_file;
+    cc.tls_key_file = c.cluster_tls_key_file;
+    cc.queue_frames = c.cluster_queue_frames;
+    cc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
+    for (const auto& s : ctx.pipeline.model().segments)
+        cc.segment_names.push_back(s.name);
+    cc.joint_angle_names = joint_angle_names(ctx.pipeline);
+    return std::make_unique<cluster::ClusterPublisher>(std::move(cc));
+}
+
 // The registry: one line per output, in the order they receive frames.
 constexpr OutputEntry kOutputs[] = {
     {"pose", &make_pose_service},        // [pose] protobuf pose service (always on live)
@@ -273,6 +296,7 @@ constexpr OutputEntry kOutputs[] = {
     {"raw_record", &make_raw_recorder},  // [outputs].raw_record
     {"angles_csv", &make_angles_csv},    // --angles-out (replay)
     {"http", &make_http},                // [http].enabled
+    {"cluster", &make_cluster},          // [cluster].nats_url
 };
 
 }  // namespace

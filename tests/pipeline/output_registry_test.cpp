@@ -48,6 +48,10 @@ TEST(OutputRegistry, ConfigSectionsTurnLiveOutputsOnAndOff) {
     c.raw_record = true;
     c.http_enabled = true;
     EXPECT_EQ(registered(c, nullptr), (Names{"pose", "bvh_live", "bvh_record", "raw_record", "http"}));
+    // [cluster].nats_url: the publisher only exists with a URL (creating it opens nothing).
+    c.cluster_nats_url = "nats://127.0.0.1:4222";
+    c.cluster_allow_anonymous = true;
+    EXPECT_EQ(registered(c, nullptr), (Names{"pose", "bvh_live", "bvh_record", "raw_record", "http", "cluster"}));
 }
 
 TEST(OutputRegistry, ReplayRegistersOnlyTheFilesItsCommandLineAsksFor) {
@@ -55,6 +59,7 @@ TEST(OutputRegistry, ReplayRegistersOnlyTheFilesItsCommandLineAsksFor) {
     c.bvh_live = true;
     c.raw_record = true;
     c.http_enabled = true;
+    c.cluster_nats_url = "nats://127.0.0.1:4222";
     ReplayOptions none;
     EXPECT_EQ(registered(c, &none), Names{});
     ReplayOptions both;
@@ -71,7 +76,7 @@ TEST(OutputRegistry, EveryEntryHasAUniqueName) {
             EXPECT_NE(n, e.name);
         names.emplace_back(e.name);
     }
-    EXPECT_EQ(names.size(), 6u);
+    EXPECT_EQ(names.size(), 7u);
 }
 
 }  // namespace

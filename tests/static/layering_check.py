@@ -3,9 +3,9 @@
 
 Layers (each a directory of server/; README.md "Layout"):
 
-    core < math < filter, skeleton (siblings: never each other) < pipeline < serve
+    core < math < filter, skeleton (siblings: never each other) < pipeline < serve < cluster
     ingest uses core and the wire library only
-    serve and ingest < daemon (which sees everything in server/)
+    serve, cluster and ingest < daemon (which sees everything in server/)
     nothing in server/ includes clients/
 
 Two views of the same rule are checked:
@@ -27,7 +27,7 @@ import re
 import sys
 import tempfile
 
-SERVER_LAYERS = ["core", "math", "filter", "skeleton", "pipeline", "serve", "ingest", "daemon"]
+SERVER_LAYERS = ["core", "math", "filter", "skeleton", "pipeline", "serve", "cluster", "ingest", "daemon"]
 # What each layer may include (besides itself). "proto" = headers generated from proto/
 # (mocap/v1/*.pb.h), "wire" = the firmware's wire library (mocap_wire/*).
 ALLOWED = {
@@ -37,6 +37,7 @@ ALLOWED = {
     "skeleton": {"core", "math"},
     "pipeline": {"core", "math", "filter", "skeleton"},
     "serve": {"core", "math", "skeleton", "pipeline", "proto"},
+    "cluster": {"core", "math", "skeleton", "pipeline", "serve", "proto"},
     "ingest": {"core", "wire"},
     "daemon": set(SERVER_LAYERS) | {"proto", "wire"},
 }
@@ -47,6 +48,7 @@ RULES = {
     "skeleton": "skeleton sits on core and math; filter and skeleton are siblings and never include each other",
     "pipeline": "pipeline sits on core, math, filter and skeleton; serve and daemon are above it",
     "serve": "serve sits on core, math, skeleton, pipeline and the protobuf headers; not on filter or ingest",
+    "cluster": "cluster sits on serve (its frame encoder) and what serve sits on; not on filter or ingest",
     "ingest": "ingest uses core and the wire library (mocap_wire/) only",
     "daemon": "daemon may include anything in server/",
 }

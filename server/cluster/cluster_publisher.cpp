@@ -1,0 +1,286 @@
+#include "cluster/cluster_publisher.hpp"
+
+#include <nats/nats.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+namespace mocap::cluster {
+namespace {
+
+// The varint length prefix of a delimited frame: NATS messages carry their own length.
+std::size_t prefix_bytes(const std::string& bytes) {
+    std::size_t n = 0;
+    while (n < bytes.size() && (static_cast<unsigned char>(bytes[n]) & 0x80u) != 0)
+        ++n;
+    return n + 1;
+}
+
+// The public user key of an nkey seed file as `nk -gen user -pubout` writes it: the seed
+// ("SU...") and the public key ("U...") on their own lines. The client needs both.
+std::string nkey_public_key(const std::string& path) {
+    std::ifstream in(path);
+    for (std::string line; std::getline(in, line);) {
+        while (!line.empty() && (line.back() == '\r' || line.back() == ' '))
+            line.pop_back();
+        if (line.size() == 56 && line.front() == 'U') return line;
+    }
+    return {};
+}
+
+bool ok(natsStatus s, const char* what, std::string* error) {
+    if (s == NATS_OK) return true;
+    *error = std::string("cluster: ") + what + ": " + natsStatus_GetText(s);
+    return false;
+}
+
+}  // namespace
+
+std::string pose_subject(const std::string& site, std::uint32_t subject_id) {
+    return "mocap." + site + "." + std::to_string(subject_id) + ".pose";
+}
+
+std::string host_subject(const std::string& site, const std::string& host_id) {
+    return "mocap." + site + ".host." + host_id;
+}
+
+ClusterPublisher::ClusterPublisher(ClusterConfig config) : config_(std::move(config)) {
+    group_.add("frames_queued", frames_queued_);
+    group_.add("frames_dropped", frames_dropped_);
+    group_.add("frames_published", frames_published_);
+    group_.add("publish_errors", publish_errors_);
+    group_.add("heartbeats", heartbeats_);
+    group_.add("disconnects", disconnects_);
+    group_.add("reconnects", reconnects_);
+}
+
+ClusterPublisher::~ClusterPublisher() {
+    std::string ignored;
+    stop(&ignored);
+}
+
+void ClusterPublisher::on_disconnected(natsConnection* /*nc*/, void* self) {
+    auto* p = static_cast<ClusterPublisher*>(self);
+    // The client also calls this when it closes: count only losses of a live connection.
+    if (p->connected_.exchange(false)) {
+        p->disconnects_.add();
+        spdlog::warn("cluster: disconnected from NATS; frames are dropped until it reconnects");
+    }
+}
+
+void ClusterPublisher::on_reconnected(natsConnection* /*nc*/, void* self) {
+    auto* p = static_cast<ClusterPublisher*>(self);
+    p->reconnects_.add();
+    p->connected_.store(true);
+    p->wake_.notify_one();
+    spdlog::info("cluster: reconnected to NATS");
+}
+
+void ClusterPublisher::on_connected(natsConnection* /*nc*/, void* self) {
+    auto* p = static_cast<ClusterPublisher*>(self);
+    p->connected_.store(true);
+    p->wake_.notify_one();
+    spdlog::info("cluster: connected to NATS");
+}
+
+bool ClusterPublisher::start(std::string* error) {
+    if (!ok(natsOptions_Create(&options_), "options", error)) return false;
+    const auto& c = config_;
+    if (!ok(natsOptions_SetURL(options_, c.nats_url.c_str()), "nats_url", error)) return false;
+    const std::string client_name = "mocapd " + c.host_id;
+    (void)natsOptions_SetName(options_, client_name.c_str());
+    if (!c.user.empty() && !ok(natsOptions_SetUserInfo(options_, c.user.c_str(), c.password.c_str()), "user", error))
+        return false;
+    if (!c.creds_file.empty() &&
+        !ok(natsOptions_SetUserCredentialsFromFiles(options_, c.creds_file.c_str(), nullptr), "creds_file", error))
+        return false;
+    if (!c.nkey_seed_file.empty()) {
+        const std::string pub = nkey_public_key(c.nkey_seed_file);
+        if (pub.empty()) {
+            *error = "cluster: nkey_seed_file " + c.nkey_seed_file + " holds no public user key (a line \"U...\")";
+            return false;
+        }
+        if (!ok(natsOptions_SetNKeyFromSeed(options_, pub.c_str(), c.nkey_seed_file.c_str()), "nkey_seed_file", error))
+            return false;
+    }
+    if (!c.tls_ca_file.empty()) {
+        if (!ok(natsOptions_SetSecure(options_, true), "tls", error) ||
+            !ok(natsOptions_LoadCATrustedCertificates(options_, c.tls_ca_file.c_str()), "tls_ca_file", error))
+            return false;
+    }
+    if (!c.tls_cert_file.empty() &&
+        !ok(natsOptions_LoadCertificatesChain(options_, c.tls_cert_file.c_str(), c.tls_key_file.c_str()),
+            "tls_cert_file", error))
+        return false;
+    // Reconnect forever, quickly: the publisher drops frames while disconnected, so a short
+    // wait bounds the gap. No reconnect buffer: frames wait in our own queue instead, where
+    // the oldest are dropped and counted.
+    (void)natsOptions_SetMaxReconnect(options_, -1);
+    (void)natsOptions_SetReconnectWait(options_, c.reconnect_wait_ms);
+    (void)natsOptions_SetReconnectBufSize(options_, 0);
+    (void)natsOptions_SetPingInterval(options_, 1000);
+    (void)natsOptions_SetMaxPingsOut(options_, 2);
+    (void)natsOptions_SetDisconnectedCB(options_, &ClusterPublisher::on_disconnected, this);
+    (void)natsOptions_SetReconnectedCB(options_, &ClusterPublisher::on_reconnected, this);
+    // A cluster unreachable at start is retried like a lost one: the local pose service runs.
+    (void)natsOptions_SetRetryOnFailedConnect(options_, true, &ClusterPublisher::on_connected, this);
+
+    const natsStatus s = natsConnection_Connect(&connection_, options_);
+    if (s == NATS_OK) {
+        connected_.store(true);
+        spdlog::info("cluster: connected to {}; publishing on mocap.{}.<subject>.pose", c.nats_url, c.site);
+    } else if (s == NATS_NOT_YET_CONNECTED) {
+        spdlog::warn("cluster: {} not reachable yet; retrying in the background", c.nats_url);
+    } else {
+        return ok(s, ("connect to " + c.nats_url).c_str(), error);
+    }
+    started_us_ = config_.wall_clock_us();
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = false;
+    }
+    thread_ = std::thread([this] { run(); });
+    return true;
+}
+
+bool ClusterPublisher::stop(std::string* /*error*/) {
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;
+    }
+    wake_.notify_one();
+    if (thread_.joinable()) thread_.join();
+    if (connection_) {
+        (void)natsConnection_FlushTimeout(connection_, 500);
+        natsConnection_Close(connection_);
+        natsConnection_Destroy(connection_);
+        connection_ = nullptr;
+    }
+    if (options_) {
+        natsOptions_Destroy(options_);
+        options_ = nullptr;
+    }
+    return true;
+}
+
+void ClusterPublisher::on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
+    // Every field: one message serves every subscriber (the pose service encodes once per
+    // selection; here there is one selection).
+    serve::SharedBytes bytes = encoder_.encode_frame(frame, pose, serve::kFieldAll, config_.wall_clock_us());
+    if (!bytes) return;
+    {
+        std::lock_guard lock(mutex_);
+        if (queue_.size() >= config_.queue_frames) {
+            queue_.pop_front();
+            frames_dropped_.add();
+        }
+        queue_.push_back({frame.subject_id, std::move(bytes)});
+        queued_.store(queue_.size(), std::memory_order_relaxed);
+    }
+    frames_queued_.add();
+    wake_.notify_one();
+}
+
+void ClusterPublisher::run() {
+    using Clock = std::chrono::steady_clock;
+    constexpr auto kHeartbeat = std::chrono::seconds(1);
+    // While disconnected, look at the connection this often (the callbacks also wake us).
+    constexpr auto kDisconnectedPoll = std::chrono::milliseconds(50);
+    auto next_heartbeat = Clock::now() + kHeartbeat;
+    auto last_heartbeat = Clock::now();
+    std::vector<Queued> batch;
+    std::unique_lock lock(mutex_);
+    while (!stopping_) {
+        const bool up = connected_.load();
+        const auto until = up ? next_heartbeat : std::min(next_heartbeat, Clock::now() + kDisconnectedPoll);
+        wake_.wait_until(lock, until, [&] { return stopping_ || (connected_.load() && !queue_.empty()); });
+        if (stopping_) break;
+        if (connected_.load() && !queue_.empty()) {
+            batch.assign(std::make_move_iterator(queue_.begin()), std::make_move_iterator(queue_.end()));
+            queue_.clear();
+            queued_.store(0, std::memory_order_relaxed);
+            lock.unlock();
+            publish_frames(batch);
+            batch.clear();
+            lock.lock();
+        }
+        const auto now = Clock::now();
+        if (now >= next_heartbeat) {
+            lock.unlock();
+            publish_heartbeat(config_.wall_clock_us(), std::chrono::duration<double>(now - last_heartbeat).count());
+            lock.lock();
+            last_heartbeat = now;
+            next_heartbeat += kHeartbeat;
+            if (next_heartbeat < now) next_heartbeat = now + kHeartbeat;  // after a long stall
+        }
+    }
+}
+
+void ClusterPublisher::publish_frames(std::vector<Queued>& batch) {
+    std::string subject;
+    for (const Queued& q : batch) {
+        subject = pose_subject(config_.site, q.subject_id);
+        const std::size_t skip = prefix_bytes(*q.bytes);
+        const natsStatus s = natsConnection_Publish(connection_, subject.c_str(), q.bytes->data() + skip,
+                                                    static_cast<int>(q.bytes->size() - skip));
+        if (s == NATS_OK) {
+            frames_published_.add();
+        } else {
+            publish_errors_.add();
+        }
+        auto it = std::find_if(subject_frames_.begin(), subject_frames_.end(),
+                               [&](const auto& e) { return e.first == q.subject_id; });
+        if (it == subject_frames_.end()) {
+            subject_frames_.emplace_back(q.subject_id, 1);
+        } else {
+            ++it->second;
+        }
+    }
+}
+
+void ClusterPublisher::publish_heartbeat(std::int64_t now_us, double interval_s) {
+    nlohmann::ordered_json subjects = nlohmann::ordered_json::array();
+    std::sort(subject_frames_.begin(), subject_frames_.end());
+    for (auto& [id, frames] : subject_frames_) {
+        subjects.push_back({{"id", id}, {"rate_hz", interval_s > 0 ? static_cast<double>(frames) / interval_s : 0.0}});
+    }
+    subject_frames_.clear();
+    const std::uint64_t dropped = frames_dropped_.value();
+    const nlohmann::ordered_json status{
+        {"host_id", config_.host_id},
+        {"site", config_.site},
+        {"time_us", now_us},
+        {"uptime_s", static_cast<double>(now_us - started_us_) / 1e6},
+        {"health", connected_.load() ? (publish_errors_.value() == 0 ? "ok" : "publish_errors") : "disconnected"},
+        {"subjects", subjects},
+        {"frames_published", frames_published_.value()},
+        {"frames_dropped", dropped},
+        {"queued", queued_.load(std::memory_order_relaxed)},
+        {"disconnects", disconnects_.value()},
+        {"reconnects", reconnects_.value()},
+        {"segments", config_.segment_names},
+        {"joint_angle_names", config_.joint_angle_names},
+    };
+    if (!connected_.load()) return;  // nobody would receive it; the counters keep the story
+    const std::string text = status.dump();
+    const std::string subject = host_subject(config_.site, config_.host_id);
+    if (natsConnection_Publish(connection_, subject.c_str(), text.data(), static_cast<int>(text.size())) == NATS_OK) {
+        heartbeats_.add();
+    } else {
+        publish_errors_.add();
+    }
+}
+
+void ClusterPublisher::register_metrics(MetricsRegistry& registry) const {
+    registry.add(group_);
+    registry.add_gauge(
+        "cluster_connected", "1 while the cluster publisher is connected to NATS",
+        [this] { return connected_.load(std::memory_order_relaxed) ? 1.0 : 0.0; }, "cluster");
+    registry.add_gauge("cluster_queued_frames", "frames waiting for the cluster publisher thread",
+                       [this] { return static_cast<double>(queued_.load(std::memory_order_relaxed)); });
+}
+
+}  // namespace mocap::cluster

@@ -1,0 +1,119 @@
+// cluster_publisher.hpp — the cluster output: every pose frame to a NATS cluster, and a host
+// heartbeat once a second (docs/outputs.md, "Cluster publisher"; subjects and payload in
+// docs/client-protocol.md, "Poses over NATS").
+//
+//   mocap.<site>.<subject id>.pose     mocap.v1.ServerMessage{frame}, every field, no length
+//                                      prefix (the bytes the pose service sends after it)
+//   mocap.<site>.host.<host_id>        JSON status, once a second
+//
+// Publishing never blocks the pipeline: on_frame() encodes the frame (once, on the assembler
+// thread) and pushes it into a bounded queue; when the queue is full its oldest frame is
+// dropped and counted. One publisher thread drains the queue into the NATS C client, whose
+// own thread writes to the socket and reconnects by itself (forever, every reconnect_wait).
+// While the client is not connected the publisher thread leaves frames in the queue, so a
+// lost cluster shows as cluster.frames_dropped, never as a slower pipeline, and publishing
+// resumes with the newest frames once the client is back.
+//
+// Threads: on_frame on the assembler thread (a mutex held for a push); the publisher thread;
+// the NATS client's threads run the connection callbacks (counters only).
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/counters.hpp"
+#include "pipeline/output.hpp"
+#include "serve/pose_encoder.hpp"
+
+struct __natsConnection;
+struct __natsOptions;
+
+namespace mocap::cluster {
+
+struct ClusterConfig {
+    std::string nats_url;  ///< one URL or a comma-separated list
+    std::string site;      ///< a NATS subject token
+    std::string host_id;   ///< a NATS subject token
+    std::string user, password;
+    std::string creds_file;
+    std::string nkey_seed_file;  ///< the seed and the public user key, one per line
+    std::string tls_ca_file, tls_cert_file, tls_key_file;
+    std::size_t queue_frames = 1024;
+    std::int64_t reconnect_wait_ms = 250;
+    std::function<std::int64_t()> wall_clock_us;  ///< frame encoded_us stamps and heartbeats
+    /// Described in every heartbeat, so a subscriber can name what a frame carries.
+    std::vector<std::string> segment_names;
+    std::vector<std::string> joint_angle_names;
+};
+
+/// "mocap.<site>.<subject>.pose".
+std::string pose_subject(const std::string& site, std::uint32_t subject_id);
+/// "mocap.<site>.host.<host_id>".
+std::string host_subject(const std::string& site, const std::string& host_id);
+
+class ClusterPublisher final : public pipeline::Output {
+public:
+    explicit ClusterPublisher(ClusterConfig config);
+    ~ClusterPublisher() override;
+    ClusterPublisher(const ClusterPublisher&) = delete;
+    ClusterPublisher& operator=(const ClusterPublisher&) = delete;
+
+    [[nodiscard]] std::string_view name() const override { return "cluster"; }
+    /// Sets up the client and starts connecting; an unreachable cluster is not an error (the
+    /// client keeps retrying), bad options (an unreadable credentials file) are.
+    bool start(std::string* error) override;
+    bool stop(std::string* error) override;
+    void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override;
+    void register_metrics(MetricsRegistry& registry) const override;
+
+    /// Any thread: whether the client is connected now.
+    [[nodiscard]] bool connected() const { return connected_.load(std::memory_order_relaxed); }
+
+private:
+    struct Queued {
+        std::uint32_t subject_id = 0;
+        serve::SharedBytes bytes;  ///< length-prefixed, as the pose service sends it
+    };
+    static void on_disconnected(__natsConnection* nc, void* self);
+    static void on_reconnected(__natsConnection* nc, void* self);
+    static void on_connected(__natsConnection* nc, void* self);
+    void run();
+    void publish_frames(std::vector<Queued>& batch);
+    void publish_heartbeat(std::int64_t now_us, double interval_s);
+
+    ClusterConfig config_;
+    serve::PoseEncoder encoder_;  // assembler thread only
+
+    std::mutex mutex_;
+    std::condition_variable wake_;
+    std::deque<Queued> queue_;  // guarded by mutex_
+    bool stopping_ = false;     // guarded by mutex_
+
+    __natsOptions* options_ = nullptr;
+    __natsConnection* connection_ = nullptr;
+    std::thread thread_;
+    std::atomic<bool> connected_{false};
+    std::atomic<std::size_t> queued_{0};
+
+    // Heartbeat rates (publisher thread only): frames per subject since the last heartbeat.
+    std::vector<std::pair<std::uint32_t, std::uint64_t>> subject_frames_;
+    std::int64_t started_us_ = 0;
+
+    Counter frames_queued_;     // assembler thread
+    Counter frames_dropped_;    // assembler thread (drop-oldest)
+    Counter frames_published_;  // publisher thread
+    Counter publish_errors_;    // publisher thread
+    Counter heartbeats_;        // publisher thread
+    Counter disconnects_;       // NATS client thread
+    Counter reconnects_;        // NATS client thread
+    CounterGroup group_{"cluster"};
+};
+
+}  // namespace mocap::cluster

@@ -1,0 +1,329 @@
+// The cluster output against a real nats-server on a loopback port (docs/outputs.md,
+// "Cluster publisher"): the real mocapd fed by mocap-sim stream publishes every pose frame to
+// mocap.<site>.<subject>.pose and a heartbeat to mocap.<site>.host.<host_id>; a NATS
+// subscriber (the C client, here) decodes them; mocap-client --nats cat prints them; a lost
+// cluster costs the local pose service nothing and publishing resumes when it is back.
+#include <gtest/gtest.h>
+#include <nats/nats.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <csignal>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "harness.hpp"
+#include "mocap/v1/mocap.pb.h"
+#include "pose_client.hpp"
+
+namespace mocap::itest {
+namespace {
+
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+
+constexpr const char* kUser = "mocap";
+constexpr const char* kPassword = "cluster-pw-1";
+constexpr const char* kSite = "itest";
+constexpr const char* kHost = "rack1";
+
+bool have_nats_server() {
+    return ::access(NATS_SERVER_BIN, X_OK) == 0;
+}
+
+std::unique_ptr<Process> start_nats(std::uint16_t port, const std::string& log) {
+    auto p =
+        std::make_unique<Process>(std::vector<std::string>{NATS_SERVER_BIN, "-a", "127.0.0.1", "-p",
+                                                           std::to_string(port), "--user", kUser, "--pass", kPassword},
+                                  log);
+    EXPECT_TRUE(wait_for_port(port, 15s)) << p->log();
+    return p;
+}
+
+/// A test-side NATS subscriber: every message of one subject pattern, kept in order.
+class Subscriber {
+public:
+    Subscriber(std::uint16_t port, const std::string& subject) {
+        natsOptions* o = nullptr;
+        EXPECT_EQ(natsOptions_Create(&o), NATS_OK);
+        const std::string url = "nats://127.0.0.1:" + std::to_string(port);
+        natsOptions_SetURL(o, url.c_str());
+        natsOptions_SetUserInfo(o, kUser, kPassword);
+        natsOptions_SetMaxReconnect(o, -1);
+        natsOptions_SetReconnectWait(o, 100);
+        EXPECT_EQ(natsConnection_Connect(&nc_, o), NATS_OK);
+        natsOptions_Destroy(o);
+        EXPECT_EQ(natsConnection_SubscribeSync(&sub_, nc_, subject.c_str()), NATS_OK);
+        natsSubscription_SetPendingLimits(sub_, 1 << 20, 1 << 30);
+        EXPECT_EQ(natsConnection_FlushTimeout(nc_, 5000), NATS_OK);
+    }
+    ~Subscriber() {
+        natsSubscription_Destroy(sub_);
+        natsConnection_Close(nc_);
+        natsConnection_Destroy(nc_);
+    }
+    Subscriber(const Subscriber&) = delete;
+    Subscriber& operator=(const Subscriber&) = delete;
+
+    /// The next message (subject, payload), or nothing within `timeout`.
+    std::optional<std::pair<std::string, std::string>> next(std::chrono::milliseconds timeout) {
+        natsMsg* m = nullptr;
+        if (natsSubscription_NextMsg(&m, sub_, timeout.count()) != NATS_OK) return std::nullopt;
+        std::pair<std::string, std::string> out{natsMsg_GetSubject(m),
+                                                std::string(natsMsg_GetData(m), natsMsg_GetDataLength(m))};
+        natsMsg_Destroy(m);
+        return out;
+    }
+
+private:
+    natsConnection* nc_ = nullptr;
+    natsSubscription* sub_ = nullptr;
+};
+
+v1::SkeletonFrame decode_frame(const std::string& payload) {
+    v1::ServerMessage m;
+    EXPECT_TRUE(m.ParseFromString(payload)) << "payload must be a mocap.v1.ServerMessage without a prefix";
+    EXPECT_TRUE(m.has_frame());
+    return m.frame();
+}
+
+std::string cluster_section(std::uint16_t nats_port, const std::string& credentials) {
+    std::ostringstream s;
+    s << "[cluster]\nnats_url = \"nats://127.0.0.1:" << nats_port << "\"\nsite = \"" << kSite << "\"\nhost_id = \""
+      << kHost << "\"\nqueue_frames = 64\n"
+      << credentials;
+    return s.str();
+}
+
+class Cluster : public ::testing::Test {
+protected:
+    void SetUp() override {
+        if (!have_nats_server())
+            GTEST_SKIP() << "no nats-server binary at " << NATS_SERVER_BIN << " (setup.sh installs it)";
+        nats_port_ = free_port();
+        nats_ = start_nats(nats_port_, dir_.file("nats.log"));
+        sink_port_ = free_port();
+        pose_port_ = free_port();
+        std::ostringstream cfg;
+        cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
+            << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\nsink_idle_timeout_s = 5.0\n"
+            << "[pipeline]\nworkers = 2\nmax_subjects = 4\n"
+            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
+            << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 4096\n"
+            << "[outputs]\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n"
+            << "[http]\nlisten = \"127.0.0.1:" << free_port() << "\"\n"
+            << cluster_section(nats_port_, std::string("user = \"") + kUser + "\"\npassword = \"" + kPassword + "\"\n");
+        write_file(dir_.file("mocapd.toml"), cfg.str());
+        daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", dir_.file("mocapd.toml")},
+                                            dir_.file("mocapd.log"), dir_.path().string());
+        ASSERT_TRUE(wait_for_port(pose_port_, 10s)) << daemon_->log();
+        ASSERT_TRUE(wait_for_port(sink_port_, 10s)) << daemon_->log();
+    }
+
+    void TearDown() override {
+        if (!daemon_) return;
+        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
+        EXPECT_EQ(daemon_->stop(10s), 0) << "mocapd must exit 0 on SIGTERM, cluster or not";
+    }
+
+    std::unique_ptr<Process> sim(int subjects, int seconds) {
+        return std::make_unique<Process>(
+            std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(sink_port_),
+                                     "--rate", "100", "--subjects", std::to_string(subjects), "--duration",
+                                     std::to_string(seconds)},
+            dir_.file("sim.log"));
+    }
+
+    std::uint64_t counter(const std::string& name) {
+        client::PoseClient c;
+        std::string err;
+        EXPECT_TRUE(c.connect("127.0.0.1", pose_port_, 5s, err)) << err;
+        v1::Stats s;
+        EXPECT_TRUE(c.request_stats(s, 5s, err)) << err;
+        for (const auto& kv : s.counters())
+            if (kv.name() == name) return kv.value();
+        ADD_FAILURE() << "no counter " << name;
+        return 0;
+    }
+
+    /// Polls `name` until `pred` holds or `limit` passes; returns the last value.
+    template <class Pred>
+    std::uint64_t wait_counter(const std::string& name, Pred pred, std::chrono::milliseconds limit) {
+        const auto end = Clock::now() + limit;
+        std::uint64_t v = counter(name);
+        while (!pred(v) && Clock::now() < end) {
+            std::this_thread::sleep_for(50ms);  // poll interval of the bounded wait
+            v = counter(name);
+        }
+        return v;
+    }
+
+    TempDir dir_;
+    std::uint16_t nats_port_ = 0, sink_port_ = 0, pose_port_ = 0;
+    std::unique_ptr<Process> nats_;
+    std::unique_ptr<Process> daemon_;
+};
+
+TEST_F(Cluster, EveryFrameIsPublishedOnItsSubjectWithMonotonicSyncAndAHeartbeatEachSecond) {
+    Subscriber poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
+    Subscriber beats(nats_port_, std::string("mocap.") + kSite + ".host." + kHost);
+    auto s = sim(2, 4);
+    std::map<std::uint32_t, std::vector<std::uint64_t>> syncs;
+    const auto end = Clock::now() + 30s;
+    while (Clock::now() < end) {
+        auto m = poses.next(s->running() ? 1000ms : 500ms);
+        if (!m) {
+            if (!s->running()) break;
+            continue;
+        }
+        const v1::SkeletonFrame f = decode_frame(m->second);
+        EXPECT_EQ(m->first, std::string("mocap.") + kSite + "." + std::to_string(f.subject_id()) + ".pose");
+        EXPECT_EQ(f.segment_count(), 15u);
+        EXPECT_EQ(f.q_world_segment_wxyz_size(), 60) << "every field is published";
+        EXPECT_EQ(f.position_m_size(), 45);
+        EXPECT_GT(f.joint_angles_rad_size(), 0);
+        syncs[f.subject_id()].push_back(f.sync());
+    }
+    ASSERT_EQ(s->wait(10s).value_or(-1), 0) << s->log();
+    ASSERT_EQ(syncs.size(), 2u);
+    for (const auto& [subject, v] : syncs) {
+        EXPECT_GE(v.size(), 300u) << "subject " << subject << ": ~4 s at 100 Hz";
+        std::uint64_t gaps = 0;
+        for (std::size_t i = 1; i < v.size(); ++i) {
+            ASSERT_GT(v[i], v[i - 1]) << "subject " << subject << ": sync must increase";
+            gaps += v[i] - v[i - 1] - 1;
+        }
+        EXPECT_EQ(gaps, 0u) << "subject " << subject << ": every frame is published once";
+    }
+    EXPECT_EQ(counter("cluster.frames_dropped"), 0u);
+    EXPECT_GE(counter("cluster.frames_published"), syncs[1].size() + syncs[2].size());
+
+    // Heartbeats: one a second (by the publisher's own stamps: the subscription queued them
+    // while the frames above were read), naming the host and the subjects served.
+    std::vector<std::int64_t> at_us;
+    bool subjects_named = false;
+    const auto beat_end = Clock::now() + 15s;
+    while (at_us.size() < 6 && Clock::now() < beat_end) {
+        auto m = beats.next(3000ms);
+        if (!m) continue;
+        const auto j = nlohmann::json::parse(m->second);
+        at_us.push_back(j.at("time_us").get<std::int64_t>());
+        EXPECT_EQ(j.at("host_id"), kHost);
+        EXPECT_EQ(j.at("site"), kSite);
+        EXPECT_EQ(j.at("segments").size(), 15u);
+        EXPECT_EQ(j.at("health"), "ok");
+        subjects_named = subjects_named || !j.at("subjects").empty();
+    }
+    ASSERT_GE(at_us.size(), 6u) << "heartbeats must keep coming (with or without frames)";
+    EXPECT_TRUE(subjects_named) << "a heartbeat while frames flowed names the subjects and rates";
+    for (std::size_t i = 1; i < at_us.size(); ++i) {
+        const double gap_s = static_cast<double>(at_us[i] - at_us[i - 1]) / 1e6;
+        EXPECT_GT(gap_s, 0.5);
+        EXPECT_LT(gap_s, 2.0);
+    }
+}
+
+TEST_F(Cluster, MocapClientCatReadsFromTheClusterInThePoseServiceFormat) {
+    auto s = sim(1, 15);
+    const std::string out = dir_.file("cat.out");
+    Process cat({"/bin/sh", "-c",
+                 std::string(MOCAP_CLIENT_BIN) + " --nats nats://127.0.0.1:" + std::to_string(nats_port_) + " --site " +
+                     kSite + " --nats-user " + kUser + " --nats-password " + kPassword + " cat --frames 50 > " + out},
+                dir_.file("cat.log"));
+    ASSERT_EQ(cat.wait(20s).value_or(-1), 0) << cat.log();
+    std::istringstream lines(read_file(out));
+    int n = 0;
+    for (std::string line; std::getline(lines, line); ++n) {
+        EXPECT_EQ(line.rfind("subject 1 sync ", 0), 0u) << line;
+        EXPECT_NE(line.find("segments=15"), std::string::npos) << line;
+        EXPECT_NE(line.find("| pelvis q=("), std::string::npos) << "segment names from the heartbeat: " << line;
+    }
+    EXPECT_EQ(n, 50);
+    s->stop();
+}
+
+TEST_F(Cluster, ALostClusterCostsThePoseServiceNothingAndPublishingResumes) {
+    Subscriber poses(nats_port_, std::string("mocap.") + kSite + ".1.pose");
+    client::PoseClient pose;
+    std::string err;
+    ASSERT_TRUE(pose.connect("127.0.0.1", pose_port_, 5s, err)) << err;
+    ASSERT_TRUE(pose.subscribe({.subject_ids = {1}}, 5s, err)) << err;
+    std::atomic<bool> stop_reading{false};
+    std::vector<std::uint64_t> pose_syncs;
+    std::thread reader([&] {
+        v1::SkeletonFrame f;
+        while (!stop_reading.load()) {
+            if (pose.next_frame(f, 200ms) == client::ReadStatus::kMessage) pose_syncs.push_back(f.sync());
+        }
+    });
+    auto s = sim(1, 60);
+
+    // Frames reach the cluster.
+    std::optional<std::pair<std::string, std::string>> m;
+    for (auto end = Clock::now() + 15s; !m && Clock::now() < end;)
+        m = poses.next(1000ms);
+    ASSERT_TRUE(m) << "no frame on the cluster";
+    const std::uint64_t sync_before = decode_frame(m->second).sync();
+
+    // The cluster dies: the publisher notices and drops (counted), the pipeline goes on.
+    nats_->signal(SIGKILL);
+    ASSERT_TRUE(nats_->wait(10s)) << "nats-server did not die";
+    EXPECT_GE(wait_counter(
+                  "cluster.disconnects", [](auto v) { return v >= 1; }, 15s),
+              1u);
+    const std::uint64_t dropped = wait_counter(
+        "cluster.frames_dropped", [](auto v) { return v >= 100; }, 15s);
+    EXPECT_GE(dropped, 100u) << "frames while the cluster is down are dropped, oldest first";
+
+    // It comes back on the same port: the publisher reconnects by itself and publishes again.
+    nats_ = start_nats(nats_port_, dir_.file("nats2.log"));
+    EXPECT_GE(wait_counter(
+                  "cluster.reconnects", [](auto v) { return v >= 1; }, 20s),
+              1u);
+    std::optional<std::uint64_t> sync_after;
+    for (auto end = Clock::now() + 20s; !sync_after && Clock::now() < end;) {
+        if (auto r = poses.next(1000ms)) {
+            const auto f = decode_frame(r->second);
+            if (f.sync() > sync_before + 100) sync_after = f.sync();
+        }
+    }
+    EXPECT_TRUE(sync_after) << "publishing must resume after the cluster is back";
+
+    stop_reading.store(true);
+    reader.join();
+    s->stop();
+    ASSERT_FALSE(pose_syncs.empty());
+    EXPECT_LE(pose_syncs.front(), sync_before) << "the pose client read from before the cluster died";
+    EXPECT_GE(pose_syncs.back(), sync_after.value_or(0)) << "... until after publishing resumed";
+    std::uint64_t gaps = 0;
+    for (std::size_t i = 1; i < pose_syncs.size(); ++i)
+        gaps += pose_syncs[i] - pose_syncs[i - 1] - 1;
+    EXPECT_EQ(gaps, 0u) << "the pose client gets every frame while the cluster is down";
+    EXPECT_EQ(pose.drops_announced(), 0u);
+}
+
+TEST(ClusterConfig, AnonymousIsRefusedAtCheckAndStartUnlessAllowed) {
+    TempDir dir;
+    const std::uint16_t port = free_port();  // nothing listens: nothing must be needed to refuse
+    const std::string base = "[serve]\npose_listen = \"127.0.0.1:" + std::to_string(free_port()) +
+                             "\"\n[ingest]\nsink_listen = \"127.0.0.1:" + std::to_string(free_port()) +
+                             "\"\n[http]\nenabled = false\n[outputs]\nbvh_live = false\n";
+    write_file(dir.file("anon.toml"), base + cluster_section(port, ""));
+    Process check({MOCAPD_BIN, "--check-config", dir.file("anon.toml")}, dir.file("check.log"));
+    EXPECT_NE(check.wait(10s).value_or(0), 0);
+    EXPECT_NE(check.log().find("cluster.nats_url: set credentials"), std::string::npos) << check.log();
+    Process start({MOCAPD_BIN, "--config", dir.file("anon.toml")}, dir.file("start.log"));
+    EXPECT_NE(start.wait(10s).value_or(0), 0) << "mocapd must refuse to start";
+    EXPECT_NE(start.log().find("allow_anonymous"), std::string::npos) << start.log();
+
+    // allow_anonymous = true passes, and an unreachable cluster does not stop the daemon.
+    write_file(dir.file("ok.toml"), base + cluster_section(port, "allow_anonymous = true\n"));
+    Process ok({MOCAPD_BIN, "--check-config", dir.file("ok.toml")}, dir.file("ok.log"));
+    EXPECT_EQ(ok.wait(10s).value_or(-1), 0) << ok.log();
+}
+
+}  // namespace
+}  // namespace mocap::itest
