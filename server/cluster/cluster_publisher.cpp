@@ -86,6 +86,15 @@ void ClusterPublisher::on_connected(natsConnection* /*nc*/, void* self) {
     spdlog::info("cluster: connected to NATS");
 }
 
+void ClusterPublisher::on_closed(natsConnection* /*nc*/, void* self) {
+    auto* p = static_cast<ClusterPublisher*>(self);
+    {
+        std::lock_guard lock(p->mutex_);
+        p->closed_ = true;
+    }
+    p->wake_.notify_all();
+}
+
 bool ClusterPublisher::start(std::string* error) {
     if (!ok(natsOptions_Create(&options_), "options", error)) return false;
     const auto& c = config_;
@@ -125,6 +134,9 @@ bool ClusterPublisher::start(std::string* error) {
     (void)natsOptions_SetMaxPingsOut(options_, 2);
     (void)natsOptions_SetDisconnectedCB(options_, &ClusterPublisher::on_disconnected, this);
     (void)natsOptions_SetReconnectedCB(options_, &ClusterPublisher::on_reconnected, this);
+    // The client runs callbacks on its own thread, after natsConnection_Close returns too:
+    // stop() waits for this last one before `this` may go away.
+    (void)natsOptions_SetClosedCB(options_, &ClusterPublisher::on_closed, this);
     // A cluster unreachable at start is retried like a lost one: the local pose service runs.
     (void)natsOptions_SetRetryOnFailedConnect(options_, true, &ClusterPublisher::on_connected, this);
 
@@ -154,8 +166,15 @@ bool ClusterPublisher::stop(std::string* /*error*/) {
     wake_.notify_one();
     if (thread_.joinable()) thread_.join();
     if (connection_) {
-        (void)natsConnection_FlushTimeout(connection_, 500);
+        if (connected_.load()) (void)natsConnection_FlushTimeout(connection_, 500);
+        connected_.store(false);  // the close is not a lost connection: not counted
         natsConnection_Close(connection_);
+        {
+            std::unique_lock lock(mutex_);
+            if (!wake_.wait_for(lock, std::chrono::seconds(5), [this] { return closed_; })) {
+                spdlog::warn("cluster: the NATS client did not confirm its close within 5 s");
+            }
+        }
         natsConnection_Destroy(connection_);
         connection_ = nullptr;
     }

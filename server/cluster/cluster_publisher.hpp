@@ -84,6 +84,7 @@ private:
     static void on_disconnected(__natsConnection* nc, void* self);
     static void on_reconnected(__natsConnection* nc, void* self);
     static void on_connected(__natsConnection* nc, void* self);
+    static void on_closed(__natsConnection* nc, void* self);
     void run();
     void publish_frames(std::vector<Queued>& batch);
     void publish_heartbeat(std::int64_t now_us, double interval_s);
@@ -95,6 +96,7 @@ private:
     std::condition_variable wake_;
     std::deque<Queued> queue_;  // guarded by mutex_
     bool stopping_ = false;     // guarded by mutex_
+    bool closed_ = false;       // guarded by mutex_: the client delivered its last callback
 
     __natsOptions* options_ = nullptr;
     __natsConnection* connection_ = nullptr;
