@@ -313,6 +313,13 @@ void read_control(TableReader& r, DaemonConfig& c) {
                    "must not be blank, start or end with whitespace, or contain control characters "
                    "(\"\" disables control)");
         }
+        // Failed attempts are rate-limited (docs/security.md, "Guessing the token"); the
+        // length is what makes that limit enough.
+        if (!blank_edge && !control_char && t.size() < kMinControlTokenLength) {
+            r.fail("token", r.take("token"),
+                   "must be at least " + std::to_string(kMinControlTokenLength) +
+                       " characters (e.g. `openssl rand -hex 16`; \"\" disables control)");
+        }
     }
     if (const auto* n = r.take("loopback_only")) {
         if (!n->is_boolean()) r.fail("loopback_only", n, "expected true or false");

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -40,6 +41,10 @@ struct SegmentConfig {
     std::string filter;                ///< "" = [filter].name
     bool operator==(const SegmentConfig&) const = default;
 };
+
+/// Shortest accepted control token: with the failed-attempt limits (2 guesses a second at
+/// most, docs/security.md) 16 random characters cannot be guessed in any useful time.
+inline constexpr std::size_t kMinControlTokenLength = 16;
 
 struct DaemonConfig {
     // [log]
@@ -80,7 +85,7 @@ struct DaemonConfig {
     std::uint32_t client_message_burst = 40;    ///< requests at once before the rate applies
     std::uint32_t max_subscribe_subjects = 64;  ///< subject ids one Subscribe may name
     // [control]
-    std::string control_token;
+    std::string control_token;  ///< "" = control off; else at least kMinControlTokenLength characters
     bool control_loopback_only = true;
     // [outputs] (docs/outputs.md)
     Endpoint bvh_listen{"0.0.0.0", 7002};

@@ -57,8 +57,14 @@ bool Daemon::start(std::string* error) {
     pipeline_->solver().load_calibrations();
 
     // Outputs (docs/outputs.md): every one comes from the registry in outputs.cpp.
-    const OutputContext outputs{
-        config_, *pipeline_, clock_, control_handlers(), [this] { return metrics(); }, [this] { return health(); }};
+    const OutputContext outputs{config_,
+                                *pipeline_,
+                                clock_,
+                                control_handlers(),
+                                [this] { return metrics(); },
+                                [this] { return health(); },
+                                nullptr,
+                                std::make_shared<serve::ControlAttemptLimiter>()};
     add_outputs(outputs, *pipeline_);
     for (const auto& o : pipeline_->outputs()) {
         if (auto* r = dynamic_cast<BvhRecorderOutput*>(o.get())) bvh_recorder_ = r;

@@ -181,6 +181,7 @@ std::unique_ptr<pipeline::Output> make_pose_service(const OutputContext& ctx) {
     sc.max_subscribe_subjects = c.max_subscribe_subjects;
     sc.control_token = c.control_token;
     sc.control_loopback_only = c.control_loopback_only;
+    sc.control_attempts = ctx.control_attempts;
     sc.io_threads = c.serve_threads;
     sc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
     sc.server_version = "mocapd";
@@ -253,6 +254,7 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     hc.control_loopback_only = ctx.config.control_loopback_only;
     hc.allowed_origins = ctx.config.http_allowed_origins;
     hc.limits = peer_limits(ctx.config, ctx.config.http_per_address);
+    hc.control_attempts = ctx.control_attempts;
     hc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
     serve::HttpDescription hd;
     for (const auto& seg : ctx.pipeline.model().segments)

@@ -36,6 +36,8 @@ struct OutputContext {
     std::function<serve::HealthStatus()> health;
     /// Non-null in `mocapd --replay`: only the file outputs its command line asks for.
     const ReplayOptions* replay = nullptr;
+    /// Failed control attempts, counted once for the pose service and HTTP together.
+    std::shared_ptr<serve::ControlAttemptLimiter> control_attempts;
 };
 
 /// Returns the output, or nullptr when its config section leaves it off.

@@ -45,7 +45,7 @@ ClientSession::ClientSession(asio::ip::tcp::socket socket, SessionContext& ctx, 
 ClientSession::~ClientSession() = default;
 
 void ClientSession::start() {
-    peer_is_loopback_ = peer_on_loopback(socket_);
+    peer_ = remote_address(socket_);
     if (SharedBytes hello = ctx_.hello()) replies_.push_back(std::move(hello));
     do_write();
     do_read();
@@ -248,8 +248,9 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
     const ServeConfig& config = ctx_.config;
     ControlResult result;
     const std::string who = fmt::format("serve: control request from client {}", id_);
-    if (const auto refusal = authorize_control({config.control_token, config.control_loopback_only}, peer_is_loopback_,
-                                               request.token(), ctx_.counters.control, ctx_.log, who)) {
+    if (const auto refusal =
+            authorize_control({config.control_token, config.control_loopback_only, config.control_attempts.get()},
+                              peer_, request.token(), ctx_.counters.control, ctx_.log, who)) {
         result = ControlResult::failure(refusal->reason);
     } else {
         const ControlHandlers& h = ctx_.handlers;

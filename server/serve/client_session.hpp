@@ -29,6 +29,7 @@
 #include <deque>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string_view>
 #include <utility>
 #include <vector>
@@ -133,7 +134,7 @@ private:
     const std::size_t lane_;
     const std::uint64_t id_;
     std::shared_ptr<ConnectionSlots::Slot> slot_;
-    bool peer_is_loopback_ = false;
+    std::optional<asio::ip::address> peer_;  ///< for the control rules; nullopt if unknown
 
     DelimitedReader reader_;
     std::unique_ptr<v1::ClientMessage> in_;     ///< reused parse target

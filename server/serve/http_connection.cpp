@@ -171,13 +171,16 @@ void HttpServer::HttpSession::control(const Request& request, std::string_view p
                                        : std::string_view(token_field->value().data(), token_field->value().size());
     const std::string who = fmt::format("http: control request {}", path);
     if (const auto refusal =
-            authorize_control({config.control_token, config.control_loopback_only}, peer_on_loopback(stream_.socket()),
-                              token, counters.control, server_.log_, who)) {
+            authorize_control({config.control_token, config.control_loopback_only, config.control_attempts.get()},
+                              remote_address(stream_.socket()), token, counters.control, server_.log_, who)) {
         const bool token_problem =
             refusal->kind == ControlRefusal::kNoToken || refusal->kind == ControlRefusal::kBadToken;
-        // 401 tells the viewer to ask for the token again; 403: no token would help.
-        return reply(token_problem ? http::status::unauthorized : http::status::forbidden,
-                     ControlResult::failure(refusal->reason));
+        // 401 tells the viewer to ask for the token again; 429: wait, too many failed
+        // attempts (control_access.hpp); 403: no token would help.
+        const http::status status = refusal->kind == ControlRefusal::kThrottled ? http::status::too_many_requests
+                                    : token_problem                             ? http::status::unauthorized
+                                                                                : http::status::forbidden;
+        return reply(status, ControlResult::failure(refusal->reason));
     }
     const ControlHandlers& h = server_.handlers_.control;
     std::optional<ControlResult> result;

@@ -49,6 +49,7 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
       sessions_(counters_.connections_closed),
       backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& frame) { deliver(frame); }) {
     register_metrics(own_metrics_);
+    if (!config_.control_attempts) config_.control_attempts = std::make_shared<ControlAttemptLimiter>();
     if (!config_.wall_clock_us) {
         config_.wall_clock_us = [] {
             return std::chrono::duration_cast<std::chrono::microseconds>(

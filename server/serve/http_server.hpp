@@ -78,6 +78,9 @@ struct HttpServerConfig {
     /// SO_SNDBUF per connection: bounded, so a stalled browser's frames are dropped from its
     /// queue (counted) instead of piling up in the kernel (0 = kernel default).
     std::uint32_t send_buffer_bytes = 128 * 1024;
+    /// Failed-attempt limits shared with the pose service (the daemon makes one); null =
+    /// the server makes its own with the default limits (control_access.hpp).
+    std::shared_ptr<ControlAttemptLimiter> control_attempts;
     /// Wall clock (CLOCK_REALTIME µs) for encoded_us; empty = system_clock.
     std::function<std::int64_t()> wall_clock_us;
 };

@@ -28,6 +28,7 @@ PoseServer::PoseServer(ServeConfig config, ControlHandlers handlers)
                 .count();
         };
     }
+    if (!config_.control_attempts) config_.control_attempts = std::make_shared<ControlAttemptLimiter>();
     const std::size_t lane_count = std::max<std::size_t>(config_.io_threads, 1);
     std::vector<asio::io_context*> ios;
     std::vector<RequestBudget*> budgets;

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,8 @@
 #include "core/metrics_registry.hpp"
 
 namespace mocap::serve {
+
+class ControlAttemptLimiter;
 
 struct ServeConfig {
     std::string bind_address = "0.0.0.0";           ///< IPv4/IPv6 literal to listen on
@@ -48,9 +51,12 @@ struct ServeConfig {
                                                 ///< beyond it frames are dropped (counted)
     std::string control_token;                  ///< empty = every control request is refused
     bool control_loopback_only = true;          ///< refuse control from non-loopback peers
-    std::uint32_t frame_rate_hz = 100;          ///< announced in Hello
-    std::string world_frame = "ENU";            ///< announced in Hello ("ENU" or "NED")
-    std::string server_version = "mocapd";      ///< announced in Hello
+    /// Failed-attempt limits shared with HTTP (the daemon makes one); null = the server
+    /// makes its own with the default limits (control_access.hpp).
+    std::shared_ptr<ControlAttemptLimiter> control_attempts;
+    std::uint32_t frame_rate_hz = 100;      ///< announced in Hello
+    std::string world_frame = "ENU";        ///< announced in Hello ("ENU" or "NED")
+    std::string server_version = "mocapd";  ///< announced in Hello
     /// Wall clock (CLOCK_REALTIME µs) for encoded_us and Stats; empty = system_clock.
     std::function<std::int64_t()> wall_clock_us;
 };

@@ -56,6 +56,7 @@ public:
         kIdle,
         kRateLimited,
         kControlRefused,
+        kControlThrottled,
         kClientFull,
         kIoError,
         kOriginRefused,

@@ -437,6 +437,15 @@ TEST_F(ConfigCheck, BlankOrPaddedTokenIsRefused) {
     EXPECT_EQ(refusal("[control]\ntoken = \"a token with inner spaces\"\n"), "");
 }
 
+// Issue 13, item 8: with failed attempts limited to a few per second, a token of 16 random
+// characters cannot be guessed; a shorter one is refused where every config is checked.
+TEST_F(ConfigCheck, TokenShorterThanSixteenCharactersIsRefused) {
+    EXPECT_REFUSED("[control]\ntoken = \"fifteen-chars-x\"\n",
+                   "c.toml:2: control.token: must be at least 16 characters");
+    EXPECT_REFUSED("[control]\ntoken = \"s3cret\"\n", "control.token: must be at least 16 characters");
+    EXPECT_EQ(refusal("[control]\ntoken = \"sixteen-chars-xy\"\n"), "");
+}
+
 TEST_F(ConfigCheck, StatsIntervalBelowATenthOfASecondIsRefused) {
     EXPECT_REFUSED("[log]\nstats_interval_s = 0.001\n", "log.stats_interval_s: must be 0 (off) or between 0.1");
     EXPECT_EQ(refusal("[log]\nstats_interval_s = 0\n"), "");

@@ -20,7 +20,7 @@ namespace {
 using namespace std::chrono_literals;
 using math::Quat;
 
-constexpr const char* kToken = "it-s3cret";
+constexpr const char* kToken = "it-s3cret-0123456789";
 constexpr int kRateHz = 100;
 
 struct TruthKey {
@@ -412,6 +412,7 @@ TEST(DaemonCli, CheckConfigRefusesEveryConfigStartUpRefuses) {
         {"[outputs]\nraw_rotate_s = 0.001\n", "outputs.raw_rotate_s: must be 0 (off) or between 10"},
         {"[outputs]\nbvh_subject = 65000\n", "outputs.bvh_subject: 65000 is not a configured subject"},
         {"[control]\ntoken = \"   \"\n", "control.token: must not be blank"},
+        {"[control]\ntoken = \"fifteen-chars-x\"\n", "control.token: must be at least 16 characters"},
     };
     int n = 0;
     for (const auto& [extra, expect] : cases) {

@@ -37,7 +37,7 @@ namespace {
 using namespace std::chrono_literals;
 using Bytes = std::vector<std::uint8_t>;
 
-constexpr const char* kToken = "faults-t0ken";
+constexpr const char* kToken = "faults-t0ken-0123456789";
 constexpr int kRateHz = 100;
 
 std::int64_t realtime_us() {

@@ -20,7 +20,7 @@ using namespace std::chrono_literals;
 using boost::beast::http::verb;
 using mocap::testing::http_request;
 
-constexpr const char* kToken = "web-s3cret";
+constexpr const char* kToken = "web-s3cret-0123456789";
 
 struct Scrape {
     std::map<std::string, std::string> types;  // family -> counter|gauge|histogram

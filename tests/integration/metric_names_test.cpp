@@ -77,7 +77,7 @@ TEST(MetricNames, MatchTheGoldenListInStatsMetricsAndLog) {
         << "[pipeline]\nworkers = 2\nmax_subjects = 2\n"
         << "[skeleton]\ncalibration_dir = \"" << dir.path().string() << "\"\n"
         << "[serve]\npose_listen = \"127.0.0.1:" << pose_port << "\"\n"
-        << "[control]\ntoken = \"names-token\"\n"
+        << "[control]\ntoken = \"names-token-0123456789\"\n"
         << "[outputs]\nbvh_live = true\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n"
         << "raw_record = true\nrecord_dir = \"" << dir.path().string() << "\"\n"
         << "[http]\nlisten = \"127.0.0.1:" << http_port << "\"\n";

@@ -58,7 +58,7 @@ calibration_dir = "$2"
 [serve]
 pose_listen = "127.0.0.1:$POSE"
 [control]
-token = "outputs-test"
+token = "outputs-test-0123456789"
 [outputs]
 bvh_listen = "127.0.0.1:$BVH"
 record_dir = "$2"
@@ -74,7 +74,7 @@ start_daemon() {  # $1 = config, $2 = log
   wait_port "$POSE" && wait_port "$BVH" || fail "mocapd did not open its ports"
 }
 
-control() { "$CLIENT" --connect "127.0.0.1:$POSE" control --token outputs-test "$@" > /dev/null; }
+control() { "$CLIENT" --connect "127.0.0.1:$POSE" control --token outputs-test-0123456789 "$@" > /dev/null; }
 
 # Checks one BVH file with every consumer. $1 = file.
 check_bvh() {

@@ -19,7 +19,7 @@ import pytest
 
 import mocapd_client as mc
 
-TOKEN = "py-s3cret"
+TOKEN = "py-s3cret-0123456789"
 RATE_HZ = 100
 CALIBRATE_S = 4.0  # still T-pose at the start of the simulated walk
 BLEND_S = 1.0  # the walk blends in over this long after the T-pose (clients/sim/stream_motion)

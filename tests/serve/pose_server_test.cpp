@@ -516,6 +516,56 @@ TEST(PoseServer, ControlFromANonLoopbackPeerIsRefusedByDefault) {
     EXPECT_EQ(calls.load(), 1);
 }
 
+// Issue 13, item 8: reconnecting reset the only limit there was (per connection), so a token
+// could be guessed at ~40 000 tries a second. Failed attempts now count per address, across
+// connections: after the burst the right token is refused too (not compared), from that
+// address, until the window has passed (manual clock); another address is unaffected.
+TEST(PoseServer, ReconnectingWithWrongTokensIsThrottledPerAddress) {
+    std::atomic<std::int64_t> now_us{1'000'000};
+    std::atomic<int> calls{0};
+    ControlHandlers handlers;
+    handlers.reload = [&] {
+        ++calls;
+        return ControlResult::success();
+    };
+    ServeConfig config = test_config();
+    config.control_attempts = std::make_shared<ControlAttemptLimiter>(ControlAttemptLimits{3.0, 0.5, 100.0, 100.0, 16},
+                                                                      [&] { return now_us.load(); });
+    const std::string lan = non_loopback_ipv4();
+    if (!lan.empty()) {  // a second address of this host, for "another address"
+        config.bind_address = "0.0.0.0";
+        config.control_loopback_only = false;
+    }
+    Started s(config, handlers);
+    auto attempt = [&](const std::string& host, const std::string& token) {
+        PoseClient c;  // a new connection for every guess
+        std::string error;
+        v1::ControlRequest request;
+        request.set_token(token);
+        request.mutable_reload();
+        v1::ControlReply reply;
+        EXPECT_TRUE(c.connect(host, s.server.port(), 2s, error)) << error;
+        EXPECT_TRUE(c.control(request, reply, 2s, error)) << error;
+        return reply;
+    };
+    for (int i = 0; i < 3; ++i)
+        EXPECT_EQ(attempt("127.0.0.1", "guess-" + std::to_string(i)).error(), "bad token");
+    for (int i = 0; i < 5; ++i)
+        EXPECT_EQ(attempt("127.0.0.1", "guess-more").error(), "too many failed control attempts, try again later");
+    EXPECT_FALSE(attempt("127.0.0.1", "s3cret-token").ok()) << "over the limit even the right token is not compared";
+    EXPECT_EQ(s.server.counters().control.refused_bad_token.value(), 3u);
+    EXPECT_EQ(s.server.counters().control.refused_throttled.value(), 6u);
+    EXPECT_EQ(calls.load(), 0);
+    if (!lan.empty()) {
+        EXPECT_TRUE(attempt(lan, "s3cret-token").ok()) << "another address has its own bucket";
+        EXPECT_EQ(calls.load(), 1);
+    }
+    now_us += 2'000'000;  // one failure back, at 0.5 per second
+    EXPECT_TRUE(attempt("127.0.0.1", "s3cret-token").ok()) << "after the window";
+    EXPECT_EQ(attempt("127.0.0.1", "guess-again").error(), "bad token");
+    EXPECT_EQ(attempt("127.0.0.1", "s3cret-token").error(), "too many failed control attempts, try again later");
+}
+
 TEST(PoseServer, StatsCarryServeAndDaemonCounters) {
     ControlHandlers handlers;
     handlers.stats = [] {
