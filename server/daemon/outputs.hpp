@@ -37,7 +37,7 @@ struct OutputContext {
     /// Non-null in `mocapd --replay`: only the file outputs its command line asks for.
     const ReplayOptions* replay = nullptr;
     /// Failed control attempts, counted once for the pose service and HTTP together.
-    std::shared_ptr<serve::ControlAttemptLimiter> control_attempts;
+    std::shared_ptr<serve::ControlAttemptLimiter> control_attempts = nullptr;  ///< null: each server makes its own
 };
 
 /// Returns the output, or nullptr when its config section leaves it off.

@@ -47,7 +47,7 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     auto pipeline = pipeline::Pipeline::create(std::move(*pc), clock, error);
     if (!pipeline) return false;
     // Outputs: the registry's file outputs, the same encoder and recorder as live.
-    OutputContext outputs{config, *pipeline, clock, {}, {}, {}, &options, nullptr};  // replay: no control
+    OutputContext outputs{config, *pipeline, clock, {}, {}, {}, &options};
     add_outputs(outputs, *pipeline);
     pipeline->solver().load_calibrations();
     if (!pipeline->start_outputs(error)) return false;
