@@ -236,13 +236,9 @@ std::uint64_t gaps(const std::vector<std::uint64_t>& s) {
 /// a client's gaps are compared with this, not with zero.
 std::uint64_t sim_skipped(const Process& sim) {
     const std::string log = sim.log();
-    const std::string key = "\"syncs_skipped\":";
-    const auto at = log.find(key);
-    if (at == std::string::npos) {
-        ADD_FAILURE() << "no stats line from mocap-sim: " << log;
-        return 0;
-    }
-    return std::stoull(log.substr(at + key.size()));
+    const auto skipped = sim_syncs_skipped(log);
+    if (!skipped) ADD_FAILURE() << "no stats line from mocap-sim: " << log;
+    return skipped.value_or(0);
 }
 
 class Faults : public ::testing::Test {

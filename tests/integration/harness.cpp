@@ -143,6 +143,13 @@ std::size_t count_lines(const std::string& text, const std::string& needle) {
     return n;
 }
 
+std::optional<std::uint64_t> sim_syncs_skipped(const std::string& sim_output) {
+    const std::string key = "\"syncs_skipped\":";
+    const auto at = sim_output.find(key);
+    if (at == std::string::npos) return std::nullopt;
+    return std::stoull(sim_output.substr(at + key.size()));
+}
+
 int tcp_connect(std::uint16_t port, const std::string& host, int rcvbuf) {
     const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
     if (rcvbuf > 0) ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);

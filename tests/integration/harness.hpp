@@ -58,6 +58,10 @@ void write_file(const std::string& path, const std::string& text);
 std::string read_file(const std::string& path);
 /// Lines of `text` that contain `needle`.
 std::size_t count_lines(const std::string& text, const std::string& needle);
+/// SYNCs `mocap-sim stream --sink-rate-stats` skipped because the simulator itself ran late
+/// (read from its output): those instants never existed, so a client's gaps may be up to
+/// this. nullopt when the output has no stats line.
+std::optional<std::uint64_t> sim_syncs_skipped(const std::string& sim_output);
 
 // Raw TCP sockets, for clients that misbehave on purpose.
 
