@@ -25,8 +25,8 @@
 #include "mocap/v1/mocap.pb.h"
 #include "pose_client.hpp"
 
-struct __natsConnection;
-struct __natsSubscription;
+struct __natsConnection;    // NOLINT(bugprone-reserved-identifier): libnats names its types so
+struct __natsSubscription;  // NOLINT(bugprone-reserved-identifier): libnats names its types so
 
 namespace mocap::client {
 

@@ -32,8 +32,8 @@
 #include "pipeline/output.hpp"
 #include "serve/pose_encoder.hpp"
 
-struct __natsConnection;
-struct __natsOptions;
+struct __natsConnection;  // NOLINT(bugprone-reserved-identifier): libnats names its types so
+struct __natsOptions;     // NOLINT(bugprone-reserved-identifier): libnats names its types so
 
 namespace mocap::cluster {
 

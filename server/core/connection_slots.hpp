@@ -80,7 +80,7 @@ public:
         [[nodiscard]] bool admitted() const { return slot != nullptr; }
     };
 
-    explicit ConnectionSlots(SlotPolicy policy) : policy_(policy) {}
+    explicit ConnectionSlots(const SlotPolicy& policy) : policy_(policy) {}
 
     /// Decides for a new connection from `address` (rules above) and, if admitted, takes
     /// its slot (and frees the victim's).

@@ -473,7 +473,7 @@ std::string cluster_host_id(const DaemonConfig& config) {
     std::array<char, 256> name{};
     if (::gethostname(name.data(), name.size() - 1) != 0) return {};
     std::string id(name.data());
-    id = id.substr(0, id.find('.'));
+    if (const auto dot = id.find('.'); dot != std::string::npos) id.resize(dot);
     for (char& ch : id) {
         if (!is_subject_token(std::string(1, ch))) ch = '_';
     }

@@ -277,6 +277,7 @@ void SinkListener::on_accept(const error_code& ec, tcp::socket socket) {
                     "packet yet, or none for longest",
                     (*victim)->peer(), peer.ip);
             // Keep it alive through close(), which erases it from connections_.
+            // NOLINTNEXTLINE(performance-unnecessary-copy-initialization): a reference would dangle
             const std::shared_ptr<SinkConnection> closing = *victim;
             closing->close();
         }

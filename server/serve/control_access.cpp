@@ -44,7 +44,7 @@ std::optional<asio::ip::address> remote_address(const asio::ip::tcp::socket& soc
     return peer.address();
 }
 
-ControlAttemptLimiter::ControlAttemptLimiter(ControlAttemptLimits limits, std::function<std::int64_t()> now_us)
+ControlAttemptLimiter::ControlAttemptLimiter(const ControlAttemptLimits& limits, std::function<std::int64_t()> now_us)
     : limits_(limits),
       per_address_(rate(limits.per_address_burst, limits.per_address_per_s)),
       global_rate_(rate(limits.global_burst, limits.global_per_s)),

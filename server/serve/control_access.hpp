@@ -72,7 +72,7 @@ struct ControlAttemptLimits {
 class ControlAttemptLimiter {
 public:
     /// `now_us`: a monotonic clock in µs (tests inject a manual one); empty = steady_clock.
-    explicit ControlAttemptLimiter(ControlAttemptLimits limits = {}, std::function<std::int64_t()> now_us = {});
+    explicit ControlAttemptLimiter(const ControlAttemptLimits& limits = {}, std::function<std::int64_t()> now_us = {});
 
     /// Reserves one failure of `peer`'s bucket and of the global one; false (nothing
     /// reserved) when either is empty: refuse without comparing.

@@ -18,7 +18,7 @@ namespace {
 constexpr std::chrono::seconds kRefusalLogInterval{10};
 }  // namespace
 
-ServeThread::ServeThread(Names names, Options options, Counters counters, Hooks hooks)
+ServeThread::ServeThread(Names names, const Options& options, const Counters& counters, Hooks hooks)
     : names_(std::move(names)),
       options_(options),
       counters_(counters),

@@ -68,7 +68,7 @@ public:
         std::uint32_t send_buffer_bytes = 128 * 1024;  ///< SO_SNDBUF per connection; 0 = kernel default
     };
 
-    ServeThread(Names names, Options options, Counters counters, Hooks hooks);
+    ServeThread(Names names, const Options& options, const Counters& counters, Hooks hooks);
     /// Calls stop().
     ~ServeThread();
     ServeThread(const ServeThread&) = delete;
