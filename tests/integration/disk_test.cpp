@@ -28,17 +28,6 @@ namespace fs = std::filesystem;
 
 constexpr const char* kToken = "disk-test-token-0123456789";
 
-/// Polls `done` every 20 ms until it holds or `limit` passes.
-template <typename Done>
-bool wait_until(Done done, std::chrono::milliseconds limit) {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    while (std::chrono::steady_clock::now() < end) {
-        if (done()) return true;
-        std::this_thread::sleep_for(20ms);
-    }
-    return done();
-}
-
 class Disk : public ::testing::Test {
 protected:
     void TearDown() override {

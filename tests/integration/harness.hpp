@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace mocap::itest {
@@ -52,6 +53,18 @@ private:
 };
 
 std::uint16_t free_port();
+/// Polls `done` every 20 ms until it holds or `limit` passes: the integration tests' one
+/// bounded wait on an event (never a bare sleep).
+template <typename Done>
+bool wait_until(Done done, std::chrono::milliseconds limit) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    while (std::chrono::steady_clock::now() < end) {
+        if (done()) return true;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return done();
+}
+
 /// True once something accepts TCP connections on 127.0.0.1:port (polls until `limit`).
 bool wait_for_port(std::uint16_t port, std::chrono::milliseconds limit);
 void write_file(const std::string& path, const std::string& text);

@@ -27,17 +27,6 @@ namespace {
 using namespace std::chrono_literals;
 using mocap::testing::http_request;
 
-/// Polls `done` every 20 ms until it holds or `limit` passes.
-template <typename F>
-bool wait_until(F done, std::chrono::milliseconds limit) {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    while (std::chrono::steady_clock::now() < end) {
-        if (done()) return true;
-        std::this_thread::sleep_for(20ms);
-    }
-    return done();
-}
-
 /// The WebSocket upgrade request of a browser, as raw text (a raw socket can then stop
 /// reading at will).
 std::string ws_upgrade(std::uint16_t port, const std::string& origin = "") {
