@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "load_tally.hpp"
 #include "pose_client.hpp"
 
 namespace mocap::client {
@@ -20,14 +21,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-/// Latencies kept for exact percentiles; beyond this, further samples are not stored
-/// (20 M samples = 1000 clients x 100 Hz x 200 s; 80 MB).
-constexpr std::size_t kMaxLatencySamples = 20'000'000;
-
 struct ClientState {
     PoseClient client;
-    std::uint64_t frames = 0;
-    std::vector<std::pair<std::uint32_t, std::uint64_t>> last_sync;  // per subject
+    ClientTally tally;
     bool open = true;
 };
 
@@ -44,14 +40,6 @@ void raise_fd_limit(std::size_t needed) {
 bool shrink_receive_buffer(int fd) {
     const int bytes = 4096;
     return setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes) == 0;
-}
-
-double percentile_ms(std::vector<std::int32_t>& v, double p) {
-    const auto n = v.size();
-    auto rank = static_cast<std::size_t>(std::ceil(p / 100.0 * static_cast<double>(n)));
-    rank = std::clamp<std::size_t>(rank, 1, n) - 1;
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(rank), v.end());
-    return v[rank] / 1000.0;
 }
 
 // The churn attack: each churner sends `churn_pipelined` Subscribes at once, naming one of
@@ -152,9 +140,7 @@ LoadResult run_load(const LoadOptions& options) {
         epoll_ctl(ep, EPOLL_CTL_ADD, states[i].client.fd(), &ev);
     }
 
-    std::vector<std::int32_t> latencies_us;
-    latencies_us.reserve(std::min<std::size_t>(
-        kMaxLatencySamples, options.clients * 100 * static_cast<std::size_t>(options.duration.count() / 1000 + 1)));
+    const std::size_t max_latencies = kMaxLatencySamples / std::max<std::size_t>(options.clients, 1);
     std::vector<epoll_event> events(256);
     v1::ServerMessage message;
     const auto start = Clock::now();
@@ -175,30 +161,7 @@ LoadResult run_load(const LoadOptions& options) {
                     break;
                 }
                 if (!message.has_frame()) continue;
-                const v1::SkeletonFrame& frame = message.frame();
-                ++s.frames;
-                ++result.frames;
-                if (frame.times().sink_send_us() != 0) {
-                    const std::int64_t lat = s.client.last_receive_us() - frame.times().sink_send_us();
-                    ++result.latency_samples;
-                    if (lat < 0) {
-                        ++result.negative_latencies;
-                    } else if (latencies_us.size() < kMaxLatencySamples) {
-                        latencies_us.push_back(static_cast<std::int32_t>(std::min<std::int64_t>(lat, INT32_MAX)));
-                    }
-                }
-                auto it = std::find_if(s.last_sync.begin(), s.last_sync.end(),
-                                       [&](const auto& p) { return p.first == frame.subject_id(); });
-                if (it == s.last_sync.end()) {
-                    s.last_sync.emplace_back(frame.subject_id(), frame.sync());
-                } else {
-                    const std::uint64_t jump = frame.sync() - it->second;
-                    if (frame.sync() > it->second && jump > decimation) {
-                        ++result.gaps;
-                        result.missing_frames += (jump + decimation - 1) / decimation - 1;
-                    }
-                    it->second = frame.sync();
-                }
+                s.tally.add(message.frame(), s.client.last_receive_us(), decimation, max_latencies);
             }
             if (f == ReadStatus::kClosed || f == ReadStatus::kError || !s.client.is_open()) {
                 s.open = false;
@@ -211,23 +174,17 @@ LoadResult run_load(const LoadOptions& options) {
     stop_churn = true;
     if (churn.joinable()) churn.join();
 
-    bool first = true;
+    std::vector<ClientTally> tallies;
+    std::vector<bool> counted;
     for (auto& s : states) {
         result.drops += s.client.drops_announced();
         if (!s.client.hello().server_version().empty() && s.client.subscribed().decimation() != 0) {
             ++result.connected;
         }
-        if (s.client.hello().server_version().empty()) continue;
-        result.frames_per_client_min = first ? s.frames : std::min(result.frames_per_client_min, s.frames);
-        result.frames_per_client_max = std::max(result.frames_per_client_max, s.frames);
-        first = false;
+        counted.push_back(!s.client.hello().server_version().empty());
+        tallies.push_back(std::move(s.tally));
     }
-    if (!latencies_us.empty()) {
-        result.max_ms = *std::max_element(latencies_us.begin(), latencies_us.end()) / 1000.0;
-        result.p50_ms = percentile_ms(latencies_us, 50);
-        result.p90_ms = percentile_ms(latencies_us, 90);
-        result.p99_ms = percentile_ms(latencies_us, 99);
-    }
+    merge_tallies(tallies, counted, result);
     return result;
 }
 

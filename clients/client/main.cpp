@@ -1,7 +1,7 @@
 // mocap-client — command-line client of mocapd's pose service.
 //
 //   mocap-client --connect HOST:PORT cat [--frames N] [--json] [--subject ID]...
-//   mocap-client --nats URL [--site S] cat ...      (the same, from a NATS cluster)
+//   mocap-client --nats URL [--site S] cat|load ... (the same, from a NATS cluster)
 //   mocap-client --connect HOST:PORT stats [--json]
 //   mocap-client --connect HOST:PORT control --token T calibrate --subject ID [--pose T|N]
 //   mocap-client --connect HOST:PORT control --token T record-start [--path FILE]
@@ -23,6 +23,7 @@
 
 #include "core/guarded_main.hpp"
 #include "load_client.hpp"
+#include "nats_load_client.hpp"
 #include "nats_pose_client.hpp"
 #include "output_commands.hpp"
 #include "pose_client.hpp"
@@ -224,6 +225,26 @@ int run_control(PoseClient& client, const v1::ControlRequest& request) {
 
 }  // namespace
 
+// `load`'s report, for either transport; exit 0 when every client (and every stalled one) got in.
+static int print_load(const mocap::client::LoadResult& r, const mocap::client::LoadOptions& options, bool json) {
+    if (json) {
+        std::cout << mocap::client::load_result_json(r) << std::endl;
+    } else {
+        std::printf("clients %zu (connected %zu, closed early %zu, stalled %zu), %.2f s\n", r.clients, r.connected,
+                    r.closed_early, r.stalled, r.duration_s);
+        std::printf("frames %llu (per client %llu..%llu), gaps %llu (missing %llu), drops %llu\n",
+                    static_cast<unsigned long long>(r.frames), static_cast<unsigned long long>(r.frames_per_client_min),
+                    static_cast<unsigned long long>(r.frames_per_client_max), static_cast<unsigned long long>(r.gaps),
+                    static_cast<unsigned long long>(r.missing_frames), static_cast<unsigned long long>(r.drops));
+        if (r.p50_ms) {
+            std::printf("latency sink-send -> receive: p50 %.3f ms, p90 %.3f ms, p99 %.3f ms, max %.3f ms\n", *r.p50_ms,
+                        *r.p90_ms, *r.p99_ms, *r.max_ms);
+        }
+        if (!r.error.empty()) std::printf("first error: %s\n", r.error.c_str());
+    }
+    return r.connected == r.clients && r.stalled == options.stalled ? 0 : kExitConnection;
+}
+
 static int run(int argc, char** argv) {
     CLI::App app{"mocap-client: read poses from mocapd, query its stats, send control requests"};
     std::string connect = "127.0.0.1:7001";
@@ -231,7 +252,8 @@ static int run(int argc, char** argv) {
     double connect_timeout_s = 3.0;
     app.add_option("--connect-timeout", connect_timeout_s, "seconds to connect and get Hello")->capture_default_str();
     mocap::client::NatsOptions nats;
-    app.add_option("--nats", nats.url, "read poses from this NATS cluster instead (nats://HOST:PORT[,...]); cat only");
+    app.add_option("--nats", nats.url,
+                   "read poses from this NATS cluster instead (nats://HOST:PORT[,...]); cat and load");
     app.add_option("--site", nats.site, "the cluster's [cluster] site")->capture_default_str();
     app.add_option("--nats-user", nats.user, "NATS user (password: --nats-password or MOCAP_NATS_PASSWORD)");
     app.add_option("--nats-password", nats.password, "NATS password");
@@ -308,9 +330,14 @@ static int run(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
 
     std::string error;
+    const auto connect_timeout = std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
+    if (*load) {
+        load_options.duration = std::chrono::milliseconds(static_cast<long long>(load_duration_s * 1000));
+        load_options.connect_timeout = connect_timeout;
+    }
     if (!nats.url.empty()) {
-        if (!*cat) {
-            std::cerr << "mocap-client: --nats serves cat only\n";
+        if (!*cat && !*load) {
+            std::cerr << "mocap-client: --nats serves cat and load only\n";
             return kExitFailed;
         }
         if (nats.password.empty()) {
@@ -318,8 +345,13 @@ static int run(int argc, char** argv) {
             // NOLINTNEXTLINE(concurrency-mt-unsafe)
             if (const char* env = std::getenv("MOCAP_NATS_PASSWORD")) nats.password = env;
         }
+        if (*load && (load_options.stalled > 0 || load_options.churn_clients > 0)) {
+            std::cerr << "mocap-client: --stalled and --churn-clients test the pose service; not with --nats\n";
+            return kExitFailed;
+        }
+        if (*load) return print_load(mocap::client::run_nats_load(nats, load_options), load_options, load_json);
         mocap::client::NatsPoseClient client;
-        if (!client.connect(nats, std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000)), error)) {
+        if (!client.connect(nats, connect_timeout, error)) {
             std::cerr << "mocap-client: " << error << "\n";
             return kExitConnection;
         }
@@ -331,7 +363,6 @@ static int run(int argc, char** argv) {
         std::cerr << "mocap-client: --connect: " << error << "\n";
         return kExitConnection;
     }
-    const auto connect_timeout = std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
 
     if (*record || *angles) {
         export_options.host = endpoint->host;
@@ -342,26 +373,7 @@ static int run(int argc, char** argv) {
     if (*load) {
         load_options.host = endpoint->host;
         load_options.port = endpoint->port;
-        load_options.duration = std::chrono::milliseconds(static_cast<long long>(load_duration_s * 1000));
-        load_options.connect_timeout = connect_timeout;
-        const auto r = mocap::client::run_load(load_options);
-        if (load_json) {
-            std::cout << mocap::client::load_result_json(r) << std::endl;
-        } else {
-            std::printf("clients %zu (connected %zu, closed early %zu, stalled %zu), %.2f s\n", r.clients, r.connected,
-                        r.closed_early, r.stalled, r.duration_s);
-            std::printf(
-                "frames %llu (per client %llu..%llu), gaps %llu (missing %llu), drops %llu\n",
-                static_cast<unsigned long long>(r.frames), static_cast<unsigned long long>(r.frames_per_client_min),
-                static_cast<unsigned long long>(r.frames_per_client_max), static_cast<unsigned long long>(r.gaps),
-                static_cast<unsigned long long>(r.missing_frames), static_cast<unsigned long long>(r.drops));
-            if (r.p50_ms) {
-                std::printf("latency sink-send -> receive: p50 %.3f ms, p90 %.3f ms, p99 %.3f ms, max %.3f ms\n",
-                            *r.p50_ms, *r.p90_ms, *r.p99_ms, *r.max_ms);
-            }
-            if (!r.error.empty()) std::printf("first error: %s\n", r.error.c_str());
-        }
-        return r.connected == r.clients && r.stalled == load_options.stalled ? 0 : kExitConnection;
+        return print_load(mocap::client::run_load(load_options), load_options, load_json);
     }
 
     PoseClient client;
