@@ -61,11 +61,13 @@ deps() {
 
 # npm registry, pinned in each package-lock.json: three.js (BVHLoader) for the BVH consumer
 # tests; three.js for the viewer (embedded into mocapd at build time); playwright-core for
-# the viewer test (it drives Debian's chromium and never downloads a browser).
+# the viewer test (it drives Debian's chromium and never downloads a browser); nats (nats.js)
+# as the foreign subscriber of the cluster test.
 npm_deps() {
   if ! command -v npm >/dev/null; then return; fi
   local pair dir
-  for pair in tests/integration/bvh_consumers:three clients/viewer:three tests/integration/viewer:playwright-core; do
+  for pair in tests/integration/bvh_consumers:three clients/viewer:three tests/integration/viewer:playwright-core \
+      tests/integration/nats_js:nats; do
     dir="$ROOT/${pair%%:*}"
     if [[ -d "$dir/node_modules/${pair##*:}" ]]; then continue; fi
     log "npm: installing ${pair##*:} in ${pair%%:*}"

@@ -250,6 +250,71 @@ TEST_F(Cluster, MocapClientCatReadsFromTheClusterInThePoseServiceFormat) {
     s->stop();
 }
 
+// `mocap-client --nats … load` measures the cluster path as `load` measures the pose service:
+// every client subscribed, every frame of both subjects counted once, latencies stamped.
+TEST_F(Cluster, MocapClientLoadMeasuresTheClusterPath) {
+    auto s = sim(2, 30);
+    // Frames flow before the measurement starts.
+    Subscriber poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
+    ASSERT_TRUE(poses.next(15s)) << "no frame on the cluster";
+    const std::string out = dir_.file("load.json");
+    Process load({"/bin/sh", "-c",
+                  std::string(MOCAP_CLIENT_BIN) + " --nats nats://127.0.0.1:" + std::to_string(nats_port_) +
+                      " --site " + kSite + " --nats-user " + kUser + " --nats-password " + kPassword +
+                      " load --clients 3 --duration 3 --json > " + out},
+                 dir_.file("load.log"));
+    ASSERT_EQ(load.wait(60s).value_or(-1), 0) << load.log();
+    s->stop();
+    const auto j = nlohmann::json::parse(read_file(out));
+    EXPECT_EQ(j.at("connected"), 3);
+    // 2 subjects x 100 Hz x ~3 s per client; a loaded machine may deliver fewer, never none.
+    EXPECT_GT(j.at("frames_per_client_min").get<std::uint64_t>(), 200u) << j.dump();
+    // Instants the simulator skipped when it ran late never existed.
+    EXPECT_LE(j.at("gaps").get<std::uint64_t>(), sim_syncs_skipped(s->log()).value_or(0)) << j.dump();
+    EXPECT_EQ(j.at("latency_samples"), j.at("frames")) << "every frame carries its sink send time";
+    EXPECT_FALSE(j.at("p99_ms").is_null());
+    EXPECT_EQ(j.at("drops"), 0);
+    EXPECT_FALSE(j.contains("error")) << j.dump();
+}
+
+// A subscriber nobody here wrote (nats.js, the `nats` package of the npm registry) reads every
+// subject of the site through one wildcard; the bytes it got decode with the project's
+// generated code, subject by subject, in order.
+TEST_F(Cluster, ANatsClientFromNpmReadsEverySubjectOfTheSite) {
+    constexpr int kMessages = 300;
+    const std::string out = dir_.file("js.out");
+    Process js({"/bin/sh", "-c",
+                std::string(NODE_BIN) + " " + NATS_JS_DIR +
+                    "/nats_subscriber.mjs nats://127.0.0.1:" + std::to_string(nats_port_) + " " + kUser + " " +
+                    kPassword + " 'mocap." + kSite + ".*.pose' " + std::to_string(kMessages) + " 120 > " + out},
+               dir_.file("js.log"));
+    ASSERT_TRUE(wait_until([&] { return js.log().find("subscribed") != std::string::npos || !js.running(); }, 30s));
+    ASSERT_NE(js.log().find("subscribed"), std::string::npos) << "node could not subscribe:\n" << js.log();
+    auto s = sim(2, 30);
+    ASSERT_EQ(js.wait(120s).value_or(-1), 0) << js.log();
+    s->stop();
+
+    std::map<std::uint32_t, std::vector<std::uint64_t>> syncs;
+    std::istringstream lines(read_file(out));
+    int n = 0;
+    for (std::string subject, hex; lines >> subject >> hex; ++n) {
+        ASSERT_EQ(hex.size() % 2, 0u);
+        std::string bytes(hex.size() / 2, '\0');
+        for (std::size_t i = 0; i < bytes.size(); ++i)
+            bytes[i] = static_cast<char>(std::stoi(hex.substr(2 * i, 2), nullptr, 16));
+        const v1::SkeletonFrame f = decode_frame(bytes);
+        EXPECT_EQ(subject, std::string("mocap.") + kSite + "." + std::to_string(f.subject_id()) + ".pose");
+        EXPECT_EQ(f.segment_count(), 15u);
+        EXPECT_EQ(f.q_world_segment_wxyz_size(), 60);
+        syncs[f.subject_id()].push_back(f.sync());
+    }
+    EXPECT_EQ(n, kMessages);
+    EXPECT_EQ(syncs.size(), 2u) << "both subjects arrive through the one wildcard subscription";
+    for (const auto& [subject, v] : syncs)
+        for (std::size_t i = 1; i < v.size(); ++i)
+            EXPECT_GT(v[i], v[i - 1]) << "subject " << subject << ": in order, each frame once";
+}
+
 TEST_F(Cluster, ALostClusterCostsThePoseServiceNothingAndPublishingResumes) {
     Subscriber poses(nats_port_, std::string("mocap.") + kSite + ".1.pose");
     client::PoseClient pose;
