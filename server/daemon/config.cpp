@@ -334,6 +334,7 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
         c.bvh_live = n->value<bool>().value();
     }
     r.read("bvh_max_clients", c.bvh_max_clients, 1, 10000);
+    r.read("bvh_threads", c.bvh_threads, 1, 64);
     r.read("bvh_subject", c.bvh_subject, 0, 65535);
     if (const auto* n = r.take("bvh_unit")) {
         const auto unit = n->value<std::string>();
@@ -377,6 +378,7 @@ void read_http(TableReader& r, DaemonConfig& c) {
     }
     r.read("listen", c.http_listen);
     r.read("max_clients", c.http_max_clients, 1, 10000);
+    r.read("threads", c.http_threads, 1, 64);
     r.read("ws_queue_frames", c.http_ws_queue_frames, 1, 4096);
     if (const auto* arr = r.array("allowed_origins")) {
         for (const auto& item : *arr) {

@@ -91,6 +91,7 @@ struct DaemonConfig {
     Endpoint bvh_listen{"0.0.0.0", 7002};
     bool bvh_live = true;  ///< serve live BVH on bvh_listen
     std::uint32_t bvh_max_clients = 64;
+    std::uint32_t bvh_threads = 1;   ///< live BVH serve threads; clients spread over them
     std::uint32_t bvh_subject = 0;   ///< 0 = first subject with a frame
     double bvh_units_per_m = 100.0;  ///< "cm" = 100, "m" = 1, "mm" = 1000
     std::string bvh_rotation_order = "ZXY";
@@ -105,6 +106,7 @@ struct DaemonConfig {
     bool http_enabled = true;
     Endpoint http_listen{"0.0.0.0", 8080};
     std::uint32_t http_max_clients = 64;            ///< HTTP + WebSocket connections at once
+    std::uint32_t http_threads = 1;                 ///< serve threads; connections spread over them
     std::uint32_t http_ws_queue_frames = 16;        ///< per-WebSocket frame queue (oldest dropped)
     std::vector<std::string> http_allowed_origins;  ///< origins besides the served host that may open /ws
     // [limits] (docs/security.md, "Connection slots"): connections one peer address may

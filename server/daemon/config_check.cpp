@@ -68,6 +68,22 @@ bool check_listeners(const DaemonConfig& c, std::string* error) {
     return true;
 }
 
+// A port's serve threads each take every published frame (encoded once, shared) and wake
+// for it, so a thread that can never hold a client costs CPU for nothing: refuse more
+// threads than client slots on the ports whose thread count is their own key.
+bool check_serve_threads(const DaemonConfig& c, std::string* error) {
+    const auto check = [error](const char* key, std::uint32_t threads, const char* slots_key, std::uint32_t slots) {
+        if (threads <= slots) return true;
+        *error = std::string(key) + ": " + std::to_string(threads) + " threads for " + std::to_string(slots) +
+                 " connection slots (" + slots_key + "): at most one thread per slot";
+        return false;
+    };
+    if (c.bvh_live && !check("outputs.bvh_threads", c.bvh_threads, "outputs.bvh_max_clients", c.bvh_max_clients)) {
+        return false;
+    }
+    return !c.http_enabled || check("http.threads", c.http_threads, "http.max_clients", c.http_max_clients);
+}
+
 bool readable_file(const std::string& path) {
     struct stat st {};
     return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode) && ::access(path.c_str(), R_OK) == 0;
@@ -141,6 +157,7 @@ bool check_config_impl(const DaemonConfig& c, std::string* error) {
         }
     }
     if (!check_listeners(c, error)) return false;
+    if (!check_serve_threads(c, error)) return false;
     if (!check_cluster(c, error)) return false;
     if (c.raw_record) {
         struct stat st {};

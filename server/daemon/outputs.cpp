@@ -205,6 +205,7 @@ std::unique_ptr<pipeline::Output> make_bvh_live(const OutputContext& ctx) {
     bc.bind_address = ctx.config.bvh_listen.host;
     bc.port = ctx.config.bvh_listen.port;
     bc.max_clients = ctx.config.bvh_max_clients;
+    bc.threads = ctx.config.bvh_threads;
     bc.queue_frames = ctx.config.client_queue_frames;
     bc.subject = ctx.config.bvh_subject;
     bc.limits = peer_limits(ctx.config, ctx.config.bvh_per_address);
@@ -249,6 +250,7 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     hc.bind_address = ctx.config.http_listen.host;
     hc.port = ctx.config.http_listen.port;
     hc.max_clients = ctx.config.http_max_clients;
+    hc.threads = ctx.config.http_threads;
     hc.ws_queue_frames = ctx.config.http_ws_queue_frames;
     hc.control_token = ctx.config.control_token;
     hc.control_loopback_only = ctx.config.control_loopback_only;

@@ -32,12 +32,13 @@ void BvhServer::register_metrics(MetricsRegistry& registry) const {
                        [this] { return static_cast<double>(client_count()); });
 }
 
-// One client. Lives on the serve thread only: no locks.
+// One client. Lives on its lane's thread only: no locks.
 class BvhServer::Session : public std::enable_shared_from_this<Session> {
 public:
-    Session(asio::ip::tcp::socket socket, BvhServer& server, ServeThread::SlotPtr slot)
+    Session(asio::ip::tcp::socket socket, BvhServer& server, std::size_t lane, ServeThread::SlotPtr slot)
         : socket_(std::move(socket)),
           server_(server),
+          lane_(lane),
           slot_(std::move(slot)),
           id_(slot_->id()),
           subject_(server.config_.subject),
@@ -62,7 +63,7 @@ public:
         boost::system::error_code ignored;
         socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
         socket_.close(ignored);
-        server_.on_closed(id_);
+        server_.on_closed(lane_, id_);
     }
 
 private:
@@ -150,6 +151,7 @@ private:
 
     asio::ip::tcp::socket socket_;
     BvhServer& server_;
+    std::size_t lane_;
     ServeThread::SlotPtr slot_;
     std::uint64_t id_;
     std::uint32_t subject_;
@@ -166,13 +168,18 @@ private:
 BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
     : config_(std::move(config)),
       encoder_(encoder),
-      serve_({"bvh", "mocap-bvh", "live BVH"}, {{config_.max_clients, config_.limits}, config_.send_buffer_bytes},
+      serve_({"bvh", "mocap-bvh", "live BVH"},
+             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes, config_.threads},
              {counters_.connections_accepted, counters_.connections_rejected_full,
               counters_.connections_refused_per_address, counters_.connections_evicted, counters_.accept_errors},
-             {[this](asio::ip::tcp::socket s, ServeThread::SlotPtr slot) { admit(std::move(s), std::move(slot)); },
-              [this](std::uint64_t id) { sessions_.close(id); }, [this] { sessions_.close_all(); }}),
-      sessions_(counters_.connections_closed),
-      backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& line) { deliver(line); }) {
+             {[this](std::size_t lane, asio::ip::tcp::socket s, ServeThread::SlotPtr slot) {
+                  admit(lane, std::move(s), std::move(slot));
+              },
+              [this](std::size_t lane, std::uint64_t id) { sessions_[lane]->close(id); },
+              [this](std::size_t lane) { sessions_[lane]->close_all(); }}),
+      sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections_closed)),
+      backlog_(serve_.ios(), config_.publish_backlog_frames,
+               [this](std::size_t lane, const SubjectText& line) { deliver(lane, line); }) {
     greeting_ = std::make_shared<const std::string>(encoder_.hierarchy() + "MOTION\n" + encoder_.frame_time_line());
 }
 
@@ -188,31 +195,36 @@ void BvhServer::stop() {
     serve_.stop();
 }
 
-void BvhServer::admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot) {
+std::size_t BvhServer::client_count() const {
+    return open_sessions(sessions_);
+}
+
+void BvhServer::admit(std::size_t lane, asio::ip::tcp::socket socket, ServeThread::SlotPtr slot) {
     const std::uint64_t id = slot->id();
-    auto s = std::make_shared<Session>(std::move(socket), *this, std::move(slot));
-    sessions_.put(id, s);
+    auto s = std::make_shared<Session>(std::move(socket), *this, lane, std::move(slot));
+    sessions_[lane]->put(id, s);
     s->start();
 }
 
-void BvhServer::on_closed(std::uint64_t id) {
-    sessions_.remove(id);
+void BvhServer::on_closed(std::size_t lane, std::uint64_t id) {
+    sessions_[lane]->remove(id);
     serve_.release(id);
 }
 
 void BvhServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
-    if (sessions_.open() == 0 || !serve_.running()) return;
+    if (client_count() == 0 || !serve_.running()) return;
     auto text = std::make_shared<std::string>();
     text->reserve(16 * encoder_.values_per_frame());
     encoder_.append_motion_line(pose, *text);
     counters_.frames_published.add();
-    if (!backlog_.push({frame.subject_id, std::move(text)})) {
-        counters_.backlog_dropped.add();
+    // One encoding, shared by every lane and client.
+    if (const std::size_t refused = backlog_.push({frame.subject_id, std::move(text)}); refused > 0) {
+        counters_.backlog_dropped.add(refused);
     }
 }
 
-void BvhServer::deliver(const SubjectText& line) {
-    sessions_.for_each([&](Session& s) { s.offer(line); });
+void BvhServer::deliver(std::size_t lane, const SubjectText& line) {
+    sessions_[lane]->for_each([&](Session& s) { s.offer(line); });
 }
 
 }  // namespace mocap::serve

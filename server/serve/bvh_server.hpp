@@ -17,10 +17,12 @@
 // a stall of the pipeline; the HIERARCHY greeting is never queued, so never dropped.
 // One write in flight per client.
 //
-// Threads: one ServeThread (its own io_context) runs the acceptor and every session.
-// publish() may be called from any thread (the assembler thread); it encodes the line
-// once (nothing when no client is connected) and hands it to the serve thread through a
-// PublishBacklog of publish_backlog_frames (beyond: dropped, counted).
+// Threads: a ServeThread with `threads` lanes (each its own io_context and thread) runs the
+// acceptor (lane 0) and the sessions, spread round-robin over the lanes; each lane keeps
+// its own session table. publish() may be called from any thread (the assembler thread);
+// it encodes the line once (nothing when no client is connected) and hands the same
+// shared bytes to every lane through a PublishBacklog of publish_backlog_frames per lane
+// (beyond: dropped, counted once per lane that refused).
 // Ownership: the daemon owns the server; stop() (or the destructor) closes everything.
 #pragma once
 
@@ -54,6 +56,7 @@ struct BvhServerConfig {
     /// SO_SNDBUF per client: bounded, so a stalled reader's lines are dropped from its
     /// queue (counted) instead of piling up in the kernel (0 = kernel default).
     std::uint32_t send_buffer_bytes = 128 * 1024;
+    std::size_t threads = 1;  ///< serve threads ([outputs] bvh_threads); clients spread over them
 };
 
 struct BvhServerCounters {
@@ -94,7 +97,9 @@ public:
     void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     [[nodiscard]] std::uint16_t port() const { return serve_.port(); }
-    [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }
+    [[nodiscard]] std::size_t client_count() const;
+    /// Clients served by lane (serve thread) `lane` now; any thread (how they are spread).
+    [[nodiscard]] std::size_t lane_client_count(std::size_t lane) const { return sessions_.at(lane)->open(); }
     [[nodiscard]] const BvhServerCounters& counters() const { return counters_; }
     /// Set-up: counter group "bvh_live" and gauge "bvh_live_clients".
     void register_metrics(MetricsRegistry& registry) const;
@@ -102,17 +107,18 @@ public:
     class Session;  // one client (bvh_server.cpp)
 
 private:
-    void admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
-    void on_closed(std::uint64_t id);
-    void deliver(const SubjectText& line);
+    void admit(std::size_t lane, asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
+    void on_closed(std::size_t lane, std::uint64_t id);
+    void deliver(std::size_t lane, const SubjectText& line);
 
     BvhServerConfig config_;
     const BvhFrameEncoder& encoder_;
     std::shared_ptr<const std::string> greeting_;  // HIERARCHY + MOTION + Frame Time
     BvhServerCounters counters_;
 
-    ServeThread serve_;               // before the sessions and the backlog, which use its io_context
-    SessionTable<Session> sessions_;  // serve thread (open(): any thread)
+    ServeThread serve_;  // before the sessions and the backlog, which use its io_contexts
+    /// One table per lane, used on that lane's thread (open(): any thread).
+    std::vector<std::unique_ptr<SessionTable<Session>>> sessions_;
     PublishBacklog backlog_;
 };
 

@@ -45,8 +45,9 @@ std::optional<std::uint32_t> parse_u32(std::string_view s) {
 
 }  // namespace
 
-HttpServer::HttpSession::HttpSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot)
-    : stream_(std::move(socket)), server_(server), slot_(std::move(slot)), id_(slot_->id()) {}
+HttpServer::HttpSession::HttpSession(asio::ip::tcp::socket socket, HttpServer& server, std::size_t lane,
+                                     ServeThread::SlotPtr slot)
+    : stream_(std::move(socket)), server_(server), lane_(lane), slot_(std::move(slot)), id_(slot_->id()) {}
 
 template <class Body>
 void HttpServer::HttpSession::send(http::response<Body>&& response) {
@@ -63,7 +64,7 @@ void HttpServer::HttpSession::close() {
     beast::error_code ignored;
     stream_.socket().shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
     stream_.close();
-    server_.on_closed(id_);
+    server_.on_closed(lane_, id_);
 }
 
 void HttpServer::HttpSession::do_read() {
@@ -118,8 +119,8 @@ void HttpServer::HttpSession::upgrade(Request request, std::string_view query) {
     // The WebSocket session takes the socket and this connection's id and slot.
     stream_.expires_never();
     closed_ = true;
-    auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, slot_, subject);
-    server_.sessions_.put(id_, ws);
+    auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, lane_, slot_, subject);
+    server_.sessions_[lane_]->put(id_, ws);
     ws->run(std::move(request));
 }
 

@@ -1,6 +1,6 @@
 // http_connection.hpp — one HTTP/1.1 connection of the web endpoint (keep-alive): reads
 // requests and answers them (viewer files, /metrics, /healthz, POST /api/... control), or
-// hands its socket to a WsSession after an Upgrade on /ws. Serve thread only.
+// hands its socket to a WsSession after an Upgrade on /ws. Its lane's thread only.
 #pragma once
 
 #include <boost/beast/core.hpp>
@@ -18,8 +18,8 @@ namespace mocap::serve {
 
 class HttpServer::HttpSession : public Session, public std::enable_shared_from_this<HttpSession> {
 public:
-    /// The session's id is its slot's.
-    HttpSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot);
+    /// The session's id is its slot's; it lives on lane `lane` of the server's ServeThread.
+    HttpSession(asio::ip::tcp::socket socket, HttpServer& server, std::size_t lane, ServeThread::SlotPtr slot);
 
     void start() { do_read(); }
     void close() override;
@@ -41,6 +41,7 @@ private:
 
     boost::beast::tcp_stream stream_;
     HttpServer& server_;
+    std::size_t lane_;
     ServeThread::SlotPtr slot_;  // progress: every whole request read
     std::uint64_t id_;
     boost::beast::flat_buffer buffer_;

@@ -41,13 +41,18 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
       description_(std::move(description)),
       handlers_(std::move(handlers)),
       serve_({"http", "mocap-http", "viewer, /metrics and /healthz"},
-             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes},
+             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes, config_.threads},
              {counters_.connections_accepted, counters_.connections_rejected_full,
               counters_.connections_refused_per_address, counters_.connections_evicted, counters_.accept_errors},
-             {[this](asio::ip::tcp::socket s, ServeThread::SlotPtr slot) { admit(std::move(s), std::move(slot)); },
-              [this](std::uint64_t id) { sessions_.close(id); }, [this] { sessions_.close_all(); }}),
-      sessions_(counters_.connections_closed),
-      backlog_(serve_.io(), config_.publish_backlog_frames, [this](const SubjectText& frame) { deliver(frame); }) {
+             {[this](std::size_t lane, asio::ip::tcp::socket s, ServeThread::SlotPtr slot) {
+                  admit(lane, std::move(s), std::move(slot));
+              },
+              [this](std::size_t lane, std::uint64_t id) { sessions_[lane]->close(id); },
+              [this](std::size_t lane) { sessions_[lane]->close_all(); }}),
+      sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections_closed)),
+      ws_sessions_(serve_.lanes()),
+      backlog_(serve_.ios(), config_.publish_backlog_frames,
+               [this](std::size_t lane, const SubjectText& frame) { deliver(lane, frame); }) {
     register_metrics(own_metrics_);
     if (!config_.control_attempts) config_.control_attempts = std::make_shared<ControlAttemptLimiter>();
     if (!config_.wall_clock_us) {
@@ -71,24 +76,22 @@ void HttpServer::stop() {
     serve_.stop();
 }
 
-void HttpServer::admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot) {
+void HttpServer::admit(std::size_t lane, asio::ip::tcp::socket socket, ServeThread::SlotPtr slot) {
     const std::uint64_t id = slot->id();
-    auto s = std::make_shared<HttpSession>(std::move(socket), *this, std::move(slot));
-    sessions_.put(id, s);
+    auto s = std::make_shared<HttpSession>(std::move(socket), *this, lane, std::move(slot));
+    sessions_[lane]->put(id, s);
     s->start();
 }
 
-void HttpServer::on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& session) {
+void HttpServer::on_ws_open(std::size_t lane, std::uint64_t id, const std::shared_ptr<WsSession>& session) {
     counters_.ws_connections.add();
-    ws_sessions_[id] = session;
-    ws_clients_.store(ws_sessions_.size());
+    if (ws_sessions_[lane].insert_or_assign(id, session).second) ws_clients_.fetch_add(1);
 }
 
-void HttpServer::on_closed(std::uint64_t id) {
-    sessions_.remove(id);
+void HttpServer::on_closed(std::size_t lane, std::uint64_t id) {
+    sessions_[lane]->remove(id);
     serve_.release(id);
-    ws_sessions_.erase(id);
-    ws_clients_.store(ws_sessions_.size());
+    if (ws_sessions_[lane].erase(id) != 0) ws_clients_.fetch_sub(1);
 }
 
 std::size_t HttpServer::active_subjects(std::int64_t window_us) const {
@@ -108,7 +111,7 @@ std::string HttpServer::hello_json(std::uint32_t subject) const {
 void HttpServer::register_metrics(MetricsRegistry& registry) const {
     registry.add(counters_.group);
     registry.add_gauge("http_clients", "HTTP and WebSocket connections open now",
-                       [this] { return static_cast<double>(sessions_.open()); });
+                       [this] { return static_cast<double>(client_count()); });
     registry.add_gauge("http_ws_clients", "Viewer WebSocket connections open now",
                        [this] { return static_cast<double>(ws_clients_.load()); });
     registry.add_gauge("subjects_active", "Subjects that delivered a frame in the last 2 s",
@@ -137,13 +140,15 @@ void HttpServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose
     auto json = std::make_shared<std::string>(encode_frame_json(frame, pose, now));
     counters_.ws_frames_encoded.add();
 
-    if (!backlog_.push({frame.subject_id, std::move(json)})) {
-        counters_.ws_backlog_dropped.add();
+    // One encoding, shared by every lane and browser.
+    if (const std::size_t refused = backlog_.push({frame.subject_id, std::move(json)}); refused > 0) {
+        counters_.ws_backlog_dropped.add(refused);
     }
 }
 
-void HttpServer::deliver(const SubjectText& frame) {
-    for (auto it = ws_sessions_.begin(); it != ws_sessions_.end();) {
+void HttpServer::deliver(std::size_t lane, const SubjectText& frame) {
+    WsTable& ws_sessions = ws_sessions_[lane];
+    for (auto it = ws_sessions.begin(); it != ws_sessions.end();) {
         auto s = (it++)->second;  // offer() may close and erase the session
         s->offer(frame);
     }

@@ -31,11 +31,14 @@
 // browser sees gaps, never stalls the pipeline; the hello is never queued with frames.
 // One write in flight per connection. Frames are encoded once, shared by every client.
 //
-// Threads: one ServeThread (own io_context) runs the acceptor, every HTTP and WebSocket
-// session, and the metrics/health/control callbacks. publish() may be called from any
-// thread (the assembler): it encodes only while a WebSocket is open and hands the frame
-// over through a PublishBacklog of publish_backlog_frames (beyond: dropped, counted). Ownership: the daemon owns the
-// server; stop() or the destructor closes all.
+// Threads: a ServeThread with `threads` lanes (each its own io_context and thread) runs
+// the acceptor (lane 0); HTTP connections are spread round-robin over the lanes and a
+// WebSocket stays on the lane of the connection it upgraded; each lane keeps its own
+// session tables and runs its sessions' metrics/health/control callbacks. publish() may
+// be called from any thread (the assembler): it encodes only while a WebSocket is open and
+// hands the same shared bytes to every lane through a PublishBacklog of
+// publish_backlog_frames per lane (beyond: dropped, counted once per lane that refused).
+// Ownership: the daemon owns the server; stop() or the destructor closes all.
 #pragma once
 
 #include <atomic>
@@ -83,6 +86,7 @@ struct HttpServerConfig {
     std::shared_ptr<ControlAttemptLimiter> control_attempts;
     /// Wall clock (CLOCK_REALTIME µs) for encoded_us; empty = system_clock.
     std::function<std::int64_t()> wall_clock_us;
+    std::size_t threads = 1;  ///< serve threads ([http] threads); connections spread over them
 };
 
 struct HttpSegment {
@@ -156,7 +160,9 @@ public:
     void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
     [[nodiscard]] std::uint16_t port() const { return serve_.port(); }
-    [[nodiscard]] std::size_t client_count() const { return sessions_.open(); }
+    [[nodiscard]] std::size_t client_count() const { return open_sessions(sessions_); }
+    /// HTTP and WebSocket connections served by lane (serve thread) `lane` now; any thread.
+    [[nodiscard]] std::size_t lane_client_count(std::size_t lane) const { return sessions_.at(lane)->open(); }
     [[nodiscard]] std::size_t ws_client_count() const { return ws_clients_.load(); }
     [[nodiscard]] const HttpServerCounters& counters() const { return counters_; }
     /// Set-up: counter group "http" and gauges "http_clients", "http_ws_clients" and
@@ -174,10 +180,11 @@ public:
 private:
     friend class HttpSession;
     friend class WsSession;
-    void admit(asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
-    void deliver(const SubjectText& frame);
-    void on_closed(std::uint64_t id);
-    void on_ws_open(std::uint64_t id, const std::shared_ptr<WsSession>& session);
+    using WsTable = std::unordered_map<std::uint64_t, std::shared_ptr<WsSession>>;
+    void admit(std::size_t lane, asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
+    void deliver(std::size_t lane, const SubjectText& frame);
+    void on_closed(std::size_t lane, std::uint64_t id);
+    void on_ws_open(std::size_t lane, std::uint64_t id, const std::shared_ptr<WsSession>& session);
     std::string hello_json(std::uint32_t subject) const;
     std::string metrics_text();
     std::int64_t now_us() const { return config_.wall_clock_us(); }
@@ -189,9 +196,10 @@ private:
     MetricsRegistry own_metrics_;  ///< this server's alone: /metrics without a metrics handler
     LogLimiter log_;               ///< one refusal line per 10 s, not one per request
 
-    ServeThread serve_;               // before the sessions and the backlog, which use its io_context
-    SessionTable<Session> sessions_;  // HTTP and WebSocket; serve thread (open(): any thread)
-    std::unordered_map<std::uint64_t, std::shared_ptr<WsSession>> ws_sessions_;  // serve thread
+    ServeThread serve_;  // before the sessions and the backlog, which use its io_contexts
+    /// HTTP and WebSocket, one table per lane, used on that lane's thread (open(): any thread).
+    std::vector<std::unique_ptr<SessionTable<Session>>> sessions_;
+    std::vector<WsTable> ws_sessions_;  // one per lane, used on that lane's thread
     PublishBacklog backlog_;
 
     mutable std::mutex subjects_mutex_;

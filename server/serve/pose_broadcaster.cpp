@@ -9,19 +9,10 @@
 
 namespace mocap::serve {
 
-struct PoseBroadcaster::Lane {
-    asio::io_context* io = nullptr;
-    std::mutex mutex;                   // guards pending, wake_posted
-    std::vector<EncodedFrame> pending;  // filled by publish()
-    bool wake_posted = false;
-    // Lane thread only:
-    std::vector<EncodedFrame> draining;  // swapped with pending, so neither reallocates
-    SubscriptionIndex<ClientSession> index;
-};
-
 PoseBroadcaster::PoseBroadcaster(const std::vector<asio::io_context*>& lanes, std::size_t backlog_frames,
                                  std::function<std::int64_t()> wall_clock_us, ServeCounters& counters)
-    : backlog_frames_(std::max<std::size_t>(backlog_frames, 1)),
+    : indexes_(lanes.size()),
+      backlog_(lanes, backlog_frames, [this](std::size_t lane, const EncodedFrame& frame) { drain(lane, frame); }),
       wall_clock_us_(std::move(wall_clock_us)),
       counters_(counters) {
     if (!wall_clock_us_) {
@@ -30,13 +21,6 @@ PoseBroadcaster::PoseBroadcaster(const std::vector<asio::io_context*>& lanes, st
                        std::chrono::system_clock::now().time_since_epoch())
                 .count();
         };
-    }
-    for (asio::io_context* io : lanes) {
-        auto lane = std::make_unique<Lane>();
-        lane->io = io;
-        lane->pending.reserve(backlog_frames_);
-        lane->draining.reserve(backlog_frames_);
-        lanes_.push_back(std::move(lane));
     }
 }
 
@@ -65,47 +49,26 @@ void PoseBroadcaster::publish(const SubjectFrame& frame, const skeleton::Skeleto
     }
     if (!any) return;  // nobody subscribed: nothing to send
 
-    for (auto& lane_ptr : lanes_) {
-        Lane& lane = *lane_ptr;
-        bool post = false;
-        {
-            std::lock_guard lock(lane.mutex);
-            if (lane.pending.size() >= backlog_frames_) {
-                // The lane's thread is not keeping up at all (not a slow client: those
-                // drop in their own queues). Dropping here keeps publish() bounded.
-                counters_.backlog_dropped.add();
-                continue;
-            }
-            lane.pending.push_back(encoded);
-            if (!lane.wake_posted) post = lane.wake_posted = true;
-        }
-        if (post) asio::post(*lane.io, [this, &lane] { drain(lane); });
-    }
+    // A lane that refuses is not keeping up at all (not a slow client: those drop in their
+    // own queues). Dropping there keeps publish() bounded.
+    if (const std::size_t refused = backlog_.push(encoded); refused > 0) counters_.backlog_dropped.add(refused);
 }
 
-void PoseBroadcaster::drain(Lane& lane) {
-    {
-        std::lock_guard lock(lane.mutex);
-        lane.draining.swap(lane.pending);
-        lane.wake_posted = false;
-    }
+void PoseBroadcaster::drain(std::size_t lane, const EncodedFrame& frame) {
     // deliver() only queues and starts asynchronous writes; it never closes a session
     // synchronously, so the index cannot change while it is walked.
-    for (const EncodedFrame& frame : lane.draining) {
-        lane.index.for_each(frame.subject_id, [&frame](ClientSession& session) { session.deliver(frame); });
-    }
-    lane.draining.clear();
+    indexes_[lane].for_each(frame.subject_id, [&frame](ClientSession& session) { session.deliver(frame); });
 }
 
 void PoseBroadcaster::subscribe(std::size_t lane_index, const std::shared_ptr<ClientSession>& session,
                                 const std::vector<std::uint32_t>& subjects, std::uint32_t fields,
                                 std::optional<std::uint32_t> previous_fields) {
-    Lane& lane = *lanes_.at(lane_index);
+    SubscriptionIndex<ClientSession>& index = indexes_.at(lane_index);
     // The new selection is counted before the old one is released, so publish() never sees
     // a moment in which neither is in use and skips an encoding this client needs.
     field_users_[normalize_fields(fields)].fetch_add(1, std::memory_order_relaxed);
     if (previous_fields) field_users_[normalize_fields(*previous_fields)].fetch_sub(1, std::memory_order_relaxed);
-    const int all_change = lane.index.assign(
+    const int all_change = index.assign(
         session, subjects.empty(), subjects,
         [this](std::uint32_t s) { subject_interest_[s % kInterestSlots].fetch_add(1, std::memory_order_relaxed); },
         [this](std::uint32_t s) { subject_interest_[s % kInterestSlots].fetch_sub(1, std::memory_order_relaxed); });
@@ -113,9 +76,8 @@ void PoseBroadcaster::subscribe(std::size_t lane_index, const std::shared_ptr<Cl
 }
 
 void PoseBroadcaster::unsubscribe(std::size_t lane_index, const ClientSession* session, std::uint32_t fields) {
-    Lane& lane = *lanes_.at(lane_index);
     field_users_[normalize_fields(fields)].fetch_sub(1, std::memory_order_relaxed);
-    const int all_change = lane.index.remove(session, [this](std::uint32_t s) {
+    const int all_change = indexes_.at(lane_index).remove(session, [this](std::uint32_t s) {
         subject_interest_[s % kInterestSlots].fetch_sub(1, std::memory_order_relaxed);
     });
     count_all_subject_users(all_change);

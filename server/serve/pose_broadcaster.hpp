@@ -4,11 +4,11 @@
 // per field selection that some client uses (nothing when nobody watches the subject),
 // then hands
 // the shared buffers to every serve thread ("lane") through a small mutex-guarded
-// backlog and one wake-up post. On its own thread, each lane walks its subscription
-// index (subscription_index.hpp) and gives the frame to each subscribed session, which
-// queues it (bounded, drop-oldest) and writes it when its previous write has completed.
-// publish() never waits for a client: its cost is the encoding plus one short lock per
-// lane. A (re)subscription costs what that client changes, never what others subscribed.
+// backlog and one wake-up post (publish_backlog.hpp, shared with live BVH and HTTP). On its own thread, each lane walks
+// its subscription index (subscription_index.hpp) and gives the frame to each subscribed session, which queues it
+// (bounded, drop-oldest) and writes it when its previous write has completed. publish() never waits for a client: its
+// cost is the encoding plus one short lock per lane. A (re)subscription costs what that client changes, never what
+// others subscribed.
 //
 // Thread-safety: publish() and the field-user counts from any thread; subscribe(),
 // unsubscribe() and drain only on the owning lane's io_context thread.
@@ -29,7 +29,9 @@
 #include "core/asio.hpp"
 #include "core/frame.hpp"
 #include "serve/pose_encoder.hpp"
+#include "serve/publish_backlog.hpp"
 #include "serve/serve_counters.hpp"
+#include "serve/subscription_index.hpp"
 #include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
@@ -70,15 +72,14 @@ public:
     /// Lane thread only; removes `session` (subscribed with `fields`) from the index.
     void unsubscribe(std::size_t lane, const ClientSession* session, std::uint32_t fields);
 
-    [[nodiscard]] std::size_t lane_count() const { return lanes_.size(); }
+    [[nodiscard]] std::size_t lane_count() const { return indexes_.size(); }
 
 private:
-    struct Lane;
-    void drain(Lane& lane);
+    void drain(std::size_t lane, const EncodedFrame& frame);
     void count_all_subject_users(int change);
 
-    std::vector<std::unique_ptr<Lane>> lanes_;
-    std::size_t backlog_frames_;
+    std::vector<SubscriptionIndex<ClientSession>> indexes_;  // one per lane, used on its thread
+    LaneBacklog<EncodedFrame> backlog_;
     std::function<std::int64_t()> wall_clock_us_;
     ServeCounters& counters_;
     std::atomic<bool> stopped_{false};

@@ -1,10 +1,12 @@
-// serve_thread.cpp — acceptor with connection slots and the thread that runs it.
+// serve_thread.cpp — acceptor with connection slots and the lanes (threads) that serve.
 #include "serve/serve_thread.hpp"
 
 #include <pthread.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
+#include <string>
 #include <utility>
 
 #include "core/peer_address.hpp"
@@ -16,6 +18,14 @@ namespace {
 // Refusals and evictions are logged at most once per interval (a connect flood would
 // otherwise flood the log); the counters have every one.
 constexpr std::chrono::seconds kRefusalLogInterval{10};
+
+template <class Lane>
+std::vector<std::unique_ptr<Lane>> make_lanes(std::size_t threads) {
+    std::vector<std::unique_ptr<Lane>> lanes;
+    for (std::size_t i = 0; i < std::max<std::size_t>(threads, 1); ++i)
+        lanes.push_back(std::make_unique<Lane>());
+    return lanes;
+}
 }  // namespace
 
 ServeThread::ServeThread(Names names, const Options& options, const Counters& counters, Hooks hooks)
@@ -24,7 +34,8 @@ ServeThread::ServeThread(Names names, const Options& options, const Counters& co
       counters_(counters),
       hooks_(std::move(hooks)),
       slots_(options_.slots),
-      backoff_(io_.get_executor(), names_.service, counters_.accept_errors) {}
+      lanes_(make_lanes<Lane>(options_.threads)),
+      backoff_(lanes_[0]->io.get_executor(), names_.service, counters_.accept_errors) {}
 
 ServeThread::~ServeThread() {
     stop();
@@ -36,7 +47,7 @@ std::int64_t ServeThread::now_us() {
 }
 
 bool ServeThread::start(const std::string& bind_address, std::uint16_t port, std::string& error) {
-    acceptor_ = listen_tcp(io_, bind_address, port, error);
+    acceptor_ = listen_tcp(lanes_[0]->io, bind_address, port, error);
     if (!acceptor_) {
         error = names_.service + ": " + error;
         return false;
@@ -44,34 +55,53 @@ bool ServeThread::start(const std::string& bind_address, std::uint16_t port, std
     bound_port_ = acceptor_->local_endpoint().port();
     running_ = true;
     do_accept();
-    thread_ = std::thread([this] {
-        pthread_setname_np(pthread_self(), names_.thread_name.c_str());
-        auto guard = asio::make_work_guard(io_);
-        io_.run();
-    });
+    for (std::size_t i = 0; i < lanes_.size(); ++i) {
+        Lane& lane = *lanes_[i];
+        // One lane keeps the plain name; several get "-<lane>" (at most 15 characters in all).
+        std::string name = lanes_.size() == 1 ? names_.thread_name : names_.thread_name + "-" + std::to_string(i);
+        lane.thread = std::thread([&lane, name = std::move(name)] {
+            pthread_setname_np(pthread_self(), name.substr(0, 15).c_str());
+            auto guard = asio::make_work_guard(lane.io);
+            lane.io.run();
+        });
+    }
     spdlog::info("{}: {} on {}:{}", names_.service, names_.serves, bind_address, bound_port_.load());
     return true;
 }
 
 void ServeThread::stop() {
-    if (!running_.exchange(false)) {
-        if (thread_.joinable()) thread_.join();
-        return;
+    if (running_.exchange(false)) {
+        for (std::size_t i = 0; i < lanes_.size(); ++i) {
+            Lane& lane = *lanes_[i];
+            asio::post(lane.io, [this, &lane, i] {
+                if (i == 0) {
+                    boost::system::error_code ignored;
+                    acceptor_->close(ignored);
+                    backoff_.cancel();
+                }
+                hooks_.close_all(i);
+                lane.io.stop();  // remaining handlers are destroyed with the io_context
+            });
+        }
     }
-    asio::post(io_, [this] {
-        boost::system::error_code ignored;
-        acceptor_->close(ignored);
-        backoff_.cancel();
-        hooks_.close_all();
-        io_.stop();
-    });
-    if (thread_.joinable()) thread_.join();
+    for (auto& lane : lanes_) {
+        if (lane->thread.joinable()) lane->thread.join();
+    }
 }
 
 void ServeThread::do_accept() {
-    acceptor_->async_accept([this](const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
-        on_accept(ec, std::move(socket));
-    });
+    // The accepted socket belongs to the lane whose turn it is; the handler runs on lane 0.
+    acceptor_->async_accept(lanes_[next_lane_]->io,
+                            [this](const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
+                                on_accept(ec, std::move(socket));
+                            });
+}
+
+void ServeThread::evict(std::uint64_t id) {
+    // The victim may be on any lane; only its own lane may touch it.
+    hooks_.evict(0, id);
+    for (std::size_t i = 1; i < lanes_.size(); ++i)
+        asio::post(lanes_[i]->io, [this, i, id] { hooks_.evict(i, id); });
 }
 
 void ServeThread::log_refusal(const char* what, const std::string& ip) {
@@ -90,6 +120,8 @@ void ServeThread::log_refusal(const char* what, const std::string& ip) {
 void ServeThread::on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
     if (ec == asio::error::operation_aborted || !running_.load()) return;
     if (ec) return backoff_.on_error(ec, [this] { do_accept(); });
+    const std::size_t lane = next_lane_;
+    next_lane_ = (next_lane_ + 1) % lanes_.size();
     boost::system::error_code ignored;
     const PeerAddress peer = peer_address(socket);
     ConnectionSlots::Admission a = slots_.admit(peer.ip, peer.loopback, now_us());
@@ -107,7 +139,7 @@ void ServeThread::on_accept(const boost::system::error_code& ec, asio::ip::tcp::
         case ConnectionSlots::Verdict::kAdmittedEvicting:
             counters_.evicted.add();
             log_refusal("admitted in place of a connection without progress, which is closed", peer.ip);
-            hooks_.evict(a.evicted);
+            evict(a.evicted);
             [[fallthrough]];
         case ConnectionSlots::Verdict::kAdmitted:
             counters_.accepted.add();
@@ -116,7 +148,13 @@ void ServeThread::on_accept(const boost::system::error_code& ec, asio::ip::tcp::
                 socket.set_option(asio::socket_base::send_buffer_size(static_cast<int>(options_.send_buffer_bytes)),
                                   ignored);
             }
-            hooks_.admit(std::move(socket), std::move(a.slot));
+            if (lane == 0) {
+                hooks_.admit(0, std::move(socket), std::move(a.slot));
+            } else {
+                asio::post(lanes_[lane]->io, [this, lane, s = std::move(socket), slot = std::move(a.slot)]() mutable {
+                    hooks_.admit(lane, std::move(s), std::move(slot));
+                });
+            }
             break;
     }
     do_accept();

@@ -1,7 +1,7 @@
 // session_table.hpp — the open sessions of one serve thread, by id (the id of the
-// connection slot, serve_thread.hpp): what the live BVH
-// server and the HTTP server keep for their ServeThread (the pose server has one table
-// per lane in pose_server.cpp).
+// connection slot, serve_thread.hpp): what the live BVH server and the HTTP server keep
+// for each lane of their ServeThread (the pose server has one table per lane in
+// pose_server.cpp).
 //
 // `Session` must have close(), which ends (at once or later) in remove(id). Each
 // remove() of a listed session counts one closed connection in the counter given at
@@ -73,5 +73,23 @@ private:
     Counter& closed_counter_;
     std::atomic<std::size_t> open_{0};
 };
+
+/// One table per lane of a ServeThread, each counting closes in `closed_counter`.
+template <class Session>
+std::vector<std::unique_ptr<SessionTable<Session>>> make_session_tables(std::size_t lanes, Counter& closed_counter) {
+    std::vector<std::unique_ptr<SessionTable<Session>>> tables;
+    for (std::size_t i = 0; i < lanes; ++i)
+        tables.push_back(std::make_unique<SessionTable<Session>>(closed_counter));
+    return tables;
+}
+
+/// Sessions open on all lanes now; any thread.
+template <class Session>
+std::size_t open_sessions(const std::vector<std::unique_ptr<SessionTable<Session>>>& tables) {
+    std::size_t n = 0;
+    for (const auto& table : tables)
+        n += table->open();
+    return n;
+}
 
 }  // namespace mocap::serve

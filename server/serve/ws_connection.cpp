@@ -16,10 +16,11 @@ namespace {
 constexpr std::size_t kMaxWsMessageBytes = std::size_t{4} * 1024;
 }  // namespace
 
-HttpServer::WsSession::WsSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot,
-                                 std::uint32_t subject)
+HttpServer::WsSession::WsSession(asio::ip::tcp::socket socket, HttpServer& server, std::size_t lane,
+                                 ServeThread::SlotPtr slot, std::uint32_t subject)
     : ws_(std::move(socket)),
       server_(server),
+      lane_(lane),
       slot_(std::move(slot)),
       id_(slot_->id()),
       subject_(subject),
@@ -50,13 +51,13 @@ void HttpServer::WsSession::close() {
     auto& socket = beast::get_lowest_layer(ws_).socket();
     socket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
     socket.close(ignored);
-    server_.on_closed(id_);
+    server_.on_closed(lane_, id_);
 }
 
 void HttpServer::WsSession::on_accept(const beast::error_code& ec) {
     if (ec) return fail(ec, "accept");
     open_ = true;
-    server_.on_ws_open(id_, shared_from_this());
+    server_.on_ws_open(lane_, id_, shared_from_this());
     replies_.push_back(std::make_shared<const std::string>(server_.hello_json(subject_)));
     do_write();
     do_read();

@@ -1,6 +1,6 @@
 // ws_connection.hpp — one WebSocket viewer of the web endpoint (http_server.hpp has the
 // messages and the lag policy). An HttpSession hands its socket over after an Upgrade on
-// /ws; the server offers every published frame. Serve thread only: no locks.
+// /ws; the server offers every published frame. Its lane's thread only: no locks.
 #pragma once
 
 #include <boost/beast/core.hpp>
@@ -25,8 +25,9 @@ public:
 
 class HttpServer::WsSession : public Session, public std::enable_shared_from_this<WsSession> {
 public:
-    /// Takes over the HTTP connection's slot (and so its id).
-    WsSession(asio::ip::tcp::socket socket, HttpServer& server, ServeThread::SlotPtr slot, std::uint32_t subject);
+    /// Takes over the HTTP connection's slot (and so its id) and lane.
+    WsSession(asio::ip::tcp::socket socket, HttpServer& server, std::size_t lane, ServeThread::SlotPtr slot,
+              std::uint32_t subject);
 
     /// Completes the handshake of `request` (the Upgrade), then sends the hello.
     void run(boost::beast::http::request<boost::beast::http::string_body> request);
@@ -44,6 +45,7 @@ private:
 
     boost::beast::websocket::stream<boost::beast::tcp_stream> ws_;
     HttpServer& server_;
+    std::size_t lane_;
     ServeThread::SlotPtr slot_;  // progress: frames the kernel took for this browser
     std::uint64_t id_;
     std::uint32_t subject_;

@@ -19,6 +19,8 @@ TEST(Config, EmbeddedDefaultIsValidAndMatchesStructDefaults) {
     EXPECT_EQ(c->pose_listen.port, 7001);
     EXPECT_TRUE(c->control_loopback_only);
     EXPECT_EQ(c->serve_threads, d.serve_threads);
+    EXPECT_EQ(c->bvh_threads, d.bvh_threads);
+    EXPECT_EQ(c->http_threads, d.http_threads);
     EXPECT_EQ(c->calibration_dir, d.calibration_dir);
     EXPECT_EQ(c->heading_align, d.heading_align);
     EXPECT_EQ(c->log_level, d.log_level);
@@ -387,6 +389,17 @@ TEST_F(ConfigCheck, TwoListenersOnOnePortAreRefused) {
                       "[outputs]\nbvh_listen = \"127.0.0.1:7009\"\n[http]\nlisten = \"127.0.0.1:7009\"\n"
                       "enabled = false\n"),
               "");
+}
+
+TEST_F(ConfigCheck, MoreServeThreadsThanSlotsAreRefused) {
+    EXPECT_REFUSED("[outputs]\nbvh_max_clients = 2\nbvh_threads = 3\n",
+                   "outputs.bvh_threads: 3 threads for 2 connection slots (outputs.bvh_max_clients)");
+    EXPECT_REFUSED("[http]\nmax_clients = 1\nthreads = 2\n",
+                   "http.threads: 2 threads for 1 connection slots (http.max_clients)");
+    EXPECT_REFUSED("[http]\nthreads = 65\n", "http.threads:");
+    // A port that is off serves nobody: its thread count does not matter.
+    EXPECT_EQ(refusal("[outputs]\nbvh_live = false\nbvh_max_clients = 2\nbvh_threads = 3\n"), "");
+    EXPECT_EQ(refusal("[outputs]\nbvh_threads = 4\n[http]\nthreads = 4\n"), "");
 }
 
 TEST_F(ConfigCheck, RawRecordIntoAMissingDirectoryIsRefused) {

@@ -9,6 +9,7 @@
 
 #include <chrono>
 #include <thread>
+#include <vector>
 
 #include "bvh_outputs_fixture.hpp"
 #include "skeleton/bvh.hpp"
@@ -74,11 +75,13 @@ std::vector<std::string> motion_lines(const std::string& text, std::size_t skip)
     return out;
 }
 
-std::unique_ptr<BvhServer> started(const BvhFrameEncoder& encoder, std::size_t queue_frames = 64) {
+std::unique_ptr<BvhServer> started(const BvhFrameEncoder& encoder, std::size_t queue_frames = 64,
+                                   std::size_t threads = 1) {
     BvhServerConfig c;
     c.bind_address = "127.0.0.1";
     c.port = 0;
     c.queue_frames = queue_frames;
+    c.threads = threads;
     auto server = std::make_unique<BvhServer>(c, encoder);
     std::string err;
     EXPECT_TRUE(server->start(err)) << err;
@@ -208,6 +211,54 @@ TEST(BvhServer, LaggingClientLosesOldestLinesNotThePipeline) {
         std::this_thread::sleep_for(5ms);
     }
     EXPECT_GT(server.counters().frames_dropped.value() + server.counters().backlog_dropped.value(), 0u);
+}
+
+TEST(BvhServer, ClientsOnSeveralServeThreadsEachGetEveryLineInOrder) {
+    const auto encoder = test::default_encoder();
+    constexpr std::size_t kThreads = 3;
+    constexpr std::size_t kClients = 6;
+    constexpr std::uint64_t kFrames = 200;
+    // Queues hold every line: a client that reads late must still see them all.
+    auto owned = started(encoder, kFrames + 16, kThreads);
+    BvhServer& server = *owned;
+    std::vector<std::unique_ptr<Conn>> conns;
+    for (std::size_t i = 0; i < kClients; ++i) {
+        conns.push_back(std::make_unique<Conn>(server.port()));
+        ASSERT_TRUE(conns.back()->ok());
+    }
+    ASSERT_TRUE(wait_clients(server, kClients));
+    for (std::size_t lane = 0; lane < kThreads; ++lane)
+        EXPECT_EQ(server.lane_client_count(lane), kClients / kThreads) << "round-robin over the lanes";
+
+    const auto segments = static_cast<std::uint16_t>(encoder.model().size());
+    std::vector<std::string> expected;
+    SubjectFrame f;
+    skeleton::SkeletonPose p;
+    for (std::uint64_t k = 0; k < kFrames; ++k) {
+        test::make_pose(1, k, segments, f, p);
+        server.publish(f, p);
+        std::string line;
+        encoder.append_motion_line(p, line);
+        line.pop_back();  // getline strips the '\n'
+        expected.push_back(std::move(line));
+    }
+    const std::size_t greeting = greeting_line_count(encoder);
+    for (auto& conn : conns) {
+        const auto lines = motion_lines(conn->read_until_lines(greeting, kFrames), greeting);
+        EXPECT_EQ(lines, expected) << "every line, in order, no gaps";
+    }
+    // Encoded once per frame, however many threads and clients.
+    EXPECT_EQ(server.counters().frames_published.value(), kFrames);
+    EXPECT_TRUE(wait_until([&] { return server.counters().frames_sent.value() == kFrames * kClients; }));
+    EXPECT_EQ(server.counters().frames_dropped.value(), 0u);
+    EXPECT_EQ(server.counters().backlog_dropped.value(), 0u);
+
+    // stop() with every client connected: each lane closes its own, the threads join.
+    server.stop();
+    EXPECT_EQ(server.client_count(), 0u);
+    EXPECT_EQ(server.counters().connections_closed.value(), kClients);
+    for (auto& conn : conns)
+        EXPECT_EQ(conn->read_until_lines(0, 1), "") << "closed: EOF";
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include <thread>
+#include <vector>
 
 #include "http_test_client.hpp"
 #include "wait_until.hpp"
@@ -29,11 +30,12 @@ struct Fixture {
     MetricsRegistry registry;
     std::unique_ptr<HttpServer> server;
 
-    explicit Fixture(std::string token, bool loopback_only = true, std::size_t queue = 4) {
+    explicit Fixture(std::string token, bool loopback_only = true, std::size_t queue = 4, std::size_t threads = 1) {
         HttpServerConfig c;
         c.bind_address = "127.0.0.1";
         c.port = 0;
         c.ws_queue_frames = queue;
+        c.threads = threads;
         c.control_token = std::move(token);
         c.control_loopback_only = loopback_only;
         HttpDescription d;
@@ -202,6 +204,46 @@ TEST(HttpServer, StalledBrowserDropsOldestAndOthersKeepUp) {
     EXPECT_TRUE(wait_until([&] { return f.server->counters().ws_frames_dropped.value() > 0; }))
         << "the stalled browser's queue must drop its oldest frames";
     EXPECT_EQ(f.server->counters().ws_backlog_dropped.value(), 0u);
+}
+
+TEST(HttpServer, WebSocketsOnSeveralServeThreadsEachGetEveryFrameInOrder) {
+    constexpr std::size_t kThreads = 2;
+    constexpr std::size_t kClients = 4;
+    constexpr int kFrames = 200;
+    // Queues hold every frame: a browser that reads late must still see them all.
+    Fixture f("", true, kFrames + 16, kThreads);
+    std::vector<std::unique_ptr<WsTestClient>> clients;
+    for (std::size_t i = 0; i < kClients; ++i) {
+        clients.push_back(std::make_unique<WsTestClient>());
+        ASSERT_TRUE(clients.back()->connect(f.port(), "/ws?subject=1"));
+        ASSERT_TRUE(clients.back()->read());  // hello
+    }
+    ASSERT_TRUE(wait_until([&] { return f.server->ws_client_count() == kClients; }));
+    for (std::size_t lane = 0; lane < kThreads; ++lane)
+        EXPECT_EQ(f.server->lane_client_count(lane), kClients / kThreads) << "round-robin over the lanes";
+    for (int i = 0; i < kFrames; ++i)
+        f.server->publish(frame(1, static_cast<std::uint64_t>(i)), pose(0.01 * i));
+    for (auto& client : clients) {
+        for (int i = 0; i < kFrames; ++i) {
+            const auto m = client->read(5000ms);
+            ASSERT_TRUE(m) << "frame " << i;
+            ASSERT_NE(m->find("\"type\":\"frame\",\"subject\":1,\"sync\":" + std::to_string(i) + ","),
+                      std::string::npos)
+                << "every frame, in order, no gaps: " << *m;
+        }
+    }
+    // Encoded once per frame, however many threads and browsers.
+    EXPECT_EQ(f.server->counters().ws_frames_encoded.value(), static_cast<std::uint64_t>(kFrames));
+    EXPECT_TRUE(wait_until([&] { return f.server->counters().ws_frames_sent.value() == kFrames * kClients; }));
+    EXPECT_EQ(f.server->counters().ws_frames_dropped.value(), 0u);
+    EXPECT_EQ(f.server->counters().ws_backlog_dropped.value(), 0u);
+
+    // stop() with every browser connected: each lane closes its own, the threads join.
+    f.server->stop();
+    EXPECT_EQ(f.server->client_count(), 0u);
+    EXPECT_EQ(f.server->ws_client_count(), 0u);
+    for (auto& client : clients)
+        EXPECT_FALSE(client->read(5000ms)) << "closed";
 }
 
 }  // namespace
