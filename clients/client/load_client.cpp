@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "load_stream_client.hpp"
 #include "load_tally.hpp"
 #include "pose_client.hpp"
 
@@ -26,14 +27,6 @@ struct ClientState {
     ClientTally tally;
     bool open = true;
 };
-
-void raise_fd_limit(std::size_t needed) {
-    rlimit lim{};
-    if (getrlimit(RLIMIT_NOFILE, &lim) != 0) return;
-    if (lim.rlim_cur >= needed + 64) return;
-    lim.rlim_cur = lim.rlim_max;
-    setrlimit(RLIMIT_NOFILE, &lim);
-}
 
 /// A stalled client should stall soon: a small receive buffer fills in a fraction of a
 /// second instead of holding megabytes of frames for the server.
@@ -83,7 +76,16 @@ void run_churn(const LoadOptions& o, const std::atomic<bool>& stop, std::uint64_
 
 }  // namespace
 
+void raise_fd_limit(std::size_t needed) {
+    rlimit lim{};
+    if (getrlimit(RLIMIT_NOFILE, &lim) != 0) return;
+    if (lim.rlim_cur >= needed + 64) return;
+    lim.rlim_cur = lim.rlim_max;
+    setrlimit(RLIMIT_NOFILE, &lim);
+}
+
 LoadResult run_load(const LoadOptions& options) {
+    if (options.protocol != "pose") return run_stream_load(options);
     LoadResult result;
     result.clients = options.clients;
     raise_fd_limit(options.clients + options.stalled);

@@ -20,6 +20,9 @@ namespace mocap::client {
 struct LoadOptions {
     std::string host = "127.0.0.1";
     std::uint16_t port = 7001;
+    /// "pose" (the protobuf stream), "bvh" (live BVH text) or "ws" (the viewer WebSocket);
+    /// the last two: load_stream_client.hpp.
+    std::string protocol = "pose";
     std::size_t clients = 10;
     std::chrono::milliseconds duration{5000};
     std::vector<std::uint32_t> subject_ids;  ///< empty = all
@@ -58,6 +61,9 @@ struct LoadResult {
 };
 
 LoadResult run_load(const LoadOptions& options);
+
+/// Raises RLIMIT_NOFILE towards its hard limit when `needed` descriptors would not fit.
+void raise_fd_limit(std::size_t needed);
 
 /// One JSON object (docs/design.md, "Command-line contracts": clients, frames, gaps, drops, p50_ms, p90_ms,
 /// p99_ms, max_ms; plus the other LoadResult fields).

@@ -202,7 +202,9 @@ def stop(proc, grace_s=5.0):
 # One run
 # --------------------------------------------------------------------------------------
 
-def daemon_config(sink_port, pose_port, tmp, spec):
+def daemon_config(sink_port, pose_port, tmp, spec, out_port=0):
+    """out_port: the live BVH port (protocol "bvh") or the HTTP port (protocol "ws")."""
+    protocol = spec.get("protocol", "pose")
     params = spec.get("params", {})
     params_toml = "{ " + ", ".join(f"{k} = {v}" for k, v in params.items()) + " }" if params else "{}"
     return f"""[log]
@@ -225,9 +227,16 @@ max_clients = 4096
 threads = {spec.get('serve_threads', 1)}
 client_queue_frames = {spec.get('client_queue_frames', 64)}
 [outputs]
-bvh_live = false
 record_dir = "{tmp}"
-"""
+""" + (f"""bvh_live = true
+bvh_listen = "127.0.0.1:{out_port}"
+bvh_max_clients = 4096
+bvh_threads = {spec.get('bvh_threads', 1)}
+""" if protocol == "bvh" else "bvh_live = false\n") + (f"""[http]
+listen = "127.0.0.1:{out_port}"
+max_clients = 4096
+threads = {spec.get('http_threads', 1)}
+""" if protocol == "ws" else "")
 
 
 OPTIONAL_SECTIONS = {}  # mocapd path -> extra config text it accepts
@@ -277,10 +286,13 @@ def run_once(bins, spec, log_dir):
     (None = all), stalled, warmup_s, measure_s, rss_every_s (memory run)."""
     raise_nofile()
     tmp = tempfile.mkdtemp(prefix="load_run_")
-    sink_port, pose_port = free_port(), free_port()
+    sink_port, pose_port, out_port = free_port(), free_port(), free_port()
+    protocol = spec.get("protocol", "pose")
     cfg = os.path.join(tmp, "mocapd.toml")
     with open(cfg, "w") as f:
-        f.write(daemon_config(sink_port, pose_port, tmp, spec) + optional_sections(bins["mocapd"], tmp))
+        # A "ws" run has its own [http] section; the others switch HTTP off if it exists.
+        f.write(daemon_config(sink_port, pose_port, tmp, spec, out_port) +
+                ("" if protocol == "ws" else optional_sections(bins["mocapd"], tmp)))
     log = open(os.path.join(log_dir, f"{spec['name']}.mocapd.log"), "w")
     daemon = subprocess.Popen([bins["mocapd"], "--config", cfg], stdout=log, stderr=subprocess.STDOUT,
                               preexec_fn=child_setup)
@@ -312,8 +324,11 @@ def run_once(bins, spec, log_dir):
                                      str(daemon.pid), "-o", perf_out, "--", "sleep", str(measure)],
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         t0 = time.monotonic()
-        load_cmd = [bins["mocap-client"], "--connect", f"127.0.0.1:{pose_port}", "load",
+        load_port = pose_port if protocol == "pose" else out_port
+        load_cmd = [bins["mocap-client"], "--connect", f"127.0.0.1:{load_port}", "load",
                     "--clients", str(spec.get("clients", 1)), "--duration", str(measure), "--json"]
+        if protocol != "pose":
+            load_cmd += ["--protocol", protocol]
         if spec.get("subject") is not None:
             load_cmd += ["--subject", str(spec["subject"])]
         if spec.get("stalled"):
@@ -419,6 +434,15 @@ def groups(measure_s):
                     for c in (1, 10, 100, 300, 1000)] + \
                    [dict(name="clients_1000_stalled_10", subjects=10, clients=1000, subject=1, stalled=10,
                          measure_s=m)]
+    # Fan-out on several serve threads (docs/performance.md; tests/bench/fanout_run.py runs
+    # these interleaved and repeated): the pose stream's curve for 1, 2 and 4 threads, and
+    # 1 000 clients of live BVH and of the WebSocket on 1 and 2 threads.
+    g["fanout"] = [dict(name=f"fanout_pose_t{t}_{c}", subjects=10, clients=c, subject=1, serve_threads=t,
+                        measure_s=m) for t in (1, 2, 4) for c in (10, 100, 300, 1000)] + \
+                  [dict(name=f"fanout_bvh_t{t}_1000", subjects=10, clients=1000, subject=1, protocol="bvh",
+                        bvh_threads=t, measure_s=m) for t in (1, 2)] + \
+                  [dict(name=f"fanout_ws_t{t}_1000", subjects=10, clients=1000, subject=1, protocol="ws",
+                        http_threads=t, measure_s=m) for t in (1, 2)]
     g["memory"] = [dict(name="memory_50_600s", subjects=50, clients=2, client_queue_frames=1024, measure_s=600,
                         rss_every_s=10)]
     g["smoke"] = [dict(name="smoke", subjects=3, nodes=15, clients=3, warmup_s=2.0, measure_s=3.0)]
