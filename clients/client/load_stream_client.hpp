@@ -11,8 +11,11 @@
 // Live BVH: a MOTION line has no timestamp and no frame number. Each distinct line gets the
 // time and index of its first arrival on any client of the run; a client's latency is its
 // arrival minus that first arrival — the fan-out spread, what serve threads change — and a
-// client's gap is an index jump beyond 1. Two identical consecutive lines (a subject that
-// does not move at all) would count as one frame. The subject is sent as "subject <id>".
+// client's gap is an index jump beyond 1. So every client must receive the same lines: a
+// line only some clients get (a subject's line sent before "subject <id>", which the tool
+// sends at connect, took effect: start mocapd with that [outputs] bvh_subject) or two
+// identical lines (a subject that does not move at all) make the gap count wrong; the
+// server's drop counters (bvh_live.frames_dropped, backlog_dropped) are the authority.
 // Thread-safety: run_stream_load() is self-contained; call from one thread.
 #pragma once
 

@@ -232,6 +232,7 @@ record_dir = "{tmp}"
 bvh_listen = "127.0.0.1:{out_port}"
 bvh_max_clients = 4096
 bvh_threads = {spec.get('bvh_threads', 1)}
+bvh_subject = {spec.get('subject') or 0}
 """ if protocol == "bvh" else "bvh_live = false\n") + (f"""[http]
 listen = "127.0.0.1:{out_port}"
 max_clients = 4096
