@@ -5,11 +5,16 @@
 
 #include <algorithm>
 #include <chrono>
-#include <fstream>
 #include <nlohmann/json.hpp>
 
 namespace mocap::cluster {
 namespace {
+
+// Raw samples are drained this often: the batch of one JetStream message per subject, and
+// about what a killed host loses beyond what was in flight.
+constexpr auto kRawDrain = std::chrono::milliseconds(20);
+// Longest a stop waits for JetStream to acknowledge the last raw samples.
+constexpr std::int64_t kRawFinishWaitMs = 3000;
 
 // The varint length prefix of a delimited frame: NATS messages carry their own length.
 std::size_t prefix_bytes(const std::string& bytes) {
@@ -17,24 +22,6 @@ std::size_t prefix_bytes(const std::string& bytes) {
     while (n < bytes.size() && (static_cast<unsigned char>(bytes[n]) & 0x80u) != 0)
         ++n;
     return n + 1;
-}
-
-// The public user key of an nkey seed file as `nk -gen user -pubout` writes it: the seed
-// ("SU...") and the public key ("U...") on their own lines. The client needs both.
-std::string nkey_public_key(const std::string& path) {
-    std::ifstream in(path);
-    for (std::string line; std::getline(in, line);) {
-        while (!line.empty() && (line.back() == '\r' || line.back() == ' '))
-            line.pop_back();
-        if (line.size() == 56 && line.front() == 'U') return line;
-    }
-    return {};
-}
-
-bool ok(natsStatus s, const char* what, std::string* error) {
-    if (s == NATS_OK) return true;
-    *error = std::string("cluster: ") + what + ": " + natsStatus_GetText(s);
-    return false;
 }
 
 }  // namespace
@@ -47,7 +34,12 @@ std::string host_subject(const std::string& site, const std::string& host_id) {
     return "mocap." + site + ".host." + host_id;
 }
 
-ClusterPublisher::ClusterPublisher(ClusterConfig config) : config_(std::move(config)) {
+ClusterPublisher::ClusterPublisher(ClusterConfig config)
+    : config_(std::move(config)),
+      raw_(
+          RawStreamConfig{
+              .site = config_.site, .replicas = config_.raw_replicas, .queue_samples = config_.raw_queue_samples},
+          group_) {
     group_.add("frames_queued", frames_queued_);
     group_.add("frames_dropped", frames_dropped_);
     group_.add("frames_published", frames_published_);
@@ -96,34 +88,8 @@ void ClusterPublisher::on_closed(natsConnection* /*nc*/, void* self) {
 }
 
 bool ClusterPublisher::start(std::string* error) {
-    if (!ok(natsOptions_Create(&options_), "options", error)) return false;
+    if (!make_nats_options(config_, &options_, error)) return false;
     const auto& c = config_;
-    if (!ok(natsOptions_SetURL(options_, c.nats_url.c_str()), "nats_url", error)) return false;
-    const std::string client_name = "mocapd " + c.host_id;
-    (void)natsOptions_SetName(options_, client_name.c_str());
-    if (!c.user.empty() && !ok(natsOptions_SetUserInfo(options_, c.user.c_str(), c.password.c_str()), "user", error))
-        return false;
-    if (!c.creds_file.empty() &&
-        !ok(natsOptions_SetUserCredentialsFromFiles(options_, c.creds_file.c_str(), nullptr), "creds_file", error))
-        return false;
-    if (!c.nkey_seed_file.empty()) {
-        const std::string pub = nkey_public_key(c.nkey_seed_file);
-        if (pub.empty()) {
-            *error = "cluster: nkey_seed_file " + c.nkey_seed_file + " holds no public user key (a line \"U...\")";
-            return false;
-        }
-        if (!ok(natsOptions_SetNKeyFromSeed(options_, pub.c_str(), c.nkey_seed_file.c_str()), "nkey_seed_file", error))
-            return false;
-    }
-    if (!c.tls_ca_file.empty()) {
-        if (!ok(natsOptions_SetSecure(options_, true), "tls", error) ||
-            !ok(natsOptions_LoadCATrustedCertificates(options_, c.tls_ca_file.c_str()), "tls_ca_file", error))
-            return false;
-    }
-    if (!c.tls_cert_file.empty() &&
-        !ok(natsOptions_LoadCertificatesChain(options_, c.tls_cert_file.c_str(), c.tls_key_file.c_str()),
-            "tls_cert_file", error))
-        return false;
     // Reconnect forever, quickly: the publisher drops frames while disconnected, so a short
     // wait bounds the gap. No reconnect buffer: frames wait in our own queue instead, where
     // the oldest are dropped and counted.
@@ -143,12 +109,13 @@ bool ClusterPublisher::start(std::string* error) {
     const natsStatus s = natsConnection_Connect(&connection_, options_);
     if (s == NATS_OK) {
         connected_.store(true);
-        spdlog::info("cluster: connected to {}; publishing on mocap.{}.<subject>.pose", c.nats_url, c.site);
+        spdlog::info("cluster: connected to {}; publishing on mocap.{}.<subject>.pose and .raw", c.nats_url, c.site);
     } else if (s == NATS_NOT_YET_CONNECTED) {
         spdlog::warn("cluster: {} not reachable yet; retrying in the background", c.nats_url);
     } else {
-        return ok(s, ("connect to " + c.nats_url).c_str(), error);
+        return nats_ok(s, ("connect to " + c.nats_url).c_str(), error);
     }
+    if (!raw_.attach(connection_, error)) return false;
     started_us_ = config_.wall_clock_us();
     {
         std::lock_guard lock(mutex_);
@@ -166,6 +133,9 @@ bool ClusterPublisher::stop(std::string* /*error*/) {
     wake_.notify_one();
     if (thread_.joinable()) thread_.join();
     if (connection_) {
+        // Raw samples still queued are published and their acknowledgements awaited (bounded):
+        // a clean stop leaves the take in JetStream complete.
+        raw_.finish(connected_.load(), kRawFinishWaitMs);
         if (connected_.load()) (void)natsConnection_FlushTimeout(connection_, 500);
         connected_.store(false);  // the close is not a lost connection: not counted
         natsConnection_Close(connection_);
@@ -211,12 +181,25 @@ void ClusterPublisher::run() {
     auto next_heartbeat = Clock::now() + kHeartbeat;
     auto last_heartbeat = Clock::now();
     std::vector<Queued> batch;
+    bool was_up = false;
+    auto next_raw = Clock::now() + kRawDrain;
     std::unique_lock lock(mutex_);
     while (!stopping_) {
         const bool up = connected_.load();
-        const auto until = up ? next_heartbeat : std::min(next_heartbeat, Clock::now() + kDisconnectedPoll);
+        if (was_up && !up) raw_.connection_lost();  // check the stream again once back
+        was_up = up;
+        // Raw samples do not wake the thread (that would be one wake per sample): they are
+        // drained every kRawDrain, so a message carries ~kRawDrain of one subject's samples.
+        auto until =
+            up ? std::min(next_heartbeat, next_raw) : std::min(next_heartbeat, Clock::now() + kDisconnectedPoll);
         wake_.wait_until(lock, until, [&] { return stopping_ || (connected_.load() && !queue_.empty()); });
         if (stopping_) break;
+        if (connected_.load() && Clock::now() >= next_raw) {
+            lock.unlock();
+            raw_.publish_queued();
+            lock.lock();
+            next_raw = Clock::now() + kRawDrain;
+        }
         if (connected_.load() && !queue_.empty()) {
             batch.assign(std::make_move_iterator(queue_.begin()), std::make_move_iterator(queue_.end()));
             queue_.clear();
@@ -300,6 +283,7 @@ void ClusterPublisher::register_metrics(MetricsRegistry& registry) const {
         [this] { return connected_.load(std::memory_order_relaxed) ? 1.0 : 0.0; }, "cluster");
     registry.add_gauge("cluster_queued_frames", "frames waiting for the cluster publisher thread",
                        [this] { return static_cast<double>(queued_.load(std::memory_order_relaxed)); });
+    raw_.register_metrics(registry);
 }
 
 }  // namespace mocap::cluster

@@ -5,6 +5,8 @@
 //   mocap.<site>.<subject id>.pose     mocap.v1.ServerMessage{frame}, every field, no length
 //                                      prefix (the bytes the pose service sends after it)
 //   mocap.<site>.host.<host_id>        JSON status, once a second
+//   mocap.<site>.<subject id>.raw      every raw sample, to the JetStream stream MOCAP_RAW
+//                                      (raw_stream.hpp: durable takes)
 //
 // Publishing never blocks the pipeline: on_frame() encodes the frame (once, on the assembler
 // thread) and pushes it into a bounded queue; when the queue is full its oldest frame is
@@ -14,44 +16,31 @@
 // lost cluster shows as cluster.frames_dropped, never as a slower pipeline, and publishing
 // resumes with the newest frames once the client is back.
 //
-// Threads: on_frame on the assembler thread (a mutex held for a push); the publisher thread;
-// the NATS client's threads run the connection callbacks (counters only).
+// Raw samples take the same path with their own bounded queue (raw_stream.hpp): on_sample()
+// copies the sample on the ingest thread, the publisher thread batches them per subject and
+// publishes them asynchronously to JetStream every kRawDrain (20 ms).
+//
+// Threads: on_frame on the assembler thread (a mutex held for a push); on_sample on the
+// ingest thread (another mutex held for a copy); the publisher thread; the NATS client's
+// threads run the connection callbacks and the JetStream acknowledgements (counters only).
 #pragma once
 
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
-#include <functional>
 #include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "cluster/cluster_config.hpp"
+#include "cluster/raw_stream.hpp"
 #include "core/counters.hpp"
 #include "pipeline/output.hpp"
 #include "serve/pose_encoder.hpp"
 
-struct __natsConnection;  // NOLINT(bugprone-reserved-identifier): libnats names its types so
-struct __natsOptions;     // NOLINT(bugprone-reserved-identifier): libnats names its types so
-
 namespace mocap::cluster {
-
-struct ClusterConfig {
-    std::string nats_url;  ///< one URL or a comma-separated list
-    std::string site;      ///< a NATS subject token
-    std::string host_id;   ///< a NATS subject token
-    std::string user, password;
-    std::string creds_file;
-    std::string nkey_seed_file;  ///< the seed and the public user key, one per line
-    std::string tls_ca_file, tls_cert_file, tls_key_file;
-    std::size_t queue_frames = 1024;
-    std::int64_t reconnect_wait_ms = 250;
-    std::function<std::int64_t()> wall_clock_us;  ///< frame encoded_us stamps and heartbeats
-    /// Described in every heartbeat, so a subscriber can name what a frame carries.
-    std::vector<std::string> segment_names;
-    std::vector<std::string> joint_angle_names;
-};
 
 /// "mocap.<site>.<subject>.pose".
 std::string pose_subject(const std::string& site, std::uint32_t subject_id);
@@ -71,6 +60,9 @@ public:
     bool start(std::string* error) override;
     bool stop(std::string* error) override;
     void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override;
+    /// Every raw sample goes to JetStream (raw_stream.hpp).
+    [[nodiscard]] bool wants_samples() const override { return true; }
+    void on_sample(const SegmentSample& sample) override { raw_.push(sample); }
     void register_metrics(MetricsRegistry& registry) const override;
 
     /// Any thread: whether the client is connected now.
@@ -116,6 +108,7 @@ private:
     Counter disconnects_;       // NATS client thread
     Counter reconnects_;        // NATS client thread
     CounterGroup group_{"cluster"};
+    RawStreamPublisher raw_;  // after group_: registers its counters there
 };
 
 }  // namespace mocap::cluster

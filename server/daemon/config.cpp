@@ -439,6 +439,7 @@ void read_cluster(TableReader& r, DaemonConfig& c) {
     r.read("tls_key_file", c.cluster_tls_key_file);
     r.read("raw_replicas", c.cluster_raw_replicas, 1, 5);
     r.read("queue_frames", c.cluster_queue_frames, 1, 1 << 20);
+    r.read("raw_queue_samples", c.cluster_raw_queue_samples, 1, 1 << 24);
 }
 
 // An IPv4 or IPv6 literal, as make_address accepts it (an IPv6 link-local address may carry

@@ -131,7 +131,8 @@ struct DaemonConfig {
     std::string cluster_tls_cert_file;
     std::string cluster_tls_key_file;
     std::uint32_t cluster_raw_replicas = 1;
-    std::uint32_t cluster_queue_frames = 1024;  ///< frames between the pipeline and the publisher
+    std::uint32_t cluster_queue_frames = 1024;        ///< frames between the pipeline and the publisher
+    std::uint32_t cluster_raw_queue_samples = 65536;  ///< raw samples between ingest and the publisher
 
     bool operator==(const DaemonConfig&) const = default;
 };

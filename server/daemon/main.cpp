@@ -40,21 +40,41 @@ static int run(int argc, char** argv) {
     // Replay of raw recordings (docs/outputs.md): no sockets, files out, then exit.
     ReplayOptions replay;
     std::vector<std::string> calibrate_at;
+    std::string from_text, to_text;
     auto* replay_opt =
         app.add_option("--replay", replay.files, "re-run raw recording(s) through the pipeline and exit");
-    app.add_flag("--realtime", replay.realtime, "replay at the recorded pace (default: as fast as possible)")
-        ->needs(replay_opt);
-    app.add_option("--bvh-out", replay.bvh_out, "replay: write a BVH file (must not exist)")->needs(replay_opt);
-    app.add_option("--bvh-subject", replay.bvh_subject,
-                   "replay: subject written to the BVH (0 = [outputs].bvh_subject)")
-        ->needs(replay_opt);
-    app.add_option("--angles-out", replay.angles_out, "replay: write the joint-angle CSV (must not exist)")
-        ->needs(replay_opt);
-    app.add_option("--calibration-dir", replay.calibration_dir, "replay: load/save calibrations here (default: none)")
-        ->needs(replay_opt);
-    app.add_option("--calibrate-at", calibrate_at, "replay: SECONDS[:SUBJECT[:T|N]] calibrate at that sample time")
-        ->needs(replay_opt);
+    auto* jetstream_opt = app.add_option("--jetstream", replay.jetstream_url,
+                                         "replay a take from JetStream at this NATS URL (needs --subject; credentials "
+                                         "from [cluster]) and exit")
+                              ->excludes(replay_opt);
+    // Replay options: with --replay FILE... or with --jetstream URL.
+    std::vector<CLI::Option*> replay_only;
+    replay_only.push_back(app.add_option("--site", replay.site, "replay --jetstream: site (default: [cluster].site)"));
+    replay_only.push_back(
+        app.add_option("--subject", replay.subject, "replay: only this subject (--jetstream: required)"));
+    replay_only.push_back(
+        app.add_option("--from", from_text, "replay: samples received from this time (RFC 3339 or epoch s)"));
+    replay_only.push_back(
+        app.add_option("--to", to_text, "replay: samples received up to this time (RFC 3339 or epoch s)"));
+    replay_only.push_back(
+        app.add_flag("--realtime", replay.realtime, "replay at the recorded pace (default: as fast as possible)"));
+    replay_only.push_back(app.add_option("--bvh-out", replay.bvh_out, "replay: write a BVH file (must not exist)"));
+    replay_only.push_back(app.add_option("--bvh-subject", replay.bvh_subject,
+                                         "replay: subject written to the BVH (0 = [outputs].bvh_subject)"));
+    replay_only.push_back(
+        app.add_option("--angles-out", replay.angles_out, "replay: write the joint-angle CSV (must not exist)"));
+    replay_only.push_back(app.add_option("--calibration-dir", replay.calibration_dir,
+                                         "replay: load/save calibrations here (default: none)"));
+    replay_only.push_back(app.add_option("--calibrate-at", calibrate_at,
+                                         "replay: SECONDS[:SUBJECT[:T|N]] calibrate at that sample time"));
     CLI11_PARSE(app, argc, argv);
+    const bool replaying = replay_opt->count() > 0 || jetstream_opt->count() > 0;
+    for (const CLI::Option* o : replay_only) {
+        if (o->count() > 0 && !replaying) {
+            std::cerr << "mocapd: " << o->get_name() << " requires --replay or --jetstream\n";
+            return 1;
+        }
+    }
 
     if (print_default) {
         std::cout << embedded_default_config();
@@ -81,7 +101,12 @@ static int run(int argc, char** argv) {
     // when the daemon is killed. Log lines are rare (counted events are logged once).
     spdlog::flush_on(spdlog::level::trace);
     google::protobuf::SetLogHandler(&protobuf_log);
-    if (!replay.files.empty()) {
+    if (replaying) {
+        if ((!from_text.empty() && !parse_replay_time(from_text, &replay.from_us, &error)) ||
+            (!to_text.empty() && !parse_replay_time(to_text, &replay.to_us, &error))) {
+            std::cerr << "mocapd: " << error << "\n";
+            return 1;
+        }
         for (const std::string& spec : calibrate_at) {
             ReplayCalibration c;
             if (!parse_replay_calibration(spec, &c, &error)) {

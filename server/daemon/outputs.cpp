@@ -273,18 +273,7 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
 std::unique_ptr<pipeline::Output> make_cluster(const OutputContext& ctx) {
     const DaemonConfig& c = ctx.config;
     if (ctx.replay || c.cluster_nats_url.empty()) return nullptr;
-    cluster::ClusterConfig cc;
-    cc.nats_url = c.cluster_nats_url;
-    cc.site = c.cluster_site;
-    cc.host_id = cluster_host_id(c);
-    cc.user = c.cluster_user;
-    cc.password = c.cluster_password;
-    cc.creds_file = c.cluster_creds_file;
-    cc.nkey_seed_file = c.cluster_nkey_seed_file;
-    cc.tls_ca_file = c.cluster_tls_ca_file;
-    cc.tls_cert_file = c.cluster_tls_cert_file;
-    cc.tls_key_file = c.cluster_tls_key_file;
-    cc.queue_frames = c.cluster_queue_frames;
+    cluster::ClusterConfig cc = cluster_config_from_config(c);
     cc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
     for (const auto& s : ctx.pipeline.model().segments)
         cc.segment_names.push_back(s.name);

@@ -83,4 +83,22 @@ std::optional<pipeline::PipelineConfig> pipeline_config_from_config(const Daemon
     return pc;
 }
 
+cluster::ClusterConfig cluster_config_from_config(const DaemonConfig& c) {
+    cluster::ClusterConfig cc;
+    cc.nats_url = c.cluster_nats_url;
+    cc.site = c.cluster_site;
+    cc.host_id = cluster_host_id(c);
+    cc.user = c.cluster_user;
+    cc.password = c.cluster_password;
+    cc.creds_file = c.cluster_creds_file;
+    cc.nkey_seed_file = c.cluster_nkey_seed_file;
+    cc.tls_ca_file = c.cluster_tls_ca_file;
+    cc.tls_cert_file = c.cluster_tls_cert_file;
+    cc.tls_key_file = c.cluster_tls_key_file;
+    cc.queue_frames = c.cluster_queue_frames;
+    cc.raw_replicas = c.cluster_raw_replicas;
+    cc.raw_queue_samples = c.cluster_raw_queue_samples;
+    return cc;
+}
+
 }  // namespace mocap::daemon

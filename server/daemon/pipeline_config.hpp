@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "cluster/cluster_config.hpp"
 #include "daemon/config.hpp"
 #include "pipeline/pipeline.hpp"
 #include "serve/bvh_frame_encoder.hpp"
@@ -26,6 +27,10 @@ serve::BvhOutputOptions bvh_options_from_config(const DaemonConfig& config);
 
 /// Skeleton solver options from [skeleton] (max_subjects follows the subjects).
 skeleton::PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& config);
+
+/// How to reach the cluster from [cluster]: URL, site, host id, credentials, TLS, queues and
+/// raw_replicas (the cluster publisher and `--replay --jetstream` connect alike).
+cluster::ClusterConfig cluster_config_from_config(const DaemonConfig& config);
 
 /// Everything the pipeline needs; std::nullopt + *error for an invalid body model.
 std::optional<pipeline::PipelineConfig> pipeline_config_from_config(const DaemonConfig& config, std::string* error);

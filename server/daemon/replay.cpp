@@ -2,10 +2,14 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
+#include <ctime>
+#include <functional>
 #include <limits>
 #include <thread>
 
+#include "cluster/raw_take_reader.hpp"
 #include "core/parse_number.hpp"
 #include "daemon/calibration_files.hpp"
 #include "daemon/outputs.hpp"
@@ -15,6 +19,101 @@
 #include "serve/raw_recorder.hpp"
 
 namespace mocap::daemon {
+
+namespace {
+
+bool is_digits(std::string_view s) {
+    return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+/// "SSS" or "SSS.ffffff" (digits only; up to 6 fraction digits count) → µs.
+bool parse_epoch_us(std::string_view text, std::int64_t* us) {
+    const std::size_t dot = text.find('.');
+    const std::string_view whole = text.substr(0, dot);
+    const std::string_view frac = dot == std::string_view::npos ? std::string_view{} : text.substr(dot + 1);
+    std::int64_t seconds = 0;
+    if (!is_digits(whole) || !core::parse_number(whole, seconds) || seconds > 1'000'000'000'000) return false;
+    if (dot != std::string_view::npos && !is_digits(frac)) return false;
+    std::int64_t frac_us = 0;
+    for (std::size_t i = 0; i < 6; ++i)
+        frac_us = frac_us * 10 + (i < frac.size() ? frac[i] - '0' : 0);
+    *us = seconds * 1'000'000 + frac_us;
+    return true;
+}
+
+/// RFC 3339 date-time: YYYY-MM-DDTHH:MM:SS[.frac](Z|+HH:MM|-HH:MM) → µs since the epoch.
+bool parse_rfc3339_us(std::string_view t, std::int64_t* us) {
+    auto num = [&](std::size_t at, std::size_t n, int* out) {
+        return at + n <= t.size() && is_digits(t.substr(at, n)) && core::parse_number(t.substr(at, n), *out);
+    };
+    int year = 0, month = 0, day = 0, hour = 0, minute = 0, second = 0;
+    if (t.size() < 20 || !num(0, 4, &year) || t[4] != '-' || !num(5, 2, &month) || t[7] != '-' || !num(8, 2, &day) ||
+        (t[10] != 'T' && t[10] != 't' && t[10] != ' ') || !num(11, 2, &hour) || t[13] != ':' || !num(14, 2, &minute) ||
+        t[16] != ':' || !num(17, 2, &second))
+        return false;
+    if (month < 1 || month > 12 || day < 1 || day > 31 || hour > 23 || minute > 59 || second > 60) return false;
+    std::size_t i = 19;
+    std::int64_t frac_us = 0;
+    if (t[i] == '.') {
+        const std::size_t start = ++i;
+        while (i < t.size() && t[i] >= '0' && t[i] <= '9')
+            ++i;
+        if (i == start || !parse_epoch_us("0" + std::string(t.substr(start - 1, i - start + 1)), &frac_us))
+            return false;
+    }
+    std::int64_t offset_s = 0;
+    if (i < t.size() && (t[i] == 'Z' || t[i] == 'z')) {
+        ++i;
+    } else if (i < t.size() && (t[i] == '+' || t[i] == '-')) {
+        int oh = 0, om = 0;
+        if (!num(i + 1, 2, &oh) || i + 3 >= t.size() || t[i + 3] != ':' || !num(i + 4, 2, &om) || oh > 23 || om > 59)
+            return false;
+        offset_s = (t[i] == '-' ? -1 : 1) * (oh * 3600 + om * 60);
+        i += 6;
+    } else {
+        return false;  // RFC 3339 requires the offset
+    }
+    if (i != t.size()) return false;
+    std::tm tm{};
+    tm.tm_year = year - 1900;
+    tm.tm_mon = month - 1;
+    tm.tm_mday = day;
+    tm.tm_hour = hour;
+    tm.tm_min = minute;
+    tm.tm_sec = second;
+    const std::time_t utc = timegm(&tm);
+    *us = (static_cast<std::int64_t>(utc) - offset_s) * 1'000'000 + frac_us;
+    return true;
+}
+
+/// Reads the take of one subject from JetStream into `feed`.
+bool replay_jetstream(const DaemonConfig& config, const ReplayOptions& options,
+                      const std::function<void(const SegmentSample&)>& feed, std::string* error) {
+    cluster::ClusterConfig cc = cluster_config_from_config(config);
+    cc.nats_url = options.jetstream_url;
+    if (!options.site.empty()) cc.site = options.site;
+    cluster::RawTakeReader reader(std::move(cc),
+                                  {.subject_id = options.subject, .from_us = options.from_us, .to_us = options.to_us});
+    if (!reader.open(error)) return false;
+    SegmentSample s;
+    for (;;) {
+        const int r = reader.next(s, error);
+        if (r < 0) return false;
+        if (r == 0) break;
+        feed(s);
+    }
+    spdlog::info("replay: read {} JetStream messages of {}", reader.messages(), reader.subject());
+    return true;
+}
+
+}  // namespace
+
+bool parse_replay_time(std::string_view text, std::int64_t* us, std::string* error) {
+    if (parse_epoch_us(text, us) || parse_rfc3339_us(text, us)) return true;
+    *error = "time " + std::string(text) +
+             ": expected seconds since the epoch (e.g. 1764648000.25) or RFC 3339 (e.g. 2026-12-02T04:10:00Z)";
+    return false;
+}
 
 bool parse_replay_calibration(std::string_view spec, ReplayCalibration* out, std::string* error) {
     const auto f = core::split_fields(spec, ':');
@@ -38,6 +137,14 @@ bool parse_replay_calibration(std::string_view spec, ReplayCalibration* out, std
 
 bool run_replay(const DaemonConfig& config, const ReplayOptions& options, ReplayResult* result, std::string* error) {
     *result = ReplayResult{};
+    if (!options.jetstream_url.empty() && (options.subject == 0 || !options.files.empty())) {
+        *error = "--jetstream reads one subject's take: give --subject N, and no --replay files";
+        return false;
+    }
+    if (options.from_us > options.to_us) {
+        *error = "--from is after --to";
+        return false;
+    }
     auto pc = pipeline_config_from_config(config, error);
     if (!pc) return false;
     pc->calibration_store = calibration_files(options.calibration_dir);
@@ -57,6 +164,41 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     std::int64_t first_received_us = 0;
     std::int64_t now_us = 0;
     const auto wall_start = std::chrono::steady_clock::now();
+    const auto feed = [&](const SegmentSample& s) {
+        if ((options.subject != 0 && s.subject_id != options.subject) || s.times.received_us < options.from_us ||
+            s.times.received_us > options.to_us)
+            return;
+        ++result->samples;
+        if (first_t_us == std::numeric_limits<std::int64_t>::min()) {
+            first_t_us = s.imu.t_us;
+            first_received_us = s.times.received_us;
+        }
+        // The assembler's clock never runs backwards (received_us is a wall clock).
+        now_us = std::max(now_us, s.times.received_us);
+        if (options.realtime) {
+            std::this_thread::sleep_until(wall_start + std::chrono::microseconds(now_us - first_received_us));
+        }
+        for (auto it = pending.begin(); it != pending.end();) {
+            if (static_cast<double>(s.imu.t_us - first_t_us) * 1e-6 >= it->at_s) {
+                const std::string err = pipeline->solver().request_calibration(it->subject, it->pose);
+                if (!err.empty()) spdlog::warn("replay: calibration: {}", err);
+                it = pending.erase(it);
+            } else {
+                ++it;
+            }
+        }
+        switch (pipeline->process(s, now_us)) {
+            case pipeline::RouteResult::kProcessed:
+                break;
+            case pipeline::RouteResult::kUnknownNode:
+                ++result->samples_unknown_node;
+                break;
+            case pipeline::RouteResult::kRejected:
+                ++result->samples_rejected;
+                break;
+        }
+    };
+    if (!options.jetstream_url.empty() && !replay_jetstream(config, options, feed, error)) return false;
     SegmentSample s;
     for (const std::string& path : options.files) {
         serve::RawRecordingReader reader;
@@ -68,35 +210,7 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
                 return false;
             }
             if (r == 0) break;
-            ++result->samples;
-            if (first_t_us == std::numeric_limits<std::int64_t>::min()) {
-                first_t_us = s.imu.t_us;
-                first_received_us = s.times.received_us;
-            }
-            // The assembler's clock never runs backwards (received_us is a wall clock).
-            now_us = std::max(now_us, s.times.received_us);
-            if (options.realtime) {
-                std::this_thread::sleep_until(wall_start + std::chrono::microseconds(now_us - first_received_us));
-            }
-            for (auto it = pending.begin(); it != pending.end();) {
-                if (static_cast<double>(s.imu.t_us - first_t_us) * 1e-6 >= it->at_s) {
-                    const std::string err = pipeline->solver().request_calibration(it->subject, it->pose);
-                    if (!err.empty()) spdlog::warn("replay: calibration: {}", err);
-                    it = pending.erase(it);
-                } else {
-                    ++it;
-                }
-            }
-            switch (pipeline->process(s, now_us)) {
-                case pipeline::RouteResult::kProcessed:
-                    break;
-                case pipeline::RouteResult::kUnknownNode:
-                    ++result->samples_unknown_node;
-                    break;
-                case pipeline::RouteResult::kRejected:
-                    ++result->samples_rejected;
-                    break;
-            }
+            feed(s);
         }
         if (reader.truncated()) {
             // What a crash or a full disk leaves: the file replays up to its last whole record.

@@ -1,6 +1,7 @@
-// replay.hpp — `mocapd --replay FILE...`: re-runs a raw recording (serve/raw_recorder.hpp)
-// through the same Pipeline as live (pipeline/pipeline.hpp, driven synchronously): the same
-// node routing, the configured filter per segment, the per-subject assembler with the
+// replay.hpp — `mocapd --replay FILE...` or `mocapd --jetstream URL --subject N`: re-runs a
+// raw recording (serve/raw_recorder.hpp), or a durable take read back from JetStream
+// (cluster/raw_take_reader.hpp: the same records), through the same Pipeline as live (pipeline/pipeline.hpp, driven
+// synchronously): the same node routing, the configured filter per segment, the per-subject assembler with the
 // configured deadline and the skeleton solver (calibration, smoothing, kinematics, joint
 // angles) — and writes its outputs through the same registry (daemon/outputs.hpp): a BVH
 // file through the same recorder and encoder as the live recorder, and the joint-angle CSV.
@@ -11,12 +12,17 @@
 // byte-identical files. What differs from live: the worker pool's threads are not used (a
 // segment's samples are filtered in the same order either way), and nothing waits on a
 // wall clock unless `realtime` is set, which paces samples by their received_us.
+// Selection: `subject` and the received_us range [from_us, to_us] pick the samples of either
+// source (a take from JetStream is one subject; files may hold many). A subject's frames
+// depend only on its own samples in order, so its replay from JetStream equals its replay from
+// the raw file recorded beside it.
 // Calibration: none is loaded or saved unless calibration_dir is given; calibrate_at
 // requests one at a sample time (seconds since the first sample), as the control request
 // would.
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -37,8 +43,20 @@ struct ReplayCalibration {
 /// subject 0, trailing characters, a pose other than T or N).
 bool parse_replay_calibration(std::string_view spec, ReplayCalibration* out, std::string* error);
 
+/// Parses a --from/--to time: seconds since the epoch (fraction allowed) or RFC 3339
+/// ("2026-12-02T04:10:00Z", "2026-12-02T05:10:00.250+01:00"). Microseconds since the epoch;
+/// false + error naming the argument otherwise.
+bool parse_replay_time(std::string_view text, std::int64_t* us, std::string* error);
+
 struct ReplayOptions {
     std::vector<std::string> files;  ///< raw recordings, replayed in this order
+    /// Non-empty: read the take from JetStream at this URL instead of files ([cluster] gives
+    /// the credentials; `site`, when set, overrides [cluster].site). Needs `subject`.
+    std::string jetstream_url;
+    std::string site;
+    std::uint32_t subject = 0;                                        ///< 0 = every subject (files only)
+    std::int64_t from_us = std::numeric_limits<std::int64_t>::min();  ///< received_us range, inclusive
+    std::int64_t to_us = std::numeric_limits<std::int64_t>::max();
     bool realtime = false;
     std::string bvh_out;            ///< "" = no BVH file; must not exist
     std::uint32_t bvh_subject = 0;  ///< 0 = [outputs].bvh_subject rule
@@ -48,7 +66,7 @@ struct ReplayOptions {
 };
 
 struct ReplayResult {
-    std::uint64_t samples = 0;
+    std::uint64_t samples = 0;               ///< selected and replayed
     std::uint64_t samples_unknown_node = 0;  ///< node not in the model, or subject not configured
     std::uint64_t samples_rejected = 0;      ///< the filter refused them (non-finite input)
     std::uint64_t frames = 0;                ///< subject frames solved

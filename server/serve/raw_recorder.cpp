@@ -286,6 +286,24 @@ bool RawRecordingReader::open(const std::string& path, std::string* error) {
     return true;
 }
 
+bool RawRecordingReader::open_records(std::string records, std::string* error) {
+    file_.reset();
+    truncated_ = false;
+    truncation_.clear();
+    memory_ = std::move(records);
+    if (memory_.empty()) {
+        *error = "no records";
+        return false;
+    }
+    // A stream over the buffer: the file path's record parsing, truncation handling included.
+    file_.reset(::fmemopen(memory_.data(), memory_.size(), "rb"));
+    if (!file_) {
+        *error = "fmemopen: " + errno_text(errno);
+        return false;
+    }
+    return true;
+}
+
 void RawRecordingReader::cut_tail(const std::string& what) {
     truncated_ = true;
     truncation_ = what + " after sample " + std::to_string(samples_) + ", skipped";

@@ -24,7 +24,8 @@
 // (UTC time of the recording's start, index 0, 1, 2... per rotation).
 //
 // Reading. RawRecordingReader reads one file record by record; a truncated last record
-// (the file of a killed daemon) ends the file cleanly (truncated() tells).
+// (the file of a killed daemon) ends the file cleanly (truncated() tells). The same reader
+// reads the records of a JetStream raw message from memory (open_records).
 //
 // Threads: push() on the producer thread; start()/stop() on the owner's thread (the
 // daemon, before ingest starts / after it stopped); counters() on any thread.
@@ -141,6 +142,10 @@ class RawRecordingReader {
 public:
     /// Opens and checks the magic. False + error otherwise.
     bool open(const std::string& path, std::string* error);
+    /// Reads records from memory instead: the records of a file without its magic and header,
+    /// as one JetStream raw message carries them (cluster/raw_stream.hpp). Replaces what was
+    /// open (truncation included); samples_read() goes on counting. False + error if `records` is empty.
+    bool open_records(std::string records, std::string* error);
     /// Next sample: 1 = got one, 0 = end of file, -1 = corrupt record (error set).
     /// A truncated final record (what a crash or a full disk can leave) counts as the end of
     /// the file: truncated() = true, truncation() says what was skipped.
@@ -154,6 +159,7 @@ public:
 private:
     void cut_tail(const std::string& what);
 
+    std::string memory_;  // open_records(): what file_ reads (declared first: closed after it)
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_{nullptr, &std::fclose};
     std::string record_;
     bool truncated_ = false;

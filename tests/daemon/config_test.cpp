@@ -475,6 +475,8 @@ TEST_F(ConfigCheck, ClusterDefaultsMatchTheStructAndOffNeedsNothing) {
     EXPECT_EQ(d->cluster_allow_anonymous, s.cluster_allow_anonymous);
     EXPECT_EQ(d->cluster_raw_replicas, s.cluster_raw_replicas);
     EXPECT_EQ(d->cluster_queue_frames, s.cluster_queue_frames);
+    EXPECT_EQ(d->cluster_raw_queue_samples, s.cluster_raw_queue_samples);
+    EXPECT_REFUSED("[cluster]\nraw_queue_samples = 0\n", "c.toml:2: cluster.raw_queue_samples: must be between");
     EXPECT_EQ(refusal("[cluster]\nsite = \"hall\"\n"), "") << "no nats_url: credentials are not needed";
 }
 

@@ -5,7 +5,6 @@
 // cluster costs the local pose service nothing and publishing resumes when it is back.
 #include <gtest/gtest.h>
 #include <nats/nats.h>
-#include <unistd.h>
 
 #include <atomic>
 #include <csignal>
@@ -17,6 +16,7 @@
 
 #include "harness.hpp"
 #include "mocap/v1/mocap.pb.h"
+#include "nats_harness.hpp"
 #include "pose_client.hpp"
 
 namespace mocap::itest {
@@ -25,23 +25,10 @@ namespace {
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
-constexpr const char* kUser = "mocap";
-constexpr const char* kPassword = "cluster-pw-1";
+constexpr const char* kUser = kNatsUser;
+constexpr const char* kPassword = kNatsPassword;
 constexpr const char* kSite = "itest";
 constexpr const char* kHost = "rack1";
-
-bool have_nats_server() {
-    return ::access(NATS_SERVER_BIN, X_OK) == 0;
-}
-
-std::unique_ptr<Process> start_nats(std::uint16_t port, const std::string& log) {
-    auto p =
-        std::make_unique<Process>(std::vector<std::string>{NATS_SERVER_BIN, "-a", "127.0.0.1", "-p",
-                                                           std::to_string(port), "--user", kUser, "--pass", kPassword},
-                                  log);
-    EXPECT_TRUE(wait_for_port(port, 15s)) << p->log();
-    return p;
-}
 
 /// A test-side NATS subscriber: every message of one subject pattern, kept in order.
 class Subscriber {
@@ -91,18 +78,14 @@ v1::SkeletonFrame decode_frame(const std::string& payload) {
 }
 
 std::string cluster_section(std::uint16_t nats_port, const std::string& credentials) {
-    std::ostringstream s;
-    s << "[cluster]\nnats_url = \"nats://127.0.0.1:" << nats_port << "\"\nsite = \"" << kSite << "\"\nhost_id = \""
-      << kHost << "\"\nqueue_frames = 64\n"
-      << credentials;
-    return s.str();
+    return itest::cluster_section(nats_port, kSite, kHost, credentials);
 }
 
 class Cluster : public ::testing::Test {
 protected:
     void SetUp() override {
         if (!have_nats_server())
-            GTEST_SKIP() << "no nats-server binary at " << NATS_SERVER_BIN << " (setup.sh installs it)";
+            GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
         nats_port_ = free_port();
         nats_ = start_nats(nats_port_, dir_.file("nats.log"));
         sink_port_ = free_port();
@@ -115,7 +98,7 @@ protected:
             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 4096\n"
             << "[outputs]\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n"
             << "[http]\nlisten = \"127.0.0.1:" << free_port() << "\"\n"
-            << cluster_section(nats_port_, std::string("user = \"") + kUser + "\"\npassword = \"" + kPassword + "\"\n");
+            << cluster_section(nats_port_, cluster_credentials());
         write_file(dir_.file("mocapd.toml"), cfg.str());
         daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", dir_.file("mocapd.toml")},
                                             dir_.file("mocapd.log"), dir_.path().string());
@@ -130,35 +113,15 @@ protected:
     }
 
     std::unique_ptr<Process> sim(int subjects, int seconds) {
-        return std::make_unique<Process>(
-            std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(sink_port_),
-                                     "--rate", "100", "--subjects", std::to_string(subjects), "--duration",
-                                     std::to_string(seconds), "--sink-rate-stats"},
-            dir_.file("sim.log"));
+        return stream_sim(MOCAP_SIM_BIN, sink_port_, subjects, seconds, dir_.file("sim.log"));
     }
 
-    std::uint64_t counter(const std::string& name) {
-        client::PoseClient c;
-        std::string err;
-        EXPECT_TRUE(c.connect("127.0.0.1", pose_port_, 5s, err)) << err;
-        v1::Stats s;
-        EXPECT_TRUE(c.request_stats(s, 5s, err)) << err;
-        for (const auto& kv : s.counters())
-            if (kv.name() == name) return kv.value();
-        ADD_FAILURE() << "no counter " << name;
-        return 0;
-    }
+    std::uint64_t counter(const std::string& name) { return stats_counter(pose_port_, name); }
 
     /// Polls `name` until `pred` holds or `limit` passes; returns the last value.
     template <class Pred>
     std::uint64_t wait_counter(const std::string& name, Pred pred, std::chrono::milliseconds limit) {
-        const auto end = Clock::now() + limit;
-        std::uint64_t v = counter(name);
-        while (!pred(v) && Clock::now() < end) {
-            std::this_thread::sleep_for(50ms);  // poll interval of the bounded wait
-            v = counter(name);
-        }
-        return v;
+        return wait_stats_counter(pose_port_, name, pred, limit);
     }
 
     TempDir dir_;

@@ -212,6 +212,31 @@ TEST(RawRecorder, RotatesBySizeAndACutFileReadsUpToItsLastRecord) {
     EXPECT_FALSE(junk.open(dir.file("junk"), &err));
 }
 
+TEST(RawRecorder, TheReaderReadsRecordsFromMemoryAsAJetStreamMessageCarriesThem) {
+    std::string records;
+    for (std::uint64_t k = 0; k < 50; ++k)
+        append_raw_sample_record(sample(k, k % 5 == 0), records);
+    RawRecordingReader reader;
+    std::string err;
+    ASSERT_TRUE(reader.open_records(records, &err)) << err;
+    SegmentSample got;
+    for (std::uint64_t k = 0; k < 50; ++k) {
+        ASSERT_EQ(reader.next(got, &err), 1) << k << " " << err;
+        expect_same(sample(k, k % 5 == 0), got);
+    }
+    EXPECT_EQ(reader.next(got, &err), 0);
+    EXPECT_FALSE(reader.truncated());
+    // The next message continues the count; a cut one says what was cut.
+    ASSERT_TRUE(reader.open_records(records.substr(0, records.size() - 3), &err)) << err;
+    int n = 0;
+    while (reader.next(got, &err) == 1)
+        ++n;
+    EXPECT_EQ(n, 49);
+    EXPECT_TRUE(reader.truncated());
+    EXPECT_EQ(reader.samples_read(), 99u);
+    EXPECT_FALSE(reader.open_records("", &err));
+}
+
 TEST(RawRecorder, AFullRingDropsAndCountsInsteadOfBlocking) {
     TempDir dir;
     StepClock clock;

@@ -1,0 +1,44 @@
+// cluster_config.hpp — how mocapd reaches a NATS cluster ([cluster] in the config, read by
+// daemon/outputs.cpp and daemon/replay.cpp), and the client options built from it: the
+// cluster publisher (cluster_publisher.hpp) and the JetStream take reader (raw_take_reader.hpp)
+// connect with the same credentials and TLS.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+struct __natsOptions;  // NOLINT(bugprone-reserved-identifier): libnats names its types so
+
+namespace mocap::cluster {
+
+struct ClusterConfig {
+    std::string nats_url;  ///< one URL or a comma-separated list
+    std::string site;      ///< a NATS subject token
+    std::string host_id;   ///< a NATS subject token
+    std::string user, password;
+    std::string creds_file;
+    std::string nkey_seed_file;  ///< the seed and the public user key, one per line
+    std::string tls_ca_file, tls_cert_file, tls_key_file;
+    std::size_t queue_frames = 1024;
+    std::int64_t reconnect_wait_ms = 250;
+    std::function<std::int64_t()> wall_clock_us;  ///< frame encoded_us stamps and heartbeats
+    /// Described in every heartbeat, so a subscriber can name what a frame carries.
+    std::vector<std::string> segment_names;
+    std::vector<std::string> joint_angle_names;
+    /// Durable takes (raw_stream.hpp): JetStream replicas of MOCAP_RAW, and the samples
+    /// waiting for the publisher thread (beyond it the oldest are dropped).
+    std::uint32_t raw_replicas = 1;
+    std::size_t raw_queue_samples = 65536;
+};
+
+/// New client options with the URL, a client name, the credentials and TLS of `config`
+/// (the caller adds its reconnect policy and destroys them). False + *error for a bad
+/// setting (an unreadable credentials file, a seed file without its public key).
+bool make_nats_options(const ClusterConfig& config, __natsOptions** out, std::string* error);
+
+/// "cluster: <what>: <status text>" when s is not NATS_OK.
+bool nats_ok(int status, const char* what, std::string* error);
+
+}  // namespace mocap::cluster

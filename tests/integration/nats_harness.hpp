@@ -1,0 +1,49 @@
+// nats_harness.hpp — what the cluster integration tests share (cluster_test.cpp,
+// jetstream_test.cpp): a real nats-server on a loopback port with a user and password, the
+// [cluster] config section that reaches it, and mocapd's counters read through the Stats
+// request of its pose service.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "harness.hpp"
+
+namespace mocap::itest {
+
+inline constexpr const char* kNatsUser = "mocap";
+inline constexpr const char* kNatsPassword = "cluster-pw-1";
+
+/// Whether the nats-server binary the build found is there (tests skip with a reason if not).
+bool have_nats_server();
+/// The nats-server binary's path.
+const char* nats_server_bin();
+
+/// nats-server on 127.0.0.1:port with kNatsUser/kNatsPassword, plus `extra` arguments (e.g.
+/// {"-js", "-sd", dir} for JetStream); returns once it accepts connections (EXPECTs that).
+std::unique_ptr<Process> start_nats(std::uint16_t port, const std::string& log,
+                                    const std::vector<std::string>& extra = {});
+
+/// "[cluster]" with nats_url on the port, site, host_id, queue_frames = 64, then `more`
+/// (credentials and other keys, one per line).
+std::string cluster_section(std::uint16_t nats_port, const std::string& site, const std::string& host_id,
+                            const std::string& more);
+/// user = kNatsUser, password = kNatsPassword, as config lines.
+std::string cluster_credentials();
+
+/// `mocap-sim stream` (the binary `sim_bin`) to 127.0.0.1:sink_port: `subjects` at 100 Hz
+/// for `seconds`, with its rate statistics (sim_syncs_skipped) in `log`.
+std::unique_ptr<Process> stream_sim(const char* sim_bin, std::uint16_t sink_port, int subjects, int seconds,
+                                    const std::string& log);
+
+/// One counter of mocapd's Stats reply ("cluster.frames_dropped"); a test failure if absent.
+std::uint64_t stats_counter(std::uint16_t pose_port, const std::string& name);
+/// Polls stats_counter until `pred` holds or `limit` passes; returns the last value.
+std::uint64_t wait_stats_counter(std::uint16_t pose_port, const std::string& name,
+                                 const std::function<bool(std::uint64_t)>& pred, std::chrono::milliseconds limit);
+
+}  // namespace mocap::itest
