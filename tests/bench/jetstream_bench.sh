@@ -1,7 +1,7 @@
 #!/bin/bash
-# jetstream_bench.sh — durable takes (docs/outputs.md, "Durable takes (JetStream)") on this host: raw bytes per subject per second on the
-# JetStream stream MOCAP_RAW and the publish-to-acknowledgement latency (p50/p99), with
-# nats-server -js (file store in a temporary directory), mocapd and mocap-sim on loopback.
+# jetstream_bench.sh — durable takes (docs/outputs.md, "Durable takes (JetStream)") on this
+# host: raw bytes per subject per second on the JetStream stream MOCAP_RAW and the
+# publish-to-acknowledgement latency (p50/p99), with nats-server -js (file store in a temporary directory), mocapd and mocap-sim on loopback.
 #
 #   tests/bench/jetstream_bench.sh MOCAPD MOCAP_SIM MOCAP_CLIENT
 #
