@@ -236,10 +236,8 @@ TEST_F(JetStream, NoClusterAtStartAndALostClusterCostThePoseServiceNothingAndPub
     });
     auto frames_flow = [&](const char* when) {
         const std::uint64_t before = pose_frames.load();
-        const auto end = std::chrono::steady_clock::now() + 15s;
-        while (pose_frames.load() < before + 100 && std::chrono::steady_clock::now() < end)
-            std::this_thread::sleep_for(20ms);  // poll interval of the bounded wait
-        EXPECT_GE(pose_frames.load(), before + 100) << "the pose service serves " << when;
+        EXPECT_TRUE(wait_until([&] { return pose_frames.load() >= before + 100; }, 15s))
+            << "the pose service serves " << when;
     };
     auto s = sim(1, 90);
 

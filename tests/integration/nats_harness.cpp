@@ -4,7 +4,6 @@
 #include <unistd.h>
 
 #include <sstream>
-#include <thread>
 
 #include "mocap/v1/mocap.pb.h"
 #include "pose_client.hpp"
@@ -66,12 +65,13 @@ std::uint64_t stats_counter(std::uint16_t pose_port, const std::string& name) {
 
 std::uint64_t wait_stats_counter(std::uint16_t pose_port, const std::string& name,
                                  const std::function<bool(std::uint64_t)>& pred, std::chrono::milliseconds limit) {
-    const auto end = std::chrono::steady_clock::now() + limit;
-    std::uint64_t v = stats_counter(pose_port, name);
-    while (!pred(v) && std::chrono::steady_clock::now() < end) {
-        std::this_thread::sleep_for(50ms);  // poll interval of the bounded wait
-        v = stats_counter(pose_port, name);
-    }
+    std::uint64_t v = 0;
+    wait_until(
+        [&] {
+            v = stats_counter(pose_port, name);
+            return pred(v);
+        },
+        limit);
     return v;
 }
 
