@@ -329,7 +329,11 @@ CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
     CLI::App* cmd =
         app.add_subcommand("stream", "Act as K sink nodes with simulated sensor nodes, streaming to mocapd");
     cmd->add_option("--connect", o.connect, "mocapd sink port, HOST:PORT")->required();
-    cmd->add_option("--subjects", o.subjects, "Subjects = sinks, sink ids 1..K")
+    cmd->add_option("--subjects", o.subjects, "Subjects = sinks, sink ids FIRST..FIRST+K-1")
+        ->check(CLI::Range(1, 255))
+        ->capture_default_str();
+    cmd->add_option("--first-sink-id", o.first_sink_id,
+                    "FIRST: sink id of the first sink (several simulators, one per host, ids apart)")
         ->check(CLI::Range(1, 255))
         ->capture_default_str();
     cmd->add_option("--nodes", o.nodes, "Sensor nodes per subject (first N segments of the body)")
@@ -379,6 +383,11 @@ int run_stream_command(const StreamCommandOptions& o) {
         std::fprintf(stderr, "mocap-sim stream: --jitter-us must be shorter than one sample period\n");
         return 2;
     }
+    if (o.first_sink_id + o.subjects - 1 > 255) {
+        std::fprintf(stderr, "mocap-sim stream: sink ids end at 255: --first-sink-id + --subjects - 1 is %d\n",
+                     o.first_sink_id + o.subjects - 1);
+        return 2;
+    }
     for (const std::string& text : o.dropouts) {
         NodeDropout d;
         if (!parse_dropout(text, &d, &error)) {
@@ -415,8 +424,8 @@ int run_stream_command(const StreamCommandOptions& o) {
     }
 
     std::vector<std::unique_ptr<SimSink>> sinks;
-    for (int k = 1; k <= o.subjects; ++k)
-        sinks.push_back(std::make_unique<SimSink>(shared, k, peer));
+    for (int k = 0; k < o.subjects; ++k)
+        sinks.push_back(std::make_unique<SimSink>(shared, o.first_sink_id + k, peer));
 
     g_stop.store(false);
     std::signal(SIGINT, on_stop_signal);

@@ -52,6 +52,7 @@ namespace mocap::sim {
 struct StreamCommandOptions {
     std::string connect;
     int subjects = 1;
+    int first_sink_id = 1;  ///< sinks get ids first_sink_id .. first_sink_id + subjects - 1
     int nodes = 15;
     int rate_hz = 100;
     std::string mode = "raw";
