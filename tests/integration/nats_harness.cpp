@@ -1,6 +1,7 @@
 #include "nats_harness.hpp"
 
 #include <gtest/gtest.h>
+#include <nats/nats.h>
 #include <unistd.h>
 
 #include <sstream>
@@ -21,12 +22,55 @@ const char* nats_server_bin() {
 }
 
 std::unique_ptr<Process> start_nats(std::uint16_t port, const std::string& log, const std::vector<std::string>& extra) {
-    std::vector<std::string> argv{NATS_SERVER_BIN, "-a",      "127.0.0.1", "-p",         std::to_string(port),
-                                  "--user",        kNatsUser, "--pass",    kNatsPassword};
+    return start_nats_as(port, kNatsUser, kNatsPassword, log, extra);
+}
+
+std::unique_ptr<Process> start_nats_as(std::uint16_t port, const std::string& user, const std::string& password,
+                                       const std::string& log, const std::vector<std::string>& extra) {
+    std::vector<std::string> argv{NATS_SERVER_BIN, "-a", "127.0.0.1", "-p",    std::to_string(port),
+                                  "--user",        user, "--pass",    password};
     argv.insert(argv.end(), extra.begin(), extra.end());
     auto p = std::make_unique<Process>(argv, log);
     EXPECT_TRUE(wait_for_port(port, 15s)) << p->log();
     return p;
+}
+
+NatsSubscriber::NatsSubscriber(std::uint16_t port, const std::string& subject, const std::string& user,
+                               const std::string& password) {
+    natsOptions* o = nullptr;
+    EXPECT_EQ(natsOptions_Create(&o), NATS_OK);
+    const std::string url = "nats://127.0.0.1:" + std::to_string(port);
+    natsOptions_SetURL(o, url.c_str());
+    natsOptions_SetUserInfo(o, user.c_str(), password.c_str());
+    natsOptions_SetMaxReconnect(o, -1);
+    natsOptions_SetReconnectWait(o, 100);
+    EXPECT_EQ(natsConnection_Connect(&nc_, o), NATS_OK);
+    natsOptions_Destroy(o);
+    EXPECT_EQ(natsConnection_SubscribeSync(&sub_, nc_, subject.c_str()), NATS_OK);
+    natsSubscription_SetPendingLimits(sub_, 1 << 20, 1 << 30);
+    EXPECT_EQ(natsConnection_FlushTimeout(nc_, 5000), NATS_OK);
+}
+
+NatsSubscriber::~NatsSubscriber() {
+    natsSubscription_Destroy(sub_);
+    natsConnection_Close(nc_);
+    natsConnection_Destroy(nc_);
+}
+
+std::optional<std::pair<std::string, std::string>> NatsSubscriber::next(std::chrono::milliseconds timeout) {
+    natsMsg* m = nullptr;
+    if (natsSubscription_NextMsg(&m, sub_, timeout.count()) != NATS_OK) return std::nullopt;
+    std::pair<std::string, std::string> out{natsMsg_GetSubject(m),
+                                            std::string(natsMsg_GetData(m), natsMsg_GetDataLength(m))};
+    natsMsg_Destroy(m);
+    return out;
+}
+
+v1::SkeletonFrame decode_pose_payload(const std::string& payload) {
+    v1::ServerMessage m;
+    EXPECT_TRUE(m.ParseFromString(payload)) << "payload must be a mocap.v1.ServerMessage without a prefix";
+    EXPECT_TRUE(m.has_frame());
+    return m.frame();
 }
 
 std::string cluster_section(std::uint16_t nats_port, const std::string& site, const std::string& host_id,

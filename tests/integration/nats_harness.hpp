@@ -1,17 +1,24 @@
 // nats_harness.hpp — what the cluster integration tests share (cluster_test.cpp,
-// jetstream_test.cpp): a real nats-server on a loopback port with a user and password, the
-// [cluster] config section that reaches it, and mocapd's counters read through the Stats
-// request of its pose service.
+// cluster_ha_test.cpp, cluster_faults_test.cpp, jetstream_test.cpp): a real nats-server on a
+// loopback port with a user and password, the [cluster] config section that reaches it, a
+// test-side subscriber (the C client), and mocapd's counters read through the Stats request
+// of its pose service.
 #pragma once
 
 #include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "harness.hpp"
+#include "mocap/v1/mocap.pb.h"
+
+struct __natsConnection;    // NOLINT(bugprone-reserved-identifier): libnats names its types so
+struct __natsSubscription;  // NOLINT(bugprone-reserved-identifier): libnats names its types so
 
 namespace mocap::itest {
 
@@ -27,6 +34,30 @@ const char* nats_server_bin();
 /// {"-js", "-sd", dir} for JetStream); returns once it accepts connections (EXPECTs that).
 std::unique_ptr<Process> start_nats(std::uint16_t port, const std::string& log,
                                     const std::vector<std::string>& extra = {});
+/// The same with other credentials (a server that refuses mocapd's password).
+std::unique_ptr<Process> start_nats_as(std::uint16_t port, const std::string& user, const std::string& password,
+                                       const std::string& log, const std::vector<std::string>& extra = {});
+
+/// Every message of one subject pattern on one server, kept in order by the client library.
+class NatsSubscriber {
+public:
+    NatsSubscriber(std::uint16_t port, const std::string& subject, const std::string& user = kNatsUser,
+                   const std::string& password = kNatsPassword);
+    ~NatsSubscriber();
+    NatsSubscriber(const NatsSubscriber&) = delete;
+    NatsSubscriber& operator=(const NatsSubscriber&) = delete;
+
+    /// The next message (subject, payload), or nothing within `timeout`.
+    std::optional<std::pair<std::string, std::string>> next(std::chrono::milliseconds timeout);
+
+private:
+    __natsConnection* nc_ = nullptr;
+    __natsSubscription* sub_ = nullptr;
+};
+
+/// The SkeletonFrame of a pose-subject payload (a ServerMessage without a length prefix);
+/// a test failure when it is not one.
+v1::SkeletonFrame decode_pose_payload(const std::string& payload);
 
 /// "[cluster]" with nats_url on the port, site, host_id, queue_frames = 64, then `more`
 /// (credentials and other keys, one per line).

@@ -1,0 +1,272 @@
+// A site on a real three-server NATS cluster (docs/cluster.md): three nats-server processes
+// routed into one cluster on loopback ports, two mocapd hosts each fed by its own simulated
+// sinks (sink ids 1-2 and 3-4), both publishing through server 0. A subscriber on another
+// server sees every subject of the site in one stream; killing server 0 moves both hosts to
+// the servers they learned from it, and each subscriber loses at most a second of frames.
+#include <gtest/gtest.h>
+#include <nats/nats.h>
+
+#include <atomic>
+#include <csignal>
+#include <iostream>
+#include <map>
+#include <mutex>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "harness.hpp"
+#include "nats_harness.hpp"
+#include "pose_client.hpp"
+
+namespace mocap::itest {
+namespace {
+
+using namespace std::chrono_literals;
+
+constexpr const char* kUser = kNatsUser;
+constexpr const char* kPassword = kNatsPassword;
+constexpr const char* kSite = "hall";
+constexpr int kRateHz = 100;
+
+/// Every pose frame one subscriber gets, per subject, from a thread of its own.
+class Collector {
+public:
+    Collector(std::uint16_t port, const std::string& subject) : sub_(port, subject), thread_([this] { run(); }) {}
+    ~Collector() { stop(); }
+    Collector(const Collector&) = delete;
+    Collector& operator=(const Collector&) = delete;
+
+    void stop() {
+        stop_ = true;
+        if (thread_.joinable()) thread_.join();
+    }
+    /// SYNCs received per subject so far.
+    std::map<std::uint32_t, std::vector<std::uint64_t>> syncs() {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        return syncs_;
+    }
+    /// True once every subject in `subjects` has a frame with SYNC above its `after` entry
+    /// (0 when absent) and at least `n` frames in all.
+    bool each_has(const std::set<std::uint32_t>& subjects, std::size_t n,
+                  const std::map<std::uint32_t, std::uint64_t>& after = {}) {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        for (std::uint32_t s : subjects) {
+            const auto it = syncs_.find(s);
+            if (it == syncs_.end() || it->second.size() < n) return false;
+            const auto a = after.find(s);
+            if (a != after.end() && it->second.back() <= a->second) return false;
+        }
+        return true;
+    }
+
+private:
+    void run() {
+        while (!stop_) {
+            auto m = sub_.next(200ms);
+            if (!m) continue;
+            const v1::SkeletonFrame f = decode_pose_payload(m->second);
+            EXPECT_EQ(m->first, std::string("mocap.") + kSite + "." + std::to_string(f.subject_id()) + ".pose");
+            EXPECT_EQ(f.segment_count(), 15u);
+            const std::lock_guard<std::mutex> lock(mutex_);
+            syncs_[f.subject_id()].push_back(f.sync());
+        }
+    }
+
+    NatsSubscriber sub_;
+    std::mutex mutex_;
+    std::map<std::uint32_t, std::vector<std::uint64_t>> syncs_;
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+/// The largest number of frames one SYNC jump skipped, and whether SYNC only grew.
+std::pair<std::uint64_t, bool> largest_gap(const std::vector<std::uint64_t>& v) {
+    std::uint64_t worst = 0;
+    bool increasing = true;
+    for (std::size_t i = 1; i < v.size(); ++i) {
+        if (v[i] <= v[i - 1]) {
+            increasing = false;
+            continue;
+        }
+        worst = std::max(worst, v[i] - v[i - 1] - 1);
+    }
+    return {worst, increasing};
+}
+
+class ThreeServerCluster : public ::testing::Test {
+protected:
+    struct Host {
+        std::uint16_t sink_port = 0, pose_port = 0;
+        std::unique_ptr<Process> daemon, sim;
+    };
+
+    void SetUp() override {
+        if (!have_nats_server())
+            GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
+        for (int i = 0; i < 3; ++i) {
+            client_ports_[i] = free_port();
+            route_ports_[i] = free_port();
+        }
+        for (int i = 0; i < 3; ++i) {
+            std::vector<std::string> routes;
+            for (int j = 0; j < 3; ++j)
+                if (j != i) routes.push_back("nats://127.0.0.1:" + std::to_string(route_ports_[j]));
+            servers_[i] = start_nats(
+                client_ports_[i], dir_.file("nats" + std::to_string(i) + ".log"),
+                {"--cluster_name", "itest", "--cluster", "nats://127.0.0.1:" + std::to_string(route_ports_[i]),
+                 "--routes", routes[0] + "," + routes[1]});
+        }
+        ASSERT_TRUE(routed(0, 1) && routed(0, 2)) << "the three servers did not form one cluster:\n"
+                                                  << servers_[0]->log();
+        start_host(hosts_[0], "host-a", 1);
+        start_host(hosts_[1], "host-b", 3);
+    }
+
+    void TearDown() override {
+        for (Host& h : hosts_) {
+            if (h.sim) h.sim->stop();
+            if (!h.daemon) continue;
+            if (HasFailure()) std::cerr << "--- mocapd log ---\n" << h.daemon->log();
+            EXPECT_EQ(h.daemon->stop(10s), 0) << "mocapd must exit 0 on SIGTERM";
+        }
+    }
+
+    /// A message published on server `from` reaches a subscriber on server `to`: the routes
+    /// are up and interest has propagated.
+    bool routed(int from, int to) {
+        NatsSubscriber sub(client_ports_[to], "probe.routes");
+        natsOptions* o = nullptr;
+        natsConnection* nc = nullptr;
+        natsOptions_Create(&o);
+        const std::string url = "nats://127.0.0.1:" + std::to_string(client_ports_[from]);
+        natsOptions_SetURL(o, url.c_str());
+        natsOptions_SetUserInfo(o, kUser, kPassword);
+        const bool connected = natsConnection_Connect(&nc, o) == NATS_OK;
+        natsOptions_Destroy(o);
+        bool got = false;
+        for (auto end = std::chrono::steady_clock::now() + 30s;
+             connected && !got && std::chrono::steady_clock::now() < end;) {
+            natsConnection_PublishString(nc, "probe.routes", "ping");
+            natsConnection_FlushTimeout(nc, 2000);
+            got = sub.next(200ms).has_value();
+        }
+        natsConnection_Destroy(nc);
+        return got;
+    }
+
+    void start_host(Host& h, const std::string& host_id, int first_sink_id) {
+        h.sink_port = free_port();
+        h.pose_port = free_port();
+        std::ostringstream cfg;
+        cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
+            << "[ingest]\nsink_listen = \"127.0.0.1:" << h.sink_port << "\"\n"
+            << "[pipeline]\nworkers = 1\nmax_subjects = 4\n"
+            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
+            << "[serve]\npose_listen = \"127.0.0.1:" << h.pose_port << "\"\n"
+            << "[outputs]\nbvh_live = false\n[http]\nenabled = false\n"
+            << "[cluster]\nnats_url = \"nats://127.0.0.1:" << client_ports_[0] << "\"\nsite = \"" << kSite
+            << "\"\nhost_id = \"" << host_id << "\"\nuser = \"" << kUser << "\"\npassword = \"" << kPassword << "\"\n";
+        const std::string path = dir_.file(host_id + ".toml");
+        write_file(path, cfg.str());
+        h.daemon = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", path},
+                                             dir_.file(host_id + ".log"), dir_.path().string());
+        ASSERT_TRUE(wait_for_port(h.sink_port, 10s)) << h.daemon->log();
+        h.sim = std::make_unique<Process>(
+            std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(h.sink_port),
+                                     "--subjects", "2", "--first-sink-id", std::to_string(first_sink_id), "--nodes",
+                                     "15", "--mode", "quat", "--rate", std::to_string(kRateHz), "--duration", "90",
+                                     "--sink-rate-stats"},
+            dir_.file(host_id + ".sim.log"));
+    }
+
+    /// Stops both simulators (they print their stats on SIGTERM); the instants each skipped
+    /// when it ran late never existed, so a subscriber's gaps may be up to that many.
+    std::uint64_t stop_sims() {
+        std::uint64_t skipped = 0;
+        for (Host& h : hosts_) {
+            h.sim->stop();
+            skipped = std::max(skipped, sim_syncs_skipped(h.sim->log()).value_or(0));
+        }
+        return skipped;
+    }
+
+    std::uint64_t counter(const Host& h, const std::string& name) {
+        client::PoseClient c;
+        std::string err;
+        EXPECT_TRUE(c.connect("127.0.0.1", h.pose_port, 5s, err)) << err;
+        v1::Stats s;
+        EXPECT_TRUE(c.request_stats(s, 5s, err)) << err;
+        for (const auto& kv : s.counters())
+            if (kv.name() == name) return kv.value();
+        ADD_FAILURE() << "no counter " << name;
+        return 0;
+    }
+
+    TempDir dir_;
+    std::uint16_t client_ports_[3] = {}, route_ports_[3] = {};
+    std::unique_ptr<Process> servers_[3];
+    Host hosts_[2];
+    const std::set<std::uint32_t> subjects_{1, 2, 3, 4};
+};
+
+TEST_F(ThreeServerCluster, OneSubscriberSeesEverySubjectOfBothHostsAtItsRate) {
+    Collector poses(client_ports_[2], std::string("mocap.") + kSite + ".*.pose");
+    NatsSubscriber beats(client_ports_[1], std::string("mocap.") + kSite + ".host.*");
+    ASSERT_TRUE(wait_until([&] { return poses.each_has(subjects_, 3 * kRateHz); }, 60s))
+        << "every subject of both hosts, 3 s of frames each, through server 2";
+    const std::uint64_t skipped = stop_sims();
+    poses.stop();
+    for (const auto& [subject, v] : poses.syncs()) {
+        EXPECT_TRUE(subjects_.count(subject)) << "unexpected subject " << subject;
+        const auto [gap, increasing] = largest_gap(v);
+        EXPECT_TRUE(increasing) << "subject " << subject << ": each frame once, in order";
+        EXPECT_LE(gap, skipped) << "subject " << subject << ": every frame its sink sent";
+    }
+    std::set<std::string> hosts;
+    for (auto end = std::chrono::steady_clock::now() + 15s; hosts.size() < 2 && std::chrono::steady_clock::now() < end;)
+        if (auto m = beats.next(1000ms)) hosts.insert(m->first);
+    EXPECT_EQ(hosts, (std::set<std::string>{std::string("mocap.") + kSite + ".host.host-a",
+                                            std::string("mocap.") + kSite + ".host.host-b"}));
+}
+
+TEST_F(ThreeServerCluster, KillingTheHostsServerCostsEachSubscriberAtMostASecond) {
+    Collector on1(client_ports_[1], std::string("mocap.") + kSite + ".*.pose");
+    Collector on2(client_ports_[2], std::string("mocap.") + kSite + ".*.pose");
+    ASSERT_TRUE(wait_until([&] { return on1.each_has(subjects_, kRateHz) && on2.each_has(subjects_, kRateHz); }, 60s));
+
+    // Both hosts publish through server 0; it dies without a word.
+    std::map<std::uint32_t, std::uint64_t> at_kill;
+    for (const auto& [subject, v] : on1.syncs())
+        at_kill[subject] = v.back();
+    servers_[0]->signal(SIGKILL);
+    ASSERT_TRUE(servers_[0]->wait(10s)) << "nats-server 0 did not die";
+
+    // The hosts move to servers 1 and 2 (learned from server 0 when they connected) and
+    // frames flow again: two more seconds of every subject on both subscribers.
+    std::map<std::uint32_t, std::uint64_t> later;
+    for (const auto& [subject, sync] : at_kill)
+        later[subject] = sync + 2 * kRateHz;
+    EXPECT_TRUE(wait_until([&] { return on1.each_has(subjects_, 0, later) && on2.each_has(subjects_, 0, later); }, 60s))
+        << "frames must flow again through the other servers";
+    for (const Host& h : hosts_)
+        EXPECT_GE(counter(h, "cluster.reconnects"), 1u);
+    const std::uint64_t skipped = stop_sims();
+    on1.stop();
+    on2.stop();
+    std::uint64_t worst = 0;
+    for (Collector* c : {&on1, &on2}) {
+        for (const auto& [subject, v] : c->syncs()) {
+            const auto [gap, increasing] = largest_gap(v);
+            worst = std::max(worst, gap);
+            EXPECT_TRUE(increasing) << "subject " << subject;
+            EXPECT_LE(gap, static_cast<std::uint64_t>(kRateHz) + skipped)
+                << "subject " << subject << ": at most 1 s of frames lost when a server dies";
+        }
+    }
+    std::cout << "[ metrics  ] server killed: largest gap " << worst << " frames at " << kRateHz
+              << " Hz (simulator skipped " << skipped << ")\n";
+}
+
+}  // namespace
+}  // namespace mocap::itest
