@@ -25,7 +25,7 @@ struct NatsClientState {
     std::size_t max_latencies = 0;
     std::vector<std::uint32_t> subject_ids;  // empty = all
     std::uint64_t undecodable = 0;
-    const std::atomic<bool>* counting = nullptr;  // false once the window closed
+    const std::atomic<bool>* counting = nullptr;  // true during the measured window only
     natsConnection* connection = nullptr;
     std::vector<natsSubscription*> subscriptions;
 };
@@ -89,7 +89,8 @@ LoadResult run_nats_load(const NatsOptions& nats, const LoadOptions& options) {
     (void)nats_SetMessageDeliveryPoolSize(2);
     std::vector<std::unique_ptr<NatsClientState>> states;
     std::vector<bool> subscribed;
-    std::atomic<bool> counting{true};
+    // Frames count from the moment every client is subscribed, as the window is measured.
+    std::atomic<bool> counting{false};
     for (std::size_t i = 0; i < options.clients; ++i) {
         auto s = std::make_unique<NatsClientState>();
         s->decimation = std::max<std::uint32_t>(options.decimation, 1);
@@ -105,6 +106,7 @@ LoadResult run_nats_load(const NatsOptions& nats, const LoadOptions& options) {
         }
         states.push_back(std::move(s));
     }
+    counting.store(true);
     const auto start = std::chrono::steady_clock::now();
     std::this_thread::sleep_for(options.duration);  // the measurement window: callbacks count meanwhile
     result.duration_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -8,9 +8,10 @@ raw nodes at 100 Hz) for the whole run. Then, for each round and each client cou
 alternating order: `mocap-client load --clients C` on the pose service and
 `mocap-client --nats URL load --clients C` on the cluster, each for --seconds. Per transport
 and C the table shows medians over the rounds: frames per client per second, gaps, drops
-and the latency from the frame's sink_send_us to the client's receive (p50, p99). Before the
-loads, one quiet window measures what the publisher puts on the wire: messages and bytes per
-subject per second (nats-server /varz in_msgs / in_bytes, heartbeats included).
+and the latency from the frame's sink_send_us to the client's receive (p50, p99), and for
+the NATS runs the CPU nats-server spent per message it delivered (/proc, /varz out_msgs).
+Before the loads, one quiet window measures what the publisher puts on the wire: messages and
+bytes per subject per second (nats-server /varz in_msgs / in_bytes, heartbeats included).
 
 Usage (Release build; nats-server from Debian):
     tests/bench/cluster_bench.py --bin build [--subjects 4] [--clients 1,10,100] [--rounds 3] [--seconds 6]
@@ -28,7 +29,7 @@ import time
 import urllib.request
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from load_run import find_binary, free_port, loadavg, raise_nofile, stop, wait_for_port  # noqa: E402
+from load_run import find_binary, free_port, loadavg, proc_cpu_s, raise_nofile, stop, wait_for_port  # noqa: E402
 
 USER, PASSWORD, SITE = "mocap", "bench-pw", "bench"
 
@@ -140,7 +141,12 @@ def main():
             for c in counts:
                 order = ("direct", "nats") if rnd % 2 == 0 else ("nats", "direct")
                 for transport in order:
+                    v_before, cpu_before = varz(monitor_port), proc_cpu_s(nats.pid)
                     r = load(bins, transport, pose_port, nats_port, c, args.seconds)
+                    v_after, cpu_after = varz(monitor_port), proc_cpu_s(nats.pid)
+                    # What nats-server spent per message it delivered (publisher input included).
+                    out = v_after["out_msgs"] - v_before["out_msgs"]
+                    r["server_us_per_msg"] = (cpu_after - cpu_before) * 1e6 / out if out > 1000 else None
                     results.setdefault((transport, c), []).append(r)
                     print(f"round {rnd + 1} {transport:6} {c:5} clients: p50 {fmt(r['p50_ms'])} ms, "
                           f"p99 {fmt(r['p99_ms'])} ms, gaps {r['gaps']}, drops {r['drops']}", file=sys.stderr)
@@ -153,8 +159,9 @@ def main():
           f"point, transports alternating; load average at the end {la:.2f}\n")
     print(f"Publisher on the wire: {msgs_per_subject:.1f} messages and {bytes_per_subject / 1000:.1f} kB per "
           f"subject per second ({bytes_per_subject * 8 / 1e6:.3f} Mbit/s per subject, heartbeats included)\n")
-    print("| transport | clients | frames/s per client | gaps | drops | p50 ms | p99 ms | p99 NATS / direct |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("| transport | clients | frames/s per client | gaps | drops | p50 ms | p99 ms | p99 NATS / direct "
+          "| nats-server µs CPU per delivered message |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for c in counts:
         for transport in ("direct", "nats"):
             rs = results[(transport, c)]
@@ -165,7 +172,8 @@ def main():
                 ratio = fmt(n / d if d and n else None)
             print(f"| {transport} | {c} | {fmt(rate, '.1f')} | {med([r['gaps'] for r in rs]):g} | "
                   f"{med([r['drops'] for r in rs]):g} | {fmt(med([r['p50_ms'] for r in rs]))} | "
-                  f"{fmt(med([r['p99_ms'] for r in rs]))} | {ratio} |")
+                  f"{fmt(med([r['p99_ms'] for r in rs]))} | {ratio} | "
+                  f"{fmt(med([r['server_us_per_msg'] for r in rs]) if transport == 'nats' else None)} |")
     return 0
 
 
