@@ -104,16 +104,29 @@ bool ClusterPublisher::start(std::string* error) {
     // stop() waits for this last one before `this` may go away.
     (void)natsOptions_SetClosedCB(options_, &ClusterPublisher::on_closed, this);
     // A cluster unreachable at start is retried like a lost one: the local pose service runs.
-    (void)natsOptions_SetRetryOnFailedConnect(options_, true, &ClusterPublisher::on_connected, this);
-
-    const natsStatus s = natsConnection_Connect(&connection_, options_);
+    // The first attempt is made without the retry so that its reason (refused credentials,
+    // nothing listening, TLS) reaches the log; the retrying client would only say "not yet
+    // connected".
+    natsStatus s = natsConnection_Connect(&connection_, options_);
     if (s == NATS_OK) {
         connected_.store(true);
         spdlog::info("cluster: connected to {}; publishing on mocap.{}.<subject>.pose and .raw", c.nats_url, c.site);
-    } else if (s == NATS_NOT_YET_CONNECTED) {
-        spdlog::warn("cluster: {} not reachable yet; retrying in the background", c.nats_url);
     } else {
-        return nats_ok(s, ("connect to " + c.nats_url).c_str(), error);
+        // The library's text is "(file.c:line): what the server said"; keep what it said.
+        std::string detail = nats_GetLastError(nullptr) != nullptr ? nats_GetLastError(nullptr) : "";
+        if (const auto at = detail.find("): "); detail.rfind('(', 0) == 0 && at != std::string::npos)
+            detail.erase(0, at + 3);
+        spdlog::warn("cluster: cannot connect to {}: {}{}{}; retrying in the background", c.nats_url,
+                     natsStatus_GetText(s), detail.empty() ? "" : ": ", detail);
+        connection_ = nullptr;
+        (void)natsOptions_SetRetryOnFailedConnect(options_, true, &ClusterPublisher::on_connected, this);
+        s = natsConnection_Connect(&connection_, options_);
+        if (s == NATS_OK) {
+            connected_.store(true);
+            spdlog::info("cluster: connected to {}", c.nats_url);
+        } else if (s != NATS_NOT_YET_CONNECTED) {
+            return nats_ok(s, ("connect to " + c.nats_url).c_str(), error);
+        }
     }
     if (!raw_.attach(connection_, error)) return false;
     started_us_ = config_.wall_clock_us();
@@ -192,8 +205,17 @@ void ClusterPublisher::run() {
         // drained every kRawDrain, so a message carries ~kRawDrain of one subject's samples.
         auto until =
             up ? std::min(next_heartbeat, next_raw) : std::min(next_heartbeat, Clock::now() + kDisconnectedPoll);
-        wake_.wait_until(lock, until, [&] { return stopping_ || (connected_.load() && !queue_.empty()); });
+        wake_.wait_until(lock, until, [&] { return stopping_ || closed_ || (connected_.load() && !queue_.empty()); });
         if (stopping_) break;
+        if (closed_) {
+            // The client gave up (it closes a connection the server refused twice for the
+            // same reason, e.g. credentials): open a new one, as an operator would restart.
+            lock.unlock();
+            reopen();
+            lock.lock();
+            was_up = false;
+            continue;
+        }
         if (connected_.load() && Clock::now() >= next_raw) {
             lock.unlock();
             raw_.publish_queued();
@@ -218,6 +240,41 @@ void ClusterPublisher::run() {
             next_heartbeat += kHeartbeat;
             if (next_heartbeat < now) next_heartbeat = now + kHeartbeat;  // after a long stall
         }
+    }
+}
+
+void ClusterPublisher::reopen() {
+    constexpr auto kReopenWait = std::chrono::seconds(2);
+    constexpr std::uint64_t kLogEvery = 30;  // a refusal that lasts is logged once a minute
+    if (reopens_++ % kLogEvery == 0) {
+        const char* why = nullptr;
+        (void)natsConnection_GetLastError(connection_, &why);
+        spdlog::warn("cluster: the NATS client closed its connection to {} ({}); connecting again every {} s",
+                     config_.nats_url, why != nullptr && *why != '\0' ? why : "no reason given", kReopenWait.count());
+    }
+    std::unique_lock lock(mutex_);
+    while (!stopping_) {
+        // Wait first: a server that refuses us is not asked again at once (stop() cuts it short).
+        if (wake_.wait_for(lock, kReopenWait, [this] { return stopping_; })) return;
+        lock.unlock();
+        raw_.detach();                        // its JetStream context belongs to the old connection
+        natsConnection_Destroy(connection_);  // its closed callback has run (closed_ is set)
+        connection_ = nullptr;
+        lock.lock();
+        closed_ = false;
+        lock.unlock();
+        const natsStatus s = natsConnection_Connect(&connection_, options_);
+        if (s == NATS_OK || s == NATS_NOT_YET_CONNECTED) {
+            std::string error;
+            if (!raw_.attach(connection_, &error)) spdlog::error("cluster: raw samples: {}", error);
+        }
+        lock.lock();
+        if (s == NATS_OK) {
+            connected_.store(true);
+            spdlog::info("cluster: connected to {}", config_.nats_url);
+        }
+        if (s == NATS_OK || s == NATS_NOT_YET_CONNECTED) return;
+        connection_ = nullptr;  // not even started (it did not retry): wait and try again
     }
 }
 

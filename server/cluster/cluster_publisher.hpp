@@ -78,6 +78,8 @@ private:
     static void on_connected(__natsConnection* nc, void* self);
     static void on_closed(__natsConnection* nc, void* self);
     void run();
+    /// Publisher thread: replaces a connection the client closed for good.
+    void reopen();
     void publish_frames(std::vector<Queued>& batch);
     void publish_heartbeat(std::int64_t now_us, double interval_s);
 
@@ -99,6 +101,7 @@ private:
     // Heartbeat rates (publisher thread only): frames per subject since the last heartbeat.
     std::vector<std::pair<std::uint32_t, std::uint64_t>> subject_frames_;
     std::int64_t started_us_ = 0;
+    std::uint64_t reopens_ = 0;  // publisher thread only
 
     Counter frames_queued_;     // assembler thread
     Counter frames_dropped_;    // assembler thread (drop-oldest)

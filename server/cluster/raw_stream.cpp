@@ -242,6 +242,11 @@ void RawStreamPublisher::on_ack(jsCtx* /*js*/, natsMsg* msg, jsPubAck* pa, jsPub
     natsMsg_Destroy(msg);
 }
 
+void RawStreamPublisher::detach() {
+    release_context();
+    stream_ready_ = false;
+}
+
 void RawStreamPublisher::finish(bool connected, std::int64_t wait_ms) {
     if (js_ == nullptr) return;
     if (connected) {
@@ -252,6 +257,15 @@ void RawStreamPublisher::finish(bool connected, std::int64_t wait_ms) {
         if (js_PublishAsyncComplete(js_, &po) != NATS_OK)
             spdlog::warn("cluster: raw samples still unacknowledged after {} ms at stop", wait_ms);
     }
+    release_context();
+    std::lock_guard lock(queue_mutex_);
+    samples_dropped_.add(queue_.size());  // a stop without a connection: never published
+    queue_.clear();
+    queued_.store(0, std::memory_order_relaxed);
+}
+
+void RawStreamPublisher::release_context() {
+    if (js_ == nullptr) return;
     // What is still pending gets no callback any more: count it and free it. (The client
     // makes its table of pending messages at the first asynchronous publish and must not be
     // asked before.)
@@ -269,10 +283,7 @@ void RawStreamPublisher::finish(bool connected, std::int64_t wait_ms) {
     }
     jsCtx_Destroy(js_);
     js_ = nullptr;
-    std::lock_guard lock(queue_mutex_);
-    samples_dropped_.add(queue_.size());  // a stop without a connection: never published
-    queue_.clear();
-    queued_.store(0, std::memory_order_relaxed);
+    published_ = false;
 }
 
 void RawStreamPublisher::register_metrics(MetricsRegistry& registry) const {

@@ -85,6 +85,10 @@ public:
     void publish_queued();
     /// Publisher thread: the connection was lost; check the stream again when it is back.
     void connection_lost() { stream_ready_ = false; }
+    /// Publisher thread, before a connection the client closed is destroyed: what it still
+    /// owed an acknowledgement is counted as failed and the context is freed; the queue stays
+    /// for the next attach().
+    void detach();
     /// Set-up thread, after the publisher thread stopped and before the connection closes:
     /// publishes what is queued (when `connected`), waits up to `wait_ms` for outstanding
     /// acknowledgements, counts the rest as failed, frees the context.
@@ -99,6 +103,8 @@ private:
     };
     static void on_ack(__jsCtx* js, __natsMsg* msg, jsPubAck* pa, jsPubAckErr* pae, void* self);
     bool ensure_stream();
+    /// Counts what the context still owes an acknowledgement as failed and frees it.
+    void release_context();
     void send(const std::string& subject, const std::string& payload, std::uint32_t samples);
 
     RawStreamConfig config_;

@@ -155,7 +155,8 @@ TEST_F(Cluster, EveryFrameIsPublishedOnItsSubjectWithMonotonicSyncAndAHeartbeatE
     const std::uint64_t skipped = sim_syncs_skipped(s->log()).value_or(0);
     ASSERT_EQ(syncs.size(), 2u);
     for (const auto& [subject, v] : syncs) {
-        EXPECT_GE(v.size(), 300u) << "subject " << subject << ": ~4 s at 100 Hz";
+        // A sanity bound (a starved machine sends fewer of the 4 s); completeness is the gap check.
+        EXPECT_GE(v.size(), 100u) << "subject " << subject << ": at least 1 s of the 4 s run";
         std::uint64_t gaps = 0;
         for (std::size_t i = 1; i < v.size(); ++i) {
             ASSERT_GT(v[i], v[i - 1]) << "subject " << subject << ": sync must increase";
