@@ -96,6 +96,10 @@ bool ClusterPublisher::start(std::string* error) {
     (void)natsOptions_SetMaxReconnect(options_, -1);
     (void)natsOptions_SetReconnectWait(options_, c.reconnect_wait_ms);
     (void)natsOptions_SetReconnectBufSize(options_, 0);
+    // Write each frame at once instead of letting the client's flusher gather them: the
+    // gathering cost ~1 ms at p50 (measured: 1.42 -> 0.62 ms, docs/cluster.md); one write per
+    // frame is 5 000 writes/s at 50 subjects, on this thread, not the pipeline's.
+    (void)natsOptions_SetSendAsap(options_, true);
     (void)natsOptions_SetPingInterval(options_, 1000);
     (void)natsOptions_SetMaxPingsOut(options_, 2);
     (void)natsOptions_SetDisconnectedCB(options_, &ClusterPublisher::on_disconnected, this);
