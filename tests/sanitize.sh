@@ -3,7 +3,7 @@
 #
 #   asan  -DMOCAP_SANITIZE=address,undefined, whole project; the whole ctest suite except the
 #         SocketCAN VM test, the ARM cross-compiles and static analysis (they run no
-#         instrumented host code of ours).
+#         instrumented host code of ours) and the descriptor-exhaustion test (see run_asan).
 #         The fuzz replay test runs here too, so every seed and regression input is
 #         replayed under ASan/UBSan built by g++ as well.
 #   tsan  -DMOCAP_SANITIZE=thread; the threaded code's tests: core (rings, worker pool,
@@ -74,7 +74,12 @@ run_asan() {
     phase "asan configure" configure "$b" address,undefined
     # -k: a target that fails to build does not stop the others (the failure is reported).
     phase "asan build" cmake --build "$b" -j"$jobs" -- -k
-    phase "asan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -E 'socketcan_vm|_arm_|static_analysis'"
+    # The descriptor-exhaustion test is left to the plain and TSan runs: g++ links UBSan as a
+    # separate runtime that starts on its first check of a new dynamic type and probes object
+    # memory through a pipe, so with every descriptor in use (the point of that test) it calls
+    # a valid protobuf message a bad one. No UBSan option avoids it (its suppression file is
+    # opened at that same moment).
+    phase "asan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -E 'socketcan_vm|_arm_|static_analysis|AcceptBacksOffWhenDescriptorsRunOut'"
 }
 
 run_tsan() {
