@@ -319,7 +319,9 @@ TEST(BvhRecorderDiskFull, AFullDiskStopsTheRecordingWithWholeLinesAndTheStopRepl
     ASSERT_TRUE(wait_until([&] { return counter(g, "frames_recorded") == 5; }));
     const auto size = fs::file_size(path);
     disk.capacity = static_cast<std::int64_t>(size + 600);  // a line is ~400 bytes: 1.5 lines fit
+    disk.hold = true;  // all 10 frames are published while the recording still runs
     publish_frames(rec, encoder, 5, 10);
+    disk.hold = false;
     ASSERT_TRUE(wait_until([&] { return !rec.recording(); })) << "the recording stops on ENOSPC";
     publish_frames(rec, encoder, 15, 5);  // not recording any more: ignored
     std::uint64_t frames = 0;

@@ -8,10 +8,12 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <limits>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -91,6 +93,8 @@ inline std::vector<std::string> raw_files(const fs::path& dir) {
 class FillingDisk final : public FileWriter {
 public:
     ssize_t pwrite(int fd, const void* data, std::size_t n, off_t offset) override {
+        while (hold.load())  // the test is still publishing: the writer waits here
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
         const auto cap = static_cast<off_t>(capacity.load());
         if (offset >= cap) {
             full_hits.fetch_add(1);
@@ -108,6 +112,9 @@ public:
 
     std::atomic<std::int64_t> capacity{std::numeric_limits<std::int64_t>::max()};
     std::atomic<std::size_t> max_chunk{std::numeric_limits<std::size_t>::max()};
+    /// While true every write waits: frames published meanwhile all reach the recorder
+    /// before its writer can fail, however slowly the machine runs.
+    std::atomic<bool> hold{false};
     std::atomic<int> full_hits{0};
     std::atomic<int> truncations{0};
 };
