@@ -30,53 +30,6 @@ constexpr const char* kPassword = kNatsPassword;
 constexpr const char* kSite = "itest";
 constexpr const char* kHost = "rack1";
 
-/// A test-side NATS subscriber: every message of one subject pattern, kept in order.
-class Subscriber {
-public:
-    Subscriber(std::uint16_t port, const std::string& subject) {
-        natsOptions* o = nullptr;
-        EXPECT_EQ(natsOptions_Create(&o), NATS_OK);
-        const std::string url = "nats://127.0.0.1:" + std::to_string(port);
-        natsOptions_SetURL(o, url.c_str());
-        natsOptions_SetUserInfo(o, kUser, kPassword);
-        natsOptions_SetMaxReconnect(o, -1);
-        natsOptions_SetReconnectWait(o, 100);
-        EXPECT_EQ(natsConnection_Connect(&nc_, o), NATS_OK);
-        natsOptions_Destroy(o);
-        EXPECT_EQ(natsConnection_SubscribeSync(&sub_, nc_, subject.c_str()), NATS_OK);
-        natsSubscription_SetPendingLimits(sub_, 1 << 20, 1 << 30);
-        EXPECT_EQ(natsConnection_FlushTimeout(nc_, 5000), NATS_OK);
-    }
-    ~Subscriber() {
-        natsSubscription_Destroy(sub_);
-        natsConnection_Close(nc_);
-        natsConnection_Destroy(nc_);
-    }
-    Subscriber(const Subscriber&) = delete;
-    Subscriber& operator=(const Subscriber&) = delete;
-
-    /// The next message (subject, payload), or nothing within `timeout`.
-    std::optional<std::pair<std::string, std::string>> next(std::chrono::milliseconds timeout) {
-        natsMsg* m = nullptr;
-        if (natsSubscription_NextMsg(&m, sub_, timeout.count()) != NATS_OK) return std::nullopt;
-        std::pair<std::string, std::string> out{natsMsg_GetSubject(m),
-                                                std::string(natsMsg_GetData(m), natsMsg_GetDataLength(m))};
-        natsMsg_Destroy(m);
-        return out;
-    }
-
-private:
-    natsConnection* nc_ = nullptr;
-    natsSubscription* sub_ = nullptr;
-};
-
-v1::SkeletonFrame decode_frame(const std::string& payload) {
-    v1::ServerMessage m;
-    EXPECT_TRUE(m.ParseFromString(payload)) << "payload must be a mocap.v1.ServerMessage without a prefix";
-    EXPECT_TRUE(m.has_frame());
-    return m.frame();
-}
-
 std::string cluster_section(std::uint16_t nats_port, const std::string& credentials) {
     return itest::cluster_section(nats_port, kSite, kHost, credentials);
 }
@@ -131,8 +84,8 @@ protected:
 };
 
 TEST_F(Cluster, EveryFrameIsPublishedOnItsSubjectWithMonotonicSyncAndAHeartbeatEachSecond) {
-    Subscriber poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
-    Subscriber beats(nats_port_, std::string("mocap.") + kSite + ".host." + kHost);
+    NatsSubscriber poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
+    NatsSubscriber beats(nats_port_, std::string("mocap.") + kSite + ".host." + kHost);
     auto s = sim(2, 4);
     std::map<std::uint32_t, std::vector<std::uint64_t>> syncs;
     const auto end = Clock::now() + 30s;
@@ -142,7 +95,7 @@ TEST_F(Cluster, EveryFrameIsPublishedOnItsSubjectWithMonotonicSyncAndAHeartbeatE
             if (!s->running()) break;
             continue;
         }
-        const v1::SkeletonFrame f = decode_frame(m->second);
+        const v1::SkeletonFrame f = decode_pose_payload(m->second);
         EXPECT_EQ(m->first, std::string("mocap.") + kSite + "." + std::to_string(f.subject_id()) + ".pose");
         EXPECT_EQ(f.segment_count(), 15u);
         EXPECT_EQ(f.q_world_segment_wxyz_size(), 60) << "every field is published";
@@ -219,7 +172,7 @@ TEST_F(Cluster, MocapClientCatReadsFromTheClusterInThePoseServiceFormat) {
 TEST_F(Cluster, MocapClientLoadMeasuresTheClusterPath) {
     auto s = sim(2, 30);
     // Frames flow before the measurement starts.
-    Subscriber poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
+    NatsSubscriber poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
     ASSERT_TRUE(poses.next(15s)) << "no frame on the cluster";
     const std::string out = dir_.file("load.json");
     Process load({"/bin/sh", "-c",
@@ -266,7 +219,7 @@ TEST_F(Cluster, ANatsClientFromNpmReadsEverySubjectOfTheSite) {
         std::string bytes(hex.size() / 2, '\0');
         for (std::size_t i = 0; i < bytes.size(); ++i)
             bytes[i] = static_cast<char>(std::stoi(hex.substr(2 * i, 2), nullptr, 16));
-        const v1::SkeletonFrame f = decode_frame(bytes);
+        const v1::SkeletonFrame f = decode_pose_payload(bytes);
         EXPECT_EQ(subject, std::string("mocap.") + kSite + "." + std::to_string(f.subject_id()) + ".pose");
         EXPECT_EQ(f.segment_count(), 15u);
         EXPECT_EQ(f.q_world_segment_wxyz_size(), 60);
@@ -280,7 +233,7 @@ TEST_F(Cluster, ANatsClientFromNpmReadsEverySubjectOfTheSite) {
 }
 
 TEST_F(Cluster, ALostClusterCostsThePoseServiceNothingAndPublishingResumes) {
-    Subscriber poses(nats_port_, std::string("mocap.") + kSite + ".1.pose");
+    NatsSubscriber poses(nats_port_, std::string("mocap.") + kSite + ".1.pose");
     client::PoseClient pose;
     std::string err;
     ASSERT_TRUE(pose.connect("127.0.0.1", pose_port_, 5s, err)) << err;
@@ -300,7 +253,7 @@ TEST_F(Cluster, ALostClusterCostsThePoseServiceNothingAndPublishingResumes) {
     for (auto end = Clock::now() + 15s; !m && Clock::now() < end;)
         m = poses.next(1000ms);
     ASSERT_TRUE(m) << "no frame on the cluster";
-    const std::uint64_t sync_before = decode_frame(m->second).sync();
+    const std::uint64_t sync_before = decode_pose_payload(m->second).sync();
 
     // The cluster dies: the publisher notices and drops (counted), the pipeline goes on.
     nats_->signal(SIGKILL);
@@ -320,7 +273,7 @@ TEST_F(Cluster, ALostClusterCostsThePoseServiceNothingAndPublishingResumes) {
     std::optional<std::uint64_t> sync_after;
     for (auto end = Clock::now() + 20s; !sync_after && Clock::now() < end;) {
         if (auto r = poses.next(1000ms)) {
-            const auto f = decode_frame(r->second);
+            const auto f = decode_pose_payload(r->second);
             if (f.sync() > sync_before + 100) sync_after = f.sync();
         }
     }
