@@ -1,5 +1,5 @@
 // raw_stream.hpp — durable takes: every raw sample of every subject to the JetStream stream
-// MOCAP_RAW (docs/cluster.md, "Durable takes (JetStream)"; payload in docs/client-protocol.md,
+// MOCAP_RAW (docs/outputs.md, "Durable takes (JetStream)"; payload in docs/client-protocol.md,
 // "Raw samples over JetStream"), so a take survives the host that recorded it.
 //
 //   stream    MOCAP_RAW, subjects mocap.<site>.*.raw, file storage, [cluster] raw_replicas

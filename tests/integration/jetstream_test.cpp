@@ -1,4 +1,4 @@
-// Durable takes (docs/cluster.md, "Durable takes (JetStream)") against a real nats-server with
+// Durable takes (docs/outputs.md, "Durable takes (JetStream)") against a real nats-server with
 // JetStream on a loopback port and a store in a temporary directory: mocapd publishes every
 // raw sample to the stream MOCAP_RAW, `mocapd --jetstream URL --subject N` reads the take
 // back and re-solves it exactly as `mocapd --replay FILE` does a raw recording; a host killed
