@@ -30,12 +30,12 @@ NatsPoseClient::~NatsPoseClient() {
 }
 
 void NatsPoseClient::close() {
+    // The connection closes first, so its reader thread has stopped delivering before the
+    // subscription is freed.
+    if (connection_) natsConnection_Close(connection_);
     if (poses_) natsSubscription_Destroy(poses_);
     poses_ = nullptr;
-    if (connection_) {
-        natsConnection_Close(connection_);
-        natsConnection_Destroy(connection_);
-    }
+    if (connection_) natsConnection_Destroy(connection_);
     connection_ = nullptr;
 }
 

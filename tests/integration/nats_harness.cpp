@@ -52,8 +52,11 @@ NatsSubscriber::NatsSubscriber(std::uint16_t port, const std::string& subject, c
 }
 
 NatsSubscriber::~NatsSubscriber() {
-    natsSubscription_Destroy(sub_);
+    // Close the connection first: its reader thread stops before the subscription it may be
+    // delivering to is freed (libnats 3.4 crashed in natsConn_processMsg once, under ASan,
+    // when the subscription went first while frames were still arriving).
     natsConnection_Close(nc_);
+    natsSubscription_Destroy(sub_);
     natsConnection_Destroy(nc_);
 }
 
