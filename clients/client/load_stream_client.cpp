@@ -23,6 +23,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/errno_text.hpp"
 #include "load_tally.hpp"
 
 namespace mocap::client {
@@ -57,11 +58,11 @@ int connect_to(const std::string& host, std::uint16_t port, std::chrono::millise
     }
     const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
     if (fd < 0) {
-        error = std::string("socket: ") + std::strerror(errno);
+        error = "socket: " + errno_text(errno);
         return -1;
     }
     if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 && errno != EINPROGRESS) {
-        error = std::string("connect: ") + std::strerror(errno);
+        error = "connect: " + errno_text(errno);
         ::close(fd);
         return -1;
     }
@@ -70,7 +71,7 @@ int connect_to(const std::string& host, std::uint16_t port, std::chrono::millise
     socklen_t len = sizeof err;
     if (::poll(&p, 1, static_cast<int>(timeout.count())) != 1 ||
         ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len) != 0 || err != 0) {
-        error = std::string("connect: ") + (err != 0 ? std::strerror(err) : "timed out");
+        error = "connect: " + (err != 0 ? errno_text(err) : std::string("timed out"));
         ::close(fd);
         return -1;
     }

@@ -424,6 +424,7 @@ int run_stream_command(const StreamCommandOptions& o) {
     }
 
     std::vector<std::unique_ptr<SimSink>> sinks;
+    sinks.reserve(static_cast<std::size_t>(o.subjects));
     for (int k = 0; k < o.subjects; ++k)
         sinks.push_back(std::make_unique<SimSink>(shared, o.first_sink_id + k, peer));
 

@@ -68,7 +68,7 @@ bool parse_rfc3339_us(std::string_view t, std::int64_t* us) {
         int oh = 0, om = 0;
         if (!num(i + 1, 2, &oh) || i + 3 >= t.size() || t[i + 3] != ':' || !num(i + 4, 2, &om) || oh > 23 || om > 59)
             return false;
-        offset_s = (t[i] == '-' ? -1 : 1) * (oh * 3600 + om * 60);
+        offset_s = (t[i] == '-' ? -1 : 1) * (static_cast<std::int64_t>(oh) * 3600 + static_cast<std::int64_t>(om) * 60);
         i += 6;
     } else {
         return false;  // RFC 3339 requires the offset
