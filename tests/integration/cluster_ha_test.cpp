@@ -17,7 +17,6 @@
 
 #include "harness.hpp"
 #include "nats_harness.hpp"
-#include "pose_client.hpp"
 
 namespace mocap::itest {
 namespace {
@@ -191,18 +190,6 @@ protected:
         return skipped;
     }
 
-    std::uint64_t counter(const Host& h, const std::string& name) {
-        client::PoseClient c;
-        std::string err;
-        EXPECT_TRUE(c.connect("127.0.0.1", h.pose_port, 5s, err)) << err;
-        v1::Stats s;
-        EXPECT_TRUE(c.request_stats(s, 5s, err)) << err;
-        for (const auto& kv : s.counters())
-            if (kv.name() == name) return kv.value();
-        ADD_FAILURE() << "no counter " << name;
-        return 0;
-    }
-
     TempDir dir_;
     std::uint16_t client_ports_[3] = {}, route_ports_[3] = {};
     std::unique_ptr<Process> servers_[3];
@@ -250,7 +237,7 @@ TEST_F(ThreeServerCluster, KillingTheHostsServerCostsEachSubscriberAtMostASecond
     EXPECT_TRUE(wait_until([&] { return on1.each_has(subjects_, 0, later) && on2.each_has(subjects_, 0, later); }, 60s))
         << "frames must flow again through the other servers";
     for (const Host& h : hosts_)
-        EXPECT_GE(counter(h, "cluster.reconnects"), 1u);
+        EXPECT_GE(stats_counter(h.pose_port, "cluster.reconnects"), 1u);
     const std::uint64_t skipped = stop_sims();
     on1.stop();
     on2.stop();
