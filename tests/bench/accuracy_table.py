@@ -1,15 +1,24 @@
 #!/usr/bin/env python3
-"""Accuracy table: every filter x the three simulated scenarios x several seeds, through the
-real command-line tools (mocap-sim csv, mocap-filter --eval). Writes docs/accuracy.md.
+"""Accuracy table: every filter x the three simulated scenarios x several seeds, and every filter x
+a directory of real recordings, through the real command-line tools (mocap-sim csv,
+mocap-filter --eval). Writes docs/accuracy.md.
 
     python3 tests/bench/accuracy_table.py [--build build] [--seeds 5] [--out docs/accuracy.md]
                                           [--filters a,b,...] [--scenarios a,b,...]
+                                          [--real DIR [--real-only]]
+
+--real DIR evaluates every *.csv and *.csv.gz of DIR (the mocap-filter CSV format with a
+reference) and writes the "Real recordings" section; --real-only recomputes only that section
+and keeps the rest of --out as it is. Without --real, an existing real-recordings section of
+--out is kept (the recordings are not in the repository).
 
 Python 3 standard library only. Runs one process at a time (about a minute on one core).
 Exit status 1 if a tool fails or a number is not finite.
 """
 
 import argparse
+import glob
+import gzip
 import json
 import math
 import os
@@ -79,9 +88,9 @@ class Tools:
                 + list(extra))
         return path
 
-    def evaluate(self, name, params, csv, frame):
+    def evaluate(self, name, params, csv, frame, skip_s=SKIP_S):
         cmd = [self.filt, "--filter", name, "--frame", frame, "--in", csv,
-               "--out", os.path.join(self.tmp, "est.csv"), "--eval", "--skip-seconds", str(SKIP_S)]
+               "--out", os.path.join(self.tmp, "est.csv"), "--eval", "--skip-seconds", str(skip_s)]
         for k, v in params.items():
             cmd += ["--param", "%s=%s" % (k, v)]
         self.runs += 1
@@ -140,7 +149,13 @@ def main():
     ap.add_argument("--out", default="docs/accuracy.md")
     ap.add_argument("--filters", default="", help="comma-separated subset (default: every name of mocap-filter --list)")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    ap.add_argument("--real", default="", metavar="DIR",
+                    help="directory of real recordings (*.csv, *.csv.gz in the mocap-filter format with a reference)")
+    ap.add_argument("--real-only", action="store_true", help="with --real: recompute only the real-recordings "
+                                                             "section of --out, keep the rest")
     args = ap.parse_args()
+    if args.real_only and not args.real:
+        ap.error("--real-only needs --real DIR")
 
     started = time.time()
     with tempfile.TemporaryDirectory(prefix="mocap_accuracy_") as tmp:
@@ -150,28 +165,181 @@ def main():
         unknown = [n for n in names if n not in available]
         if unknown:
             raise ToolError("unknown filter(s): %s (mocap-filter --list: %s)" % (", ".join(unknown), ", ".join(available)))
-        scenarios = [s for s in args.scenarios.split(",") if s]
-        seeds = list(range(1, args.seeds + 1))
 
-        table = {}  # (scenario, filter) -> [result per seed], default parameters
-        conv = {}   # (scenario, filter) -> [convergence time from the paper's start per seed]
-        for sc in scenarios:
-            frame = frame_of(sc)
-            for seed in seeds:
-                csv = tools.scenario(sc, seed, frame)
-                for name in names:
-                    table.setdefault((sc, name), []).append(tools.evaluate(name, {}, csv, frame))
-                    if "q0w" in available[name]:
-                        r = tools.evaluate(name, q0_params(paper_start_enu(sc)), csv, frame)
-                        conv.setdefault((sc, name), []).append(r)
-            print("%s done (%d runs, %.0f s)" % (sc, tools.runs, time.time() - started), file=sys.stderr)
+        previous = ""
+        if os.path.exists(args.out):
+            with open(args.out) as f:
+                previous = f.read()
+        real_runs = 0
+        if args.real:
+            real = real_table(tools, names, args.real)
+            real_runs = tools.runs
+            real_block = render_real(args, names, real)
+            print_real(names, real)
+        else:
+            real_block = extract_block(previous)
 
-        study = fourati_study(tools, seeds, available) if "fourati" in scenarios and "csmo" in available else None
-        text = render(args, names, available, scenarios, seeds, table, conv, study, tools.runs)
+        if args.real_only:
+            text = splice_block(previous, real_block)
+        else:
+            scenarios = [s for s in args.scenarios.split(",") if s]
+            seeds = list(range(1, args.seeds + 1))
+            table = {}  # (scenario, filter) -> [result per seed], default parameters
+            conv = {}   # (scenario, filter) -> [convergence time from the paper's start per seed]
+            for sc in scenarios:
+                frame = frame_of(sc)
+                for seed in seeds:
+                    csv = tools.scenario(sc, seed, frame)
+                    for name in names:
+                        table.setdefault((sc, name), []).append(tools.evaluate(name, {}, csv, frame))
+                        if "q0w" in available[name]:
+                            r = tools.evaluate(name, q0_params(paper_start_enu(sc)), csv, frame)
+                            conv.setdefault((sc, name), []).append(r)
+                print("%s done (%d runs, %.0f s)" % (sc, tools.runs, time.time() - started), file=sys.stderr)
+
+            study = fourati_study(tools, seeds, available) if "fourati" in scenarios and "csmo" in available else None
+            text = render(args, names, available, scenarios, seeds, table, conv, study, tools.runs - real_runs,
+                          real_block)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out, "w") as f:
         f.write(text)
     print("wrote %s (%d filter runs, %.0f s)" % (args.out, tools.runs, time.time() - started), file=sys.stderr)
+
+
+# Real recordings ---------------------------------------------------------------------------
+
+REAL_BEGIN = "<!-- real recordings: written by accuracy_table.py --real, kept by runs without it -->"
+REAL_END = "<!-- end of real recordings -->"
+
+# Published reference figures, total RMSE in degrees with the BROAD metric (no skip, movement
+# mask), of VQF (Laidig & Seel, "VQF: Highly accurate IMU orientation estimation with bias
+# estimation and magnetic disturbance rejection", Information Fusion 91, 2023) with its default
+# parameters, online (causal, 9-axis) and offline (non-causal), from the authors' C++
+# implementation, on these BROAD trials (Laidig, Caruso, Cereatti, Seel, "BROAD - A Benchmark
+# for Robust Inertial Orientation Estimation", Data 6(7):72, 2021, CC BY 4.0).
+VQF_REFERENCE = {
+    "broad_01_undisturbed_slow_rotation_A": (1.99, 3.37),
+    "broad_07_undisturbed_fast_rotation_B": (1.75, 1.71),
+    "broad_21_undisturbed_fast_combined": (4.08, 5.24),
+    "broad_24_disturbed_tapping_A": (1.55, 1.16),
+    "broad_28_disturbed_stationary_magnet_A": (4.04, 2.38),
+    "broad_36_disturbed_attached_magnet_5cm": (2.39, 3.25),
+}
+
+
+def recording_paths(directory):
+    paths = sorted(glob.glob(os.path.join(directory, "*.csv")) + glob.glob(os.path.join(directory, "*.csv.gz")))
+    if not paths:
+        raise ToolError("no *.csv or *.csv.gz in %s" % directory)
+    return paths
+
+
+def recording_name(path):
+    base = os.path.basename(path)
+    return base[:-len(".csv.gz")] if base.endswith(".csv.gz") else base[:-len(".csv")]
+
+
+def real_table(tools, names, directory):
+    """[(recording, {filter: eval result})] for every recording of the directory, no skip
+    (the BROAD metric evaluates every sample with movement = 1)."""
+    rows = []
+    for path in recording_paths(directory):
+        csv = path
+        if path.endswith(".gz"):
+            csv = os.path.join(tools.tmp, "real.csv")
+            with gzip.open(path, "rb") as src, open(csv, "wb") as dst:
+                while True:
+                    chunk = src.read(1 << 20)
+                    if not chunk:
+                        break
+                    dst.write(chunk)
+        rows.append((recording_name(path), {n: tools.evaluate(n, {}, csv, "enu", 0.0) for n in names}))
+    return rows
+
+
+def real_columns(names, rows):
+    """(header, [cells per row], mean cells): every filter's total RMSE, then the reference figures
+    where a recording has them (the mean of a column only if every recording has a value)."""
+    refs = [VQF_REFERENCE.get(rec) for rec, _ in rows]
+    header = ["`%s`" % n for n in names] + ["VQF online", "VQF offline"]
+    body = []
+    for (rec, res), ref in zip(rows, refs):
+        cells = ["%.2f" % res[n]["rmse_total_deg"] for n in names]
+        cells += ["%.2f" % ref[0], "%.2f" % ref[1]] if ref else ["–", "–"]
+        body.append((rec, cells))
+    mean = ["%.2f" % statistics.mean(res[n]["rmse_total_deg"] for _, res in rows) for n in names]
+    for i in range(2):
+        mean.append("%.2f" % statistics.mean(r[i] for r in refs) if all(refs) else "–")
+    return header, body, mean
+
+
+def print_real(names, rows):
+    header, body, mean = real_columns(names, rows)
+    width = max(len(rec) for rec, _ in body)
+    print("%-*s %s" % (width, "recording", " ".join("%11s" % h.strip("`") for h in header)), file=sys.stderr)
+    for rec, cells in body + [("mean", mean)]:
+        print("%-*s %s" % (width, rec, " ".join("%11s" % c for c in cells)), file=sys.stderr)
+
+
+def render_real(args, names, rows):
+    header, body, mean = real_columns(names, rows)
+    default = names[0]
+    L = [REAL_BEGIN, "## Real recordings (BROAD)", ""]
+    L.append("Generated from the repository root after building, with the directory of recordings as the "
+             "argument (it recomputes this section only and keeps the rest of the file):")
+    L.append("")
+    L.append("```sh")
+    L.append("python3 tests/bench/accuracy_table.py --real DIR --real-only")
+    L.append("```")
+    L.append("")
+    L.append("(`--seeds 5 --real DIR` regenerates the whole file, this section and the simulated ones; a run "
+             "without `--real` keeps this section as it is.)")
+    L.append("")
+    L.append("It runs `mocap-filter --eval` for every filter of `mocap-filter --list` on every `*.csv` or "
+             "`*.csv.gz` of DIR, each with its default parameters, and prints the same table on stderr. "
+             "Recordings: six trials of **BROAD**, *A Benchmark for Robust Inertial Orientation Estimation* "
+             "(Laidig, Caruso, Cereatti, Seel; Data 6(7):72, 2021; licence CC BY 4.0; "
+             "https://github.com/dlaidig/broad), a 9-axis IMU at 285.7 Hz tracked by an optical system whose "
+             "reference orientation the dataset's authors aligned to the IMU and to an ENU earth frame. The "
+             "recordings are not in the repository: take a trial's `imu_gyr` (rad/s), `imu_acc` (m/s²), "
+             "`imu_mag` (µT), `opt_quat` and `movement` and write them in the `mocap-filter` CSV format "
+             "(`t,gx,gy,gz,ax,ay,az,mx,my,mz,qw,qx,qy,qz,movement`, t = i / rate; a missing reference as `nan`). "
+             "Metric as in BROAD: total error 2·acos(|w|) of q_est ⊗ conj(q_ref), RMSE in degrees over every "
+             "sample with `movement = 1` (no skipped start, no heading alignment).")
+    L.append("")
+    L.append("*VQF online / offline*: published figures, not computed here — VQF (Laidig & Seel, *VQF: Highly "
+             "accurate IMU orientation estimation with bias estimation and magnetic disturbance rejection*, "
+             "Information Fusion 91, 2023) with its default parameters, causal 9-axis and non-causal, from the "
+             "authors' implementation on the same six files.")
+    L.append("")
+    L.append("| recording | " + " | ".join(header) + " |")
+    L.append("| --- | " + " | ".join("---:" for _ in header) + " |")
+    for rec, cells in body:
+        L.append("| %s | %s |" % (rec, " | ".join(cells)))
+    L.append("| **mean** | %s |" % " | ".join("**%s**" % c for c in mean))
+    L.append("")
+    with_ref = [(rec, res, VQF_REFERENCE[rec]) for rec, res in rows if rec in VQF_REFERENCE]
+    if with_ref:
+        worst = max(with_ref, key=lambda t: t[1][default]["rmse_total_deg"] - t[2][0])
+        L.append("Default `%s`: mean %.2f° over %d recordings; its largest excess over VQF online is %+.2f° (%s)."
+                 % (default, float(mean[0]), len(rows), worst[1][default]["rmse_total_deg"] - worst[2][0], worst[0]))
+        L.append("")
+    L.append(REAL_END)
+    return "\n".join(L)
+
+
+def extract_block(text):
+    i, j = text.find(REAL_BEGIN), text.find(REAL_END)
+    return text[i:j + len(REAL_END)] if i >= 0 and j > i else ""
+
+
+def splice_block(text, block):
+    """text with its real-recordings block replaced by block (inserted after the title if none)."""
+    old = extract_block(text)
+    if old:
+        return text.replace(old, block)
+    head, sep, rest = text.partition("\n\n")
+    return head + "\n\n" + block + "\n\n" + rest if sep else text + "\n" + block + "\n"
 
 
 PAPER_START = "paper's start [0.2, 0.5, 0.7, 0.3]"
@@ -200,14 +368,22 @@ def fourati_study(tools, seeds, available):
     return out
 
 
-def render(args, names, available, scenarios, seeds, table, conv, study, runs):
+def render(args, names, available, scenarios, seeds, table, conv, study, runs, real_block):
     cmd = "python3 tests/bench/accuracy_table.py --seeds %d" % args.seeds
     if args.filters:
         cmd += " --filters " + args.filters
     if args.scenarios != ",".join(SCENARIOS):
         cmd += " --scenarios " + args.scenarios
     L = []
-    L.append("# Orientation accuracy on simulated recordings")
+    L.append("# Orientation accuracy")
+    L.append("")
+    L.append("Real recordings with an optical reference first (a directory of recordings the repository does "
+             "not contain), then simulated ones (generated by `mocap-sim`).")
+    L.append("")
+    if real_block:
+        L.append(real_block)
+        L.append("")
+    L.append("## Simulated recordings")
     L.append("")
     L.append("Generated by one command, from the repository root after building (`./setup.sh build`; add "
              "`--build DIR` if `mocap-sim` and `mocap-filter` are not under `build/`):")
@@ -256,7 +432,7 @@ def render(args, names, available, scenarios, seeds, table, conv, study, runs):
         L.append(line + ".")
     L.append("")
     for sc in scenarios:
-        L.append("## `%s`" % sc)
+        L.append("### `%s`" % sc)
         L.append("")
         L.append(SCENARIO_TEXT[sc])
         L.append("")
@@ -268,7 +444,7 @@ def render(args, names, available, scenarios, seeds, table, conv, study, runs):
             L.append("| `%s` | %s | %d |" % (name, " | ".join(cells), statistics.median([r["samples"] for r in rs])))
         L.append("")
 
-    L.append("## Time to converge")
+    L.append("### Time to converge")
     L.append("")
     L.append("Two readings of `mocap-filter --eval`, median over the seeds: *reaches* = first instant the total "
              "error falls below 10° (`first_below_s`); *stays* = first instant after which it stays below 10° "
@@ -301,7 +477,7 @@ def render(args, names, available, scenarios, seeds, table, conv, study, runs):
 
 
 def render_study(study, seeds):
-    L = ["## Fourati et al.'s benchmark: what CSMO with the paper's gains achieves", ""]
+    L = ["### Fourati et al.'s benchmark: what CSMO with the paper's gains achieves", ""]
     L.append("CSMO with the paper's gains (k1..k3 = 1e-3, k4..k6 = 9e-4, ρ = 3e-4 at 100 Hz: the `csmo` "
              "defaults) on the `fourati` scenario, seeds %d–%d, errors in the paper's NED frame after %g s. "
              "*Reference field*: the paper's LMA aligns the measured field with a known reference (0.5 G at "
@@ -431,14 +607,14 @@ so each filter error is an average over many near-random corrections, and becaus
 The measured attitude q_m is solved from both vectors together, so the field noise reaches roll
 and pitch too; that is why all three angles improve when only the magnetometer gets quieter."""
 
-LIMITS_TEXT = """## What these numbers do not say
+LIMITS_TEXT = """### What these numbers do not say
 
 The `realistic` scenario is optimistic next to real recordings: its sensors are perfectly
 calibrated (no hard/soft-iron residual, no scale-factor or axis-misalignment error), the field is
-homogeneous outside the disturbance, and the reference is exact. On public recordings with
-optical ground truth (BROAD) the best published filters reach about 2–3° total RMSE and
-Madgwick about 5°, several times the figures above: real data adds those effects, which this
-simulation does not contain. Use these tables to catch regressions and to compare behaviour
+homogeneous outside the disturbance, and the reference is exact. On the real recordings with
+optical ground truth (BROAD, the first section) the best published filters reach about 2–3°
+total RMSE and Madgwick about 4°, several times the figures above: real data adds those effects,
+which this simulation does not contain. Use these tables to catch regressions and to compare behaviour
 (bias, rest, disturbance, convergence), and `mocap-filter --eval` on real recordings to choose
 parameters."""
 
