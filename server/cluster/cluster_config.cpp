@@ -56,6 +56,15 @@ bool nats_ok(int status, const char* what, std::string* error) {
     return false;
 }
 
+std::string nats_error_text(int status) {
+    std::string text = natsStatus_GetText(static_cast<natsStatus>(status));
+    std::string detail = nats_GetLastError(nullptr) != nullptr ? nats_GetLastError(nullptr) : "";
+    if (const auto at = detail.find("): "); detail.rfind('(', 0) == 0 && at != std::string::npos)
+        detail.erase(0, at + 3);
+    if (!detail.empty() && detail != text) text += ": " + detail;
+    return text;
+}
+
 bool make_nats_options(const ClusterConfig& config, natsOptions** out, std::string* error) {
     *out = nullptr;
     natsOptions* o = nullptr;

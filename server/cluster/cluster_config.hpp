@@ -41,4 +41,9 @@ bool make_nats_options(const ClusterConfig& config, __natsOptions** out, std::st
 /// "cluster: <what>: <status text>" when s is not NATS_OK.
 bool nats_ok(int status, const char* what, std::string* error);
 
+/// The status text and, when the client recorded one on this thread, what the server or the
+/// client said about it ("No server available for connection", "Authorization Violation"),
+/// without the library's "(file.c:line): " prefix.
+std::string nats_error_text(int status);
+
 }  // namespace mocap::cluster

@@ -116,12 +116,7 @@ bool ClusterPublisher::start(std::string* error) {
         connected_.store(true);
         spdlog::info("cluster: connected to {}; publishing on mocap.{}.<subject>.pose and .raw", c.nats_url, c.site);
     } else {
-        // The library's text is "(file.c:line): what the server said"; keep what it said.
-        std::string detail = nats_GetLastError(nullptr) != nullptr ? nats_GetLastError(nullptr) : "";
-        if (const auto at = detail.find("): "); detail.rfind('(', 0) == 0 && at != std::string::npos)
-            detail.erase(0, at + 3);
-        spdlog::warn("cluster: cannot connect to {}: {}{}{}; retrying in the background", c.nats_url,
-                     natsStatus_GetText(s), detail.empty() ? "" : ": ", detail);
+        spdlog::warn("cluster: cannot connect to {}: {}; retrying in the background", c.nats_url, nats_error_text(s));
         connection_ = nullptr;
         (void)natsOptions_SetRetryOnFailedConnect(options_, true, &ClusterPublisher::on_connected, this);
         s = natsConnection_Connect(&connection_, options_);

@@ -5,6 +5,7 @@
 
 #include <chrono>
 
+#include "cluster/calibration_bucket.hpp"
 #include "daemon/config_check.hpp"
 #include "daemon/peer_limits.hpp"
 
@@ -52,6 +53,11 @@ bool Daemon::start(std::string* error) {
     signals_.add(SIGHUP);
     auto pc = pipeline_config_from_config(config_, error);
     if (!pc) return false;
+    if (!config_.cluster_nats_url.empty()) {
+        // Calibrations are shared across the site's hosts; the files stay the fallback.
+        pc->calibration_store = std::make_unique<cluster::CalibrationBucket>(cluster_config_from_config(config_),
+                                                                             std::move(pc->calibration_store));
+    }
     pipeline_ = pipeline::Pipeline::create(std::move(*pc), clock_, error);
     if (!pipeline_) return false;
     pipeline_->solver().load_calibrations();

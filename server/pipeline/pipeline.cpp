@@ -86,6 +86,7 @@ void Pipeline::register_metrics(MetricsRegistry& registry) const {
     pool_->register_metrics(registry);
     assemblers_->register_metrics(registry);
     registry.add(solver_->counters());
+    if (const auto* store = solver_->store()) store->register_metrics(registry);
     for (const auto& o : outputs_)
         o->register_metrics(registry);
 }

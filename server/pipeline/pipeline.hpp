@@ -129,7 +129,7 @@ public:
     [[nodiscard]] LatencySnapshot ingest_latency(std::uint32_t subject_id) const;
     [[nodiscard]] const std::vector<std::unique_ptr<Output>>& outputs() const { return outputs_; }
     /// Set-up, after the outputs were added: the route counters and the ingest latency (with
-    /// counter latency.ingest_negative), the worker pool's, the assemblers' and the solver's
+    /// counter latency.ingest_negative), the worker pool's, the assemblers', the solver's and its store's
     /// metrics, and every output's.
     void register_metrics(MetricsRegistry& registry) const;
     /// Wall clock µs of the first and the latest sample routed to a segment of a configured

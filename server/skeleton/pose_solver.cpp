@@ -36,6 +36,11 @@ PoseSolver::PoseSolver(BodyModel model, PoseSolverOptions options, PublishFn pub
     group_.add("calibrations_ok", calibrations_ok_);
     group_.add("calibrations_failed", calibrations_failed_);
     group_.add("auto_calibration_retries", auto_calibration_retries_);
+    group_.add("calibrations_shared", calibrations_shared_);
+    if (store_) {
+        store_->bind(model_, [this](std::uint32_t id, const Calibration& c, const std::string& where,
+                                    std::uint64_t saves_seen) { offer_calibration(id, c, where, saves_seen); });
+    }
 }
 
 std::size_t PoseSolver::load_calibrations() {
@@ -65,8 +70,42 @@ std::string PoseSolver::request_calibration(std::uint32_t subject_id, Calibratio
     return {};
 }
 
+void PoseSolver::offer_calibration(std::uint32_t subject_id, const Calibration& calibration, const std::string& where,
+                                   std::uint64_t saves_seen) {
+    if (subject_id == 0 || subject_id >= subjects_.size()) return;
+    std::lock_guard lock(requests_mutex_);
+    offers_.push_back({subject_id, calibration, where, saves_seen});
+    has_requests_.store(true, std::memory_order_release);
+}
+
+void PoseSolver::install(Subject& s, const Calibration& calibration) {
+    s.calibration = calibration;
+    s.smoother.reset();
+    s.root.emplace(model_);
+    s.root->reset(root_position(model_));
+}
+
+void PoseSolver::apply_offer(Offer& offer) {
+    Subject& s = subjects_[offer.subject_id];
+    if (s.calibrated_here != offer.saves_seen) {
+        // Calibrated here after the store chose this one: the local calibration is the newer
+        // and the store publishes it; applying this one would undo it.
+        log(LogLevel::kInfo,
+            subject_text(offer.subject_id) + "calibration from " + offer.where + " not applied: calibrated here since");
+        return;
+    }
+    install(s, offer.calibration);
+    s.auto_pending = false;
+    if (s.collecting && s.auto_run) s.collecting = false;  // calibrated now: no automatic one
+    calibrations_shared_.add();
+    log(LogLevel::kInfo, subject_text(offer.subject_id) + "calibration from " + offer.where + " applied");
+}
+
 void PoseSolver::take_requests() {
     std::lock_guard lock(requests_mutex_);
+    for (auto& offer : offers_)
+        apply_offer(offer);
+    offers_.clear();
     for (const auto& [id, pose] : requests_) {
         Subject& s = subjects_[id];
         s.collector.reset();
@@ -109,10 +148,8 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
         log(LogLevel::kInfo, subject_text(subject_id) + "calibrated automatically from its first still period (" +
                                  std::string(to_string(s.pose)) + " assumed); send a calibrate request to redo it");
     }
-    s.calibration = *result.calibration;
-    s.smoother.reset();
-    s.root.emplace(model_);
-    s.root->reset(root_position(model_));
+    install(s, *result.calibration);
+    ++s.calibrated_here;
     calibrations_ok_.add();
     log(LogLevel::kInfo, subject_text(subject_id) + "calibrated (" + std::string(to_string(s.pose)) + ")");
     if (!store_) return;
@@ -132,7 +169,10 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
         const auto& q = frame.segments[i].q_earth_sensor_wxyz;
         q_earth_sensor[i] = Quat(q[0], q[1], q[2], q[3]);
     }
-    if (s.first_us < 0) s.first_us = frame.sample_us;
+    if (s.first_us < 0) {
+        s.first_us = frame.sample_us;
+        if (store_) store_->serving(frame.subject_id);
+    }
     if (options_.auto_calibrate && s.auto_pending && !s.calibration && !s.collecting &&
         frame.sample_us - s.first_us >= 500'000) {
         s.collector.reset();

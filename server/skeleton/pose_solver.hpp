@@ -21,9 +21,17 @@
 // a segment without data fails the calibration; the old one stays. Results are counted and
 // logged through the injected LogFn: this layer does no file I/O and has no logger.
 //
-// Threading: on_frame() runs on the assembler thread; request_calibration() on any thread
-// (a mutex guards the request hand-over only). The store and the log are called on the
-// thread of load_calibrations() and on_frame().
+// Calibrations made elsewhere: a store shared by several hosts (cluster/calibration_bucket.hpp)
+// hands the solver a newer calibration of a subject through offer_calibration() (any thread);
+// it is applied at the next frame like a calibration made here, unless this host calibrated
+// the subject after the store decided to offer it (then the local one, which the store
+// publishes as the newer, stays). The solver tells the store when a subject's first frame
+// arrives (CalibrationStore::serving), so the store can look for the subject's calibration.
+//
+// Threading: on_frame() runs on the assembler thread; request_calibration() and
+// offer_calibration() on any thread (a mutex guards the hand-over only). The store and the
+// log are called on the thread of load_calibrations() and on_frame() (and the store calls
+// offer_calibration() from its own thread).
 // Cost per frame: O(segments) quaternion math, no allocation (except in the rare frame that
 // completes a calibration: log text, store).
 #pragma once
@@ -69,6 +77,10 @@ public:
     /// store: nullptr = calibrations are neither loaded nor saved. log: nullptr = silent.
     PoseSolver(BodyModel model, PoseSolverOptions options, PublishFn publish,
                std::unique_ptr<CalibrationStore> store = nullptr, LogFn log = nullptr);
+    /// The store goes first: its thread may still offer calibrations until it stops.
+    ~PoseSolver() override { store_.reset(); }
+    PoseSolver(const PoseSolver&) = delete;
+    PoseSolver& operator=(const PoseSolver&) = delete;
 
     /// Loads every subject's saved calibration from the store (set-up, before frames flow)
     /// and logs what it found. Returns how many were loaded.
@@ -80,10 +92,20 @@ public:
     /// for an unknown subject (empty = accepted).
     std::string request_calibration(std::uint32_t subject_id, CalibrationPose pose);
 
+    /// Any thread: a calibration of the subject made elsewhere (`where` names it in the log),
+    /// applied at the subject's next frame unless this host has calibrated the subject more
+    /// than `saves_seen` times by then (OfferFn, calibration_store.hpp). Unknown ids are ignored.
+    void offer_calibration(std::uint32_t subject_id, const Calibration& calibration, const std::string& where,
+                           std::uint64_t saves_seen);
+
+    /// The injected store (nullptr = none), for its metrics.
+    [[nodiscard]] const CalibrationStore* store() const { return store_.get(); }
+
     [[nodiscard]] const BodyModel& model() const { return model_; }
     [[nodiscard]] const std::vector<JointSpec>& joints() const { return joints_; }
     /// Component "skeleton": frames_solved, calibrations_ok, calibrations_failed,
-    /// auto_calibration_retries (automatic attempts restarted because the subject moved).
+    /// auto_calibration_retries (automatic attempts restarted because the subject moved),
+    /// calibrations_shared (calibrations made elsewhere and applied here).
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
 
 private:
@@ -98,9 +120,19 @@ private:
         bool auto_pending = true;                    // no calibration yet: calibrate from the first still period
         bool auto_run = false;                       // the collection in progress is the automatic one
         std::int64_t first_us = -1;                  // sample time of the subject's first frame
+        std::uint64_t calibrated_here = 0;           // successful calibrations made by this solver
+    };
+    struct Offer {
+        std::uint32_t subject_id = 0;
+        Calibration calibration;
+        std::string where;
+        std::uint64_t saves_seen = 0;
     };
 
     void take_requests();
+    void apply_offer(Offer& offer);
+    /// Installs a calibration and starts the subject's smoothing and root travel afresh.
+    void install(Subject& s, const Calibration& calibration);
     void collect(Subject& s, std::uint32_t subject_id, const SubjectFrame& frame,
                  const std::array<Quat, kMaxSegments>& q_earth_sensor);
     void log(LogLevel level, const std::string& line) const {
@@ -117,10 +149,11 @@ private:
     SkeletonPose out_{};
 
     std::mutex requests_mutex_;
-    std::vector<std::pair<std::uint32_t, CalibrationPose>> requests_;
+    std::vector<std::pair<std::uint32_t, CalibrationPose>> requests_;  // guarded by requests_mutex_
+    std::vector<Offer> offers_;                                        // guarded by requests_mutex_
     std::atomic<bool> has_requests_{false};
 
-    Counter frames_solved_, calibrations_ok_, calibrations_failed_, auto_calibration_retries_;
+    Counter frames_solved_, calibrations_ok_, calibrations_failed_, auto_calibration_retries_, calibrations_shared_;
     CounterGroup group_{"skeleton"};
 };
 

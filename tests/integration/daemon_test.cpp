@@ -13,6 +13,7 @@
 #include "harness.hpp"
 #include "math/quaternion.hpp"
 #include "pose_client.hpp"
+#include "truth_check.hpp"
 
 namespace mocap::itest {
 namespace {
@@ -22,33 +23,6 @@ using math::Quat;
 
 constexpr const char* kToken = "it-s3cret-0123456789";
 constexpr int kRateHz = 100;
-
-struct TruthKey {
-    std::uint32_t subject;
-    std::uint32_t counter;
-    std::string segment;
-    bool operator<(const TruthKey& o) const {
-        return std::tie(subject, counter, segment) < std::tie(o.subject, o.counter, o.segment);
-    }
-};
-
-// t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,...
-std::map<TruthKey, Quat> read_truth(const std::string& path) {
-    std::map<TruthKey, Quat> out;
-    std::istringstream in(read_file(path));
-    std::string line;
-    std::getline(in, line);  // header
-    while (std::getline(in, line)) {
-        std::vector<std::string> f;
-        std::stringstream ls(line);
-        for (std::string x; std::getline(ls, x, ',');)
-            f.push_back(x);
-        if (f.size() < 9) continue;
-        out[{static_cast<std::uint32_t>(std::stoul(f[1])), static_cast<std::uint32_t>(std::stoul(f[4])), f[2]}] =
-            Quat(std::stod(f[5]), std::stod(f[6]), std::stod(f[7]), std::stod(f[8]));
-    }
-    return out;
-}
 
 struct Received {
     v1::SkeletonFrame frame;
@@ -150,16 +124,6 @@ protected:
     std::string config_;
     std::unique_ptr<Process> daemon_;
 };
-
-std::uint32_t counter_of(const v1::SkeletonFrame& f) {
-    return static_cast<std::uint32_t>(f.sync() & 0xFFFFFFFFu);
-}
-
-Quat segment_q(const v1::SkeletonFrame& f, int i) {
-    return Quat(f.q_world_segment_wxyz(4 * i), f.q_world_segment_wxyz(4 * i + 1), f.q_world_segment_wxyz(4 * i + 2),
-                f.q_world_segment_wxyz(4 * i + 3))
-        .normalized();
-}
 
 TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
     auto c = connect_client({1});

@@ -76,6 +76,19 @@ v1::SkeletonFrame decode_pose_payload(const std::string& payload) {
     return m.frame();
 }
 
+std::string daemon_config(const HostConfig& h) {
+    std::ostringstream s;
+    s << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
+      << "[ingest]\nsink_listen = \"127.0.0.1:" << h.sink_port << "\"\n"
+      << h.ingest << "[pipeline]\nworkers = " << h.workers << "\nmax_subjects = 4\n"
+      << "[skeleton]\ncalibration_dir = \"" << h.calibration_dir << "\"\n"
+      << h.skeleton << "[serve]\npose_listen = \"127.0.0.1:" << h.pose_port << "\"\n"
+      << h.serve << "[outputs]\n"
+      << h.outputs << "[http]\n"
+      << h.http << h.cluster;
+    return s.str();
+}
+
 std::string cluster_section(std::uint16_t nats_port, const std::string& site, const std::string& host_id,
                             const std::string& more) {
     std::ostringstream s;

@@ -59,6 +59,24 @@ private:
 /// a test failure when it is not one.
 v1::SkeletonFrame decode_pose_payload(const std::string& payload);
 
+/// What one mocapd host of the cluster tests sets; daemon_config() writes the rest.
+struct HostConfig {
+    std::uint16_t sink_port = 0;
+    std::uint16_t pose_port = 0;
+    std::string calibration_dir;
+    int workers = 2;
+    std::string ingest;                          ///< more [ingest] lines
+    std::string skeleton;                        ///< more [skeleton] lines
+    std::string serve;                           ///< more [serve] lines
+    std::string outputs = "bvh_live = false\n";  ///< the [outputs] lines
+    std::string http = "enabled = false\n";      ///< the [http] lines
+    std::string cluster;                         ///< the [cluster] section (cluster_section()), last
+};
+/// mocapd's config for one host: [log] at info without the periodic stats line, sinks and
+/// pose clients on the loopback ports, [pipeline] workers and 4 subjects, the calibration
+/// directory, then the host's own lines and sections.
+std::string daemon_config(const HostConfig& host);
+
 /// "[cluster]" with nats_url on the port, site, host_id, queue_frames = 64, then `more`
 /// (credentials and other keys, one per line).
 std::string cluster_section(std::uint16_t nats_port, const std::string& site, const std::string& host_id,

@@ -18,6 +18,8 @@ struct Shelf {
     std::map<std::uint32_t, std::string> broken;
     int saves = 0;
     std::string save_error;  ///< returned by every save when set
+    OfferFn offer;           ///< what the solver bound: a shared store's way in
+    std::vector<std::uint32_t> serving;
 };
 
 class MemoryStore final : public CalibrationStore {
@@ -39,6 +41,8 @@ public:
         shelf_.saved[subject_id] = calibration;
         return {};
     }
+    void bind(const BodyModel&, OfferFn offer) override { shelf_.offer = std::move(offer); }
+    void serving(std::uint32_t subject_id) override { shelf_.serving.push_back(subject_id); }
 
 private:
     Shelf& shelf_;
@@ -239,6 +243,57 @@ TEST(PoseSolver, AFailedSaveIsLoggedAndTheCalibrationStillApplies) {
     EXPECT_TRUE(rig.logged(LogLevel::kError, "subject 1: cannot write shelf"));
 }
 
+// A calibration made on another host (offered by a shared store) replaces the subject's at
+// its next frame, as one made here would, and stops its automatic calibration.
+TEST(PoseSolver, ACalibrationOfferedByTheStoreIsAppliedAtTheNextFrame) {
+    PoseSolverOptions o;
+    o.auto_calibrate = CalibrationPose::kTPose;
+    Rig rig(o);
+    ASSERT_TRUE(rig.shelf.offer) << "the solver binds its store";
+    rig.run(0.1, kMounted);
+    EXPECT_EQ(rig.shelf.serving, std::vector<std::uint32_t>{1}) << "the store hears of the subject's first frame once";
+    // What a T-pose calibration with these sensors gives, made by another solver.
+    Rig other;
+    other.run(0.2, kMounted);
+    ASSERT_EQ(other.solver->request_calibration(1, CalibrationPose::kTPose), "");
+    other.run(0.7, kMounted);
+    ASSERT_EQ(other.shelf.saved.count(1), 1u);
+
+    rig.shelf.offer(1, other.shelf.saved.at(1), "bucket (key venue.1, revision 3)", 0);
+    rig.shelf.offer(9, other.shelf.saved.at(1), "an unknown subject", 0);  // ignored
+    rig.run(0.02, kMounted);
+    EXPECT_TRUE(rig.in_calibrated_t_pose(1));
+    EXPECT_EQ(rig.counter("calibrations_shared"), 1u);
+    EXPECT_TRUE(rig.logged(LogLevel::kInfo, "subject 1: calibration from bucket (key venue.1, revision 3) applied"));
+    rig.run(1.5, kMounted);
+    EXPECT_EQ(rig.counter("calibrations_ok"), 0u) << "calibrated from elsewhere: no automatic calibration";
+    EXPECT_EQ(rig.shelf.saves, 0) << "the store saved it already; the solver does not save it back";
+}
+
+// The store chose a calibration before this host calibrated the subject (saves_seen 0), and
+// the solver takes the offer after its own calibration: the local one is newer and stays.
+TEST(PoseSolver, AnOfferOlderThanALocalCalibrationIsNotApplied) {
+    Rig rig;
+    rig.run(0.2, kMounted);
+    ASSERT_EQ(rig.solver->request_calibration(1, CalibrationPose::kTPose), "");
+    rig.run(0.7, kMounted);
+    ASSERT_EQ(rig.counter("calibrations_ok"), 1u);
+    Calibration elsewhere = rig.shelf.saved.at(1);
+    elsewhere.q_sensor_segment[0] = rz(0.5);  // different from the local one
+    rig.shelf.offer(1, elsewhere, "bucket (key venue.1, revision 7)", 0);
+    rig.run(0.02, kMounted);
+    EXPECT_EQ(rig.counter("calibrations_shared"), 0u);
+    EXPECT_TRUE(rig.in_calibrated_t_pose(1)) << "the local calibration stays";
+    EXPECT_TRUE(
+        rig.logged(LogLevel::kInfo,
+                   "subject 1: calibration from bucket (key venue.1, revision 7) not applied: calibrated here since"));
+    // Offered after the store saw the local save: applied.
+    rig.shelf.offer(1, elsewhere, "bucket (key venue.1, revision 9)", 1);
+    rig.run(0.02, kMounted);
+    EXPECT_EQ(rig.counter("calibrations_shared"), 1u);
+    EXPECT_FALSE(rig.in_calibrated_t_pose(1)) << "segment 0 now has the other calibration";
+}
+
 TEST(PoseSolver, CountsFramesAndRejectsUnknownSubjects) {
     Rig rig;
     EXPECT_EQ(rig.solver->counters().component(), "skeleton");
@@ -254,7 +309,7 @@ TEST(PoseSolver, CountsFramesAndRejectsUnknownSubjects) {
     for (const auto& c : rig.solver->counters().snapshot())
         names.push_back(c.name);
     EXPECT_EQ(names, (std::vector<std::string>{"frames_solved", "calibrations_ok", "calibrations_failed",
-                                               "auto_calibration_retries"}));
+                                               "auto_calibration_retries", "calibrations_shared"}));
 }
 
 }  // namespace
