@@ -125,13 +125,31 @@ Quat average_quaternions(std::span<const Quat> qs, std::span<const Mat3> info) {
 }
 
 Quat average_two(const Quat& q1, double w1, const Quat& q2, double w2) {
-    assert(w1 + w2 > 0.0);
+    // A negative or NaN weight counts as zero (NaN > 0 is false); dividing by the larger
+    // weight keeps w1·w2 finite, and an infinite weight outweighs every finite one.
+    w1 = w1 > 0.0 ? w1 : 0.0;
+    w2 = w2 > 0.0 ? w2 : 0.0;
+    const double scale = std::max(w1, w2);
+    if (scale == 0.0) return Quat::Identity();
+    if (std::isinf(scale)) {
+        w1 = std::isinf(w1) ? 1.0 : 0.0;
+        w2 = std::isinf(w2) ? 1.0 : 0.0;
+    } else {
+        w1 /= scale;
+        w2 /= scale;
+    }
     const double d = q1.coeffs().dot(q2.coeffs());
+    const double s = d < 0.0 ? -1.0 : 1.0;
     const double z = std::sqrt((w1 - w2) * (w1 - w2) + 4.0 * w1 * w2 * d * d);
+    if (z == 0.0) {
+        // Equal weights, orthogonal inputs: the largest eigenvalue is double and every unit
+        // combination of q1 and q2 is an average. The formula's limit as q1ᵀq2 -> 0 from
+        // the side of s is (q1 + s q2)/√2, the midpoint of the arc between them.
+        return canonical_from(to_wxyz(q1) + s * to_wxyz(q2));
+    }
     const double den = z * (w1 + w2 + z);
     const double a = std::sqrt(std::max(0.0, w1 * (w1 - w2 + z) / den));
     const double b = std::sqrt(std::max(0.0, w2 * (w2 - w1 + z) / den));
-    const double s = d < 0.0 ? -1.0 : 1.0;
     const Vec4 v = a * to_wxyz(q1) + s * b * to_wxyz(q2);
     return canonical_from(v);
 }

@@ -103,7 +103,12 @@ Quat average_quaternions(std::span<const Quat> qs, std::span<const Mat3> info);
 ///   z = √((w1 − w2)² + 4 w1 w2 (q1ᵀq2)²)
 ///   q̄ = √(w1 (w1 − w2 + z) / (z (w1 + w2 + z))) q1
 ///      + sign(q1ᵀq2) √(w2 (w2 − w1 + z) / (z (w1 + w2 + z))) q2.
-/// Returns w >= 0. Requires w1 + w2 > 0.
+/// Returns w >= 0, always a unit quaternion:
+///  * equal weights and orthogonal q1, q2 (rotations 180° apart; z = 0): the largest
+///    eigenvalue is double and any unit combination of q1 and q2 is an average; the result is
+///    (q1 + q2)/√2, the limit of the formula as q1ᵀq2 -> 0⁺ (the arc's midpoint, 90° from each);
+///  * a negative or NaN weight counts as 0, an infinite one outweighs every finite one (two
+///    infinite ones are equal); both 0 gives identity, as average_quaternions does.
 Quat average_two(const Quat& q1, double w1, const Quat& q2, double w2);
 
 /// Covariance (rad², sensor frame) of the averaged attitude's error δθ

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -97,6 +99,83 @@ TEST(MarkleyAverage, TwoQuaternionClosedFormEqualsEigenSolution) {
     const Quat a = quat_from_rotvec(Vec3(0, 0, 0.2));
     const Quat b = quat_from_rotvec(Vec3(0, 0, 1.0));
     EXPECT_LT(qdist(average_two(a, 1.0, neg(b), 1.0), quat_from_rotvec(Vec3(0, 0, 0.6))), 1e-12);
+}
+
+// Orthogonal as 4-vectors = the same attitude turned 180°. The largest eigenvalue of M is then
+// double; average_two returns (q1 + s q2)/√2 with s the sign of q1ᵀq2 (+ for an exact 0),
+// the arc's midpoint, 90° from each (it used to return (0, 0, 0, 0) for an exact 0).
+TEST(MarkleyAverage, TwoOrthogonalQuaternionsWithEqualWeightsGiveTheArcMidpoint) {
+    const auto expect_midpoint = [](const Quat& q1, const Quat& q2, double w) {
+        const Quat m = average_two(q1, w, q2, w);
+        ASSERT_TRUE(m.coeffs().allFinite());
+        EXPECT_NEAR(m.norm(), 1.0, 1e-12);
+        EXPECT_GE(m.w(), 0.0);
+        EXPECT_NEAR(qdist(m, q1), 0.5 * std::numbers::pi, 1e-9);
+        EXPECT_NEAR(qdist(m, q2), 0.5 * std::numbers::pi, 1e-9);
+        const double s = q1.coeffs().dot(q2.coeffs()) < 0.0 ? -1.0 : 1.0;
+        EXPECT_LT(qdist(m, from_wxyz((to_wxyz(q1) + s * to_wxyz(q2)).normalized())), 1e-9);
+        // Still an average: an eigenvector of M for its largest eigenvalue.
+        QuatAccumulator acc;
+        acc.add(q1, w);
+        acc.add(q2, w);
+        const Vec4 x = to_wxyz(m);
+        EXPECT_NEAR(x.dot(acc.matrix() * x), max_eigenvector(acc.matrix()).eigenvalue, 1e-9 * w);
+    };
+    // q1ᵀq2 exactly 0.
+    const Quat a(0.6, 0.8, 0.0, 0.0), b(0.0, 0.0, -0.8, 0.6);
+    ASSERT_EQ(a.coeffs().dot(b.coeffs()), 0.0);
+    for (const double w : {1.0, 0.37, 4e7}) {
+        expect_midpoint(a, b, w);
+        expect_midpoint(b, a, w);
+        expect_midpoint(a, neg(b), w);
+        expect_midpoint(Quat::Identity(), Quat(0.0, 0.0, 0.0, 1.0), w);
+    }
+    EXPECT_LT(qdist(average_two(a, 2.0, b, 2.0), from_wxyz((to_wxyz(a) + to_wxyz(b)).normalized())), 1e-12);
+    // q1 ⊗ (0, n): orthogonal up to rounding, q1ᵀq2 of either sign.
+    std::mt19937 rng(8);
+    for (int i = 0; i < 50; ++i) {
+        const Quat q1 = random_quat(rng);
+        const Vec3 n = random_vec(rng, 1.0).normalized();
+        const Quat q2 = q1 * Quat(0.0, n.x(), n.y(), n.z());
+        ASSERT_LT(std::abs(q1.coeffs().dot(q2.coeffs())), 1e-12);
+        expect_midpoint(q1, q2, 1.0);
+        // The limit from inputs slightly closer than orthogonal.
+        const Quat q2_near = (q1 * quat_from_rotvec(n * (std::numbers::pi - 1e-7))).normalized();
+        ASSERT_GT(q1.coeffs().dot(q2_near.coeffs()), 0.0);
+        EXPECT_LT(qdist(average_two(q1, 1.0, q2_near, 1.0), from_wxyz((to_wxyz(q1) + to_wxyz(q2)).normalized())), 1e-6);
+    }
+}
+
+TEST(MarkleyAverage, TwoQuaternionWeightsThatAreNotPositiveAreDefined) {
+    const Quat a = quat_from_rotvec(Vec3(0.3, -0.2, 0.1));
+    const Quat b = quat_from_rotvec(Vec3(-0.5, 0.4, 1.2));
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double inf = std::numeric_limits<double>::infinity();
+    const struct {
+        double w1, w2;
+        Quat expected;
+    } cases[] = {
+        {0.0, 1.0, b},
+        {1.0, 0.0, a},
+        {-1.0, 2.0, b},
+        {3.0, -0.5, a},
+        {nan, 1.0, b},
+        {1.0, nan, a},
+        {0.0, 0.0, Quat::Identity()},
+        {-1.0, -1.0, Quat::Identity()},
+        {nan, nan, Quat::Identity()},
+        {inf, 1.0, a},
+        {1.0, inf, b},
+        {-inf, 2.0, b},
+        {inf, inf, average_two(a, 1.0, b, 1.0)},
+        {1e300, 1e300, average_two(a, 1.0, b, 1.0)},
+    };
+    for (const auto& c : cases) {
+        const Quat m = average_two(a, c.w1, b, c.w2);
+        ASSERT_TRUE(m.coeffs().allFinite()) << c.w1 << ' ' << c.w2;
+        EXPECT_NEAR(m.norm(), 1.0, 1e-12) << c.w1 << ' ' << c.w2;
+        EXPECT_LT(qdist(m, c.expected), 1e-9) << c.w1 << ' ' << c.w2;
+    }
 }
 
 TEST(MarkleyAverage, MatrixWeightsScaledIdentityReduceToScalarWeights) {
