@@ -1,7 +1,7 @@
 // mocap-client — command-line client of mocapd's pose service.
 //
 //   mocap-client --connect HOST:PORT cat [--frames N] [--json] [--subject ID]...
-//   mocap-client --nats URL [--site S] cat|load ... (the same, from a NATS cluster)
+//   mocap-client --nats URL [--site S] cat|load|record ... (the same, from a NATS cluster)
 //   mocap-client --connect HOST:PORT stats [--json]
 //   mocap-client --connect HOST:PORT control --token T calibrate --subject ID [--pose T|N]
 //   mocap-client --connect HOST:PORT control --token T record-start [--path FILE]
@@ -255,7 +255,7 @@ static int run(int argc, char** argv) {
     app.add_option("--connect-timeout", connect_timeout_s, "seconds to connect and get Hello")->capture_default_str();
     mocap::client::NatsOptions nats;
     app.add_option("--nats", nats.url,
-                   "read poses from this NATS cluster instead (nats://HOST:PORT[,...]); cat and load");
+                   "read poses from this NATS cluster instead (nats://HOST:PORT[,...]); cat, load and record");
     app.add_option("--site", nats.site, "the cluster's [cluster] site")->capture_default_str();
     app.add_option("--nats-user", nats.user, "NATS user (password: --nats-password or MOCAP_NATS_PASSWORD)");
     app.add_option("--nats-password", nats.password, "NATS password");
@@ -323,7 +323,7 @@ static int run(int argc, char** argv) {
     // File exports (output_commands.hpp, docs/outputs.md).
     mocap::client::ExportOptions export_options;
     double export_timeout_s = 10.0;
-    auto* record = app.add_subcommand("record", "live BVH port (7002) -> complete BVH file");
+    auto* record = app.add_subcommand("record", "live BVH port (7002), or the cluster (--nats) -> complete BVH file");
     auto* angles = app.add_subcommand("angles", "joint angles (pose port) -> CSV file");
     for (auto* sub_cmd : {record, angles}) {
         sub_cmd->add_option("--out", export_options.out, "output file (must not exist)")->required();
@@ -337,13 +337,14 @@ static int run(int argc, char** argv) {
 
     std::string error;
     const auto connect_timeout = std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
+    export_options.timeout = std::chrono::milliseconds(static_cast<long long>(export_timeout_s * 1000));
     if (*load) {
         load_options.duration = std::chrono::milliseconds(static_cast<long long>(load_duration_s * 1000));
         load_options.connect_timeout = connect_timeout;
     }
     if (!nats.url.empty()) {
-        if (!*cat && !*load) {
-            std::cerr << "mocap-client: --nats serves cat and load only\n";
+        if (!*cat && !*load && !*record) {
+            std::cerr << "mocap-client: --nats serves cat, load and record only\n";
             return kExitFailed;
         }
         if (nats.password.empty()) {
@@ -360,6 +361,7 @@ static int run(int argc, char** argv) {
             return kExitFailed;
         }
         if (*load) return print_load(mocap::client::run_nats_load(nats, load_options), load_options, load_json);
+        if (*record) return mocap::client::run_record_bvh_nats(nats, export_options);
         mocap::client::NatsPoseClient client;
         if (!client.connect(nats, connect_timeout, error)) {
             std::cerr << "mocap-client: " << error << "\n";
@@ -377,7 +379,6 @@ static int run(int argc, char** argv) {
     if (*record || *angles) {
         export_options.host = endpoint->host;
         export_options.port = endpoint->port;
-        export_options.timeout = std::chrono::milliseconds(static_cast<long long>(export_timeout_s * 1000));
         return *record ? mocap::client::run_record_bvh(export_options) : mocap::client::run_angles_csv(export_options);
     }
     if (*load) {

@@ -82,9 +82,9 @@ bool NatsPoseClient::subscribe(const SubscribeOptions& options, std::chrono::mil
     }
     natsMsg* msg = nullptr;
     if (natsSubscription_NextMsg(&msg, heartbeat, ms(heartbeat_wait)) == NATS_OK) {
-        const auto j = nlohmann::json::parse(natsMsg_GetData(msg), natsMsg_GetData(msg) + natsMsg_GetDataLength(msg),
-                                             nullptr, false);
+        heartbeat_.assign(natsMsg_GetData(msg), static_cast<std::size_t>(natsMsg_GetDataLength(msg)));
         natsMsg_Destroy(msg);
+        const auto j = nlohmann::json::parse(heartbeat_, nullptr, false);
         auto* skeleton = hello_.mutable_skeleton();
         if (j.is_object() && j.contains("segments") && j["segments"].is_array()) {
             for (const auto& name : j["segments"])

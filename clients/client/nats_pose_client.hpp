@@ -51,6 +51,9 @@ public:
     ReadStatus next_frame(v1::SkeletonFrame& out, std::chrono::milliseconds timeout);
 
     [[nodiscard]] const v1::Hello& hello() const { return hello_; }
+    /// The JSON text of the heartbeat subscribe() waited for ("" = none arrived): it also
+    /// describes the body and the live BVH encoding (mocap-client --nats record).
+    [[nodiscard]] const std::string& heartbeat() const { return heartbeat_; }
     /// CLOCK_REALTIME µs when the last frame was taken from the client library.
     [[nodiscard]] std::int64_t last_receive_us() const { return last_receive_us_; }
     /// Frames the client library dropped because this reader was too slow.
@@ -67,6 +70,7 @@ private:
     __natsConnection* connection_ = nullptr;
     __natsSubscription* poses_ = nullptr;
     v1::Hello hello_;
+    std::string heartbeat_;
     v1::ServerMessage scratch_;
     std::map<std::uint32_t, std::uint64_t> seen_per_subject_;  // for decimation
     std::int64_t last_receive_us_ = 0;

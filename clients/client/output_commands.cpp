@@ -11,10 +11,14 @@
 #include <memory>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "core/errno_text.hpp"
 #include "pose_client.hpp"
 #include "serve/angles_csv.hpp"
+#include "serve/bvh_frame_encoder.hpp"
 #include "serve/bvh_text.hpp"
+#include "skeleton/euler.hpp"
 
 namespace mocap::client {
 
@@ -55,6 +59,71 @@ int connect_blocking(const std::string& host, std::uint16_t port, std::chrono::m
 
 std::FILE* create_new(const std::string& path) {
     return std::fopen(path.c_str(), "wx");
+}
+
+/// A complete BVH file: the hierarchy ("HIERARCHY" ... "}\n"), "MOTION", the frame count, the
+/// "Frame Time:" line and the MOTION lines; refuses to overwrite a file.
+int write_bvh_file(const ExportOptions& o, const std::string& hierarchy, const std::string& frame_time,
+                   const std::vector<std::string>& lines, std::size_t values) {
+    std::FILE* f = create_new(o.out);
+    if (!f) {
+        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << errno_text(errno) << "\n";
+        return kExitFailed;
+    }
+    std::string text = hierarchy + "MOTION\nFrames: " + std::to_string(lines.size()) + "\n" + frame_time;
+    for (const auto& l : lines)
+        text += l;
+    const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+    if (std::fclose(f) != 0 || !ok) {
+        std::cerr << "mocap-client: writing " << o.out << " failed\n";
+        return kExitFailed;
+    }
+    std::cout << o.out << ": " << lines.size() << " frames, " << values << " values per frame\n";
+    return 0;
+}
+
+/// The live BVH encoding of the body a host heartbeat describes (docs/outputs.md, "Cluster
+/// publisher"): the same model and options give the same HIERARCHY as the live port's.
+std::unique_ptr<serve::BvhFrameEncoder> encoder_from_heartbeat(const std::string& text, std::string& error) {
+    const auto j = nlohmann::json::parse(text, nullptr, false);
+    if (!j.is_object() || !j.contains("body") || !j.contains("bvh")) {
+        error = "the host heartbeat does not describe the body (a mocapd older than this client?)";
+        return nullptr;
+    }
+    try {
+        skeleton::BodyModel model;
+        const auto vec3 = [](const nlohmann::json& v) {
+            return skeleton::Vec3(v.at(0).get<double>(), v.at(1).get<double>(), v.at(2).get<double>());
+        };
+        for (const auto& s : j.at("body").at("segments")) {
+            skeleton::SegmentDef d;
+            d.name = s.at("name").get<std::string>();
+            d.parent = s.at("parent").get<int>();
+            d.offset_m = vec3(s.at("offset_m"));
+            d.end_m = vec3(s.at("end_m"));
+            model.segments.push_back(std::move(d));
+        }
+        model.root_height_m = j.at("body").at("root_height_m").get<double>();
+        const auto& b = j.at("bvh");
+        serve::BvhOutputOptions options;
+        options.write.units_per_m = b.at("units_per_m").get<double>();
+        options.write.decimals = b.at("decimals").get<int>();
+        options.frame_time_s = b.at("frame_time_s").get<double>();
+        const auto order = skeleton::parse_rotation_order(b.at("rotation_order").get<std::string>());
+        if (!order) {
+            error = "the host heartbeat names an unknown BVH rotation order";
+            return nullptr;
+        }
+        options.write.order = *order;
+        if (const auto problems = skeleton::validate(model); !problems.empty()) {
+            error = "the host heartbeat's body: " + problems.front();
+            return nullptr;
+        }
+        return std::make_unique<serve::BvhFrameEncoder>(std::move(model), options);
+    } catch (const nlohmann::json::exception& e) {
+        error = std::string("the host heartbeat's body: ") + e.what();
+        return nullptr;
+    }
 }
 
 }  // namespace
@@ -143,21 +212,68 @@ int run_record_bvh(const ExportOptions& o) {
         }
         buf.erase(0, pos);
     }
-    std::FILE* f = create_new(o.out);
-    if (!f) {
-        std::cerr << "mocap-client: cannot create " << o.out << " (it must not exist): " << errno_text(errno) << "\n";
+    return write_bvh_file(o, header, frame_time, lines, values);
+}
+
+int run_record_bvh_nats(const NatsOptions& nats, const ExportOptions& o) {
+    NatsPoseClient client;
+    std::string error;
+    if (!client.connect(nats, o.timeout, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    SubscribeOptions sub;
+    if (o.subject != 0) sub.subject_ids.push_back(o.subject);
+    sub.fields = v1::FIELD_ORIENTATIONS | v1::FIELD_POSITIONS;
+    if (!client.subscribe(sub, o.timeout, error)) {
+        std::cerr << "mocap-client: " << error << "\n";
+        return kExitConnection;
+    }
+    if (client.heartbeat().empty()) {
+        std::cerr << "mocap-client: no host heartbeat within the timeout: the body to write is unknown\n";
+        return kExitConnection;
+    }
+    const auto encoder = encoder_from_heartbeat(client.heartbeat(), error);
+    if (!encoder) {
+        std::cerr << "mocap-client: " << error << "\n";
         return kExitFailed;
     }
-    std::string text = header + "MOTION\nFrames: " + std::to_string(lines.size()) + "\n" + frame_time;
-    for (const auto& l : lines)
-        text += l;
-    const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
-    if (std::fclose(f) != 0 || !ok) {
-        std::cerr << "mocap-client: writing " << o.out << " failed\n";
-        return kExitFailed;
+    const std::size_t n = encoder->model().size();
+    std::uint32_t subject = o.subject;  // 0: the subject of the first frame
+    std::vector<std::string> lines;
+    lines.reserve(o.frames);
+    v1::SkeletonFrame frame;
+    skeleton::SkeletonPose pose;
+    while (lines.size() < o.frames) {
+        const ReadStatus s = client.next_frame(frame, o.timeout);
+        if (s != ReadStatus::kMessage) {
+            std::cerr << "mocap-client: "
+                      << (s == ReadStatus::kTimeout ? "no frame within the timeout" : "connection ended") << " after "
+                      << lines.size() << " frames\n";
+            return kExitConnection;
+        }
+        if (subject == 0) subject = frame.subject_id();
+        if (frame.subject_id() != subject) continue;
+        if (frame.segment_count() != n || frame.q_world_segment_wxyz_size() != static_cast<int>(4 * n) ||
+            frame.position_m_size() != static_cast<int>(3 * n)) {
+            std::cerr << "mocap-client: frame has " << frame.segment_count() << " segments, the heartbeat's body " << n
+                      << "\n";
+            return kExitFailed;
+        }
+        pose.segment_count = static_cast<std::uint16_t>(n);
+        for (std::size_t i = 0; i < n; ++i) {
+            for (std::size_t k = 0; k < 4; ++k)
+                pose.q_world_segment_wxyz[i][k] = frame.q_world_segment_wxyz(static_cast<int>(4 * i + k));
+        }
+        pose.position_m[0] = {frame.position_m(0), frame.position_m(1), frame.position_m(2)};
+        std::string line;
+        encoder->append_motion_line(pose, line);
+        lines.push_back(std::move(line));
     }
-    std::cout << o.out << ": " << lines.size() << " frames, " << values << " values per frame\n";
-    return 0;
+    if (client.drops_announced() != 0) {
+        std::cerr << "mocap-client: the client library dropped " << client.drops_announced() << " frame(s)\n";
+    }
+    return write_bvh_file(o, encoder->hierarchy(), encoder->frame_time_line(), lines, encoder->values_per_frame());
 }
 
 int run_angles_csv(const ExportOptions& o) {

@@ -4,6 +4,12 @@
 //       reads the LIVE BVH port: HIERARCHY, MOTION, Frame Time, then N MOTION lines, and
 //       writes a complete BVH file with "Frames: N". Every line's value count is checked
 //       against the CHANNELS of the hierarchy (a wrong count fails: exit 1).
+//   mocap-client --nats URL [--site S] record --out FILE.bvh --frames N [--subject ID]
+//       the same file from the poses mocapd publishes to a NATS cluster: the HIERARCHY and
+//       Frame Time are built from the host heartbeat's body and BVH settings with the live
+//       port's encoder (serve::BvhFrameEncoder), and each MOTION line from a pose frame's
+//       orientations and root position (floats on the wire: values agree with the live
+//       port's to the float's precision). Without --subject, the subject of the first frame.
 //   mocap-client --connect HOST:7001 angles --out FILE.csv --frames N [--subject ID]
 //       subscribes to joint angles on the protobuf port and writes the joint-angle CSV
 //       (serve/angles_csv.hpp), the same format as `mocapd --replay --angles-out`.
@@ -15,6 +21,8 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
+
+#include "nats_pose_client.hpp"
 
 namespace mocap::client {
 
@@ -28,6 +36,7 @@ struct ExportOptions {
 };
 
 int run_record_bvh(const ExportOptions& options);
+int run_record_bvh_nats(const NatsOptions& nats, const ExportOptions& options);
 int run_angles_csv(const ExportOptions& options);
 
 /// Sum of the CHANNELS counts of a HIERARCHY text (the values per MOTION line).

@@ -9,6 +9,9 @@
 #include <string>
 #include <vector>
 
+#include "serve/bvh_frame_encoder.hpp"
+#include "skeleton/body_model.hpp"
+
 struct __natsOptions;  // NOLINT(bugprone-reserved-identifier): libnats names its types so
 
 namespace mocap::cluster {
@@ -27,6 +30,10 @@ struct ClusterConfig {
     /// Described in every heartbeat, so a subscriber can name what a frame carries.
     std::vector<std::string> segment_names;
     std::vector<std::string> joint_angle_names;
+    /// Also in every heartbeat ("body", "bvh"): the body model and the live BVH encoding, so
+    /// a subscriber writes the BVH file the live BVH port would (mocap-client --nats record).
+    skeleton::BodyModel model;
+    serve::BvhOutputOptions bvh;
     /// Durable takes (raw_stream.hpp): JetStream replicas of MOCAP_RAW, and the samples
     /// waiting for the publisher thread (beyond it the oldest are dropped).
     std::uint32_t raw_replicas = 1;

@@ -7,6 +7,8 @@
 #include <chrono>
 #include <nlohmann/json.hpp>
 
+#include "skeleton/euler.hpp"
+
 namespace mocap::cluster {
 namespace {
 
@@ -22,6 +24,18 @@ std::size_t prefix_bytes(const std::string& bytes) {
     while (n < bytes.size() && (static_cast<unsigned char>(bytes[n]) & 0x80u) != 0)
         ++n;
     return n + 1;
+}
+
+// The body model as the heartbeat describes it (docs/outputs.md, "Cluster publisher").
+nlohmann::ordered_json body_json(const skeleton::BodyModel& model) {
+    nlohmann::ordered_json segments = nlohmann::ordered_json::array();
+    for (const auto& s : model.segments) {
+        segments.push_back({{"name", s.name},
+                            {"parent", s.parent},
+                            {"offset_m", {s.offset_m.x(), s.offset_m.y(), s.offset_m.z()}},
+                            {"end_m", {s.end_m.x(), s.end_m.y(), s.end_m.z()}}});
+    }
+    return {{"segments", segments}, {"root_height_m", model.root_height_m}};
 }
 
 }  // namespace
@@ -321,6 +335,12 @@ void ClusterPublisher::publish_heartbeat(std::int64_t now_us, double interval_s)
         {"reconnects", reconnects_.value()},
         {"segments", config_.segment_names},
         {"joint_angle_names", config_.joint_angle_names},
+        {"body", body_json(config_.model)},
+        {"bvh",
+         {{"units_per_m", config_.bvh.write.units_per_m},
+          {"rotation_order", skeleton::to_string(config_.bvh.write.order)},
+          {"decimals", config_.bvh.write.decimals},
+          {"frame_time_s", config_.bvh.frame_time_s}}},
     };
     if (!connected_.load()) return;  // nobody would receive it; the counters keep the story
     const std::string text = status.dump();

@@ -278,6 +278,8 @@ std::unique_ptr<pipeline::Output> make_cluster(const OutputContext& ctx) {
     for (const auto& s : ctx.pipeline.model().segments)
         cc.segment_names.push_back(s.name);
     cc.joint_angle_names = joint_angle_names(ctx.pipeline);
+    cc.model = ctx.pipeline.model();
+    cc.bvh = bvh_options_from_config(c);
     return std::make_unique<cluster::ClusterPublisher>(std::move(cc));
 }
 

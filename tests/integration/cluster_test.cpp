@@ -43,13 +43,14 @@ protected:
         nats_ = start_nats(nats_port_, dir_.file("nats.log"));
         sink_port_ = free_port();
         pose_port_ = free_port();
+        bvh_port_ = free_port();
         std::ostringstream cfg;
         cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
             << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\nsink_idle_timeout_s = 5.0\n"
             << "[pipeline]\nworkers = 2\nmax_subjects = 4\n"
             << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 4096\n"
-            << "[outputs]\nbvh_listen = \"127.0.0.1:" << free_port() << "\"\n"
+            << "[outputs]\nbvh_listen = \"127.0.0.1:" << bvh_port_ << "\"\n"
             << "[http]\nlisten = \"127.0.0.1:" << free_port() << "\"\n"
             << cluster_section(nats_port_, cluster_credentials());
         write_file(dir_.file("mocapd.toml"), cfg.str());
@@ -78,7 +79,7 @@ protected:
     }
 
     TempDir dir_;
-    std::uint16_t nats_port_ = 0, sink_port_ = 0, pose_port_ = 0;
+    std::uint16_t nats_port_ = 0, sink_port_ = 0, pose_port_ = 0, bvh_port_ = 0;
     std::unique_ptr<Process> nats_;
     std::unique_ptr<Process> daemon_;
 };
@@ -165,6 +166,68 @@ TEST_F(Cluster, MocapClientCatReadsFromTheClusterInThePoseServiceFormat) {
     }
     EXPECT_EQ(n, 50);
     s->stop();
+}
+
+/// The text of a BVH file before its MOTION lines, and the MOTION lines.
+std::pair<std::string, std::vector<std::string>> split_bvh(const std::string& text) {
+    const auto at = text.find("Frame Time:");
+    const auto end = text.find('\n', at);
+    if (at == std::string::npos || end == std::string::npos) return {text, {}};
+    std::vector<std::string> lines;
+    std::istringstream in(text.substr(end + 1));
+    for (std::string line; std::getline(in, line);)
+        lines.push_back(line);
+    return {text.substr(0, end + 1), lines};
+}
+
+std::vector<double> bvh_values(const std::string& line) {
+    std::vector<double> v;
+    std::istringstream in(line);
+    for (double x = 0; in >> x;)
+        v.push_back(x);
+    return v;
+}
+
+// `mocap-client --nats … record` writes the BVH file `record` writes from the live BVH port:
+// the same HIERARCHY, frame count and Frame Time (built from the heartbeat's body and BVH
+// settings), MOTION lines of the same width, and the same subject: its root height agrees
+// with the live port's (the two record about the same second of the same walk).
+TEST_F(Cluster, MocapClientRecordWritesFromTheClusterTheBvhTheLiveBvhPortGives) {
+    auto s = sim(2, 30);
+    NatsSubscriber poses(nats_port_, std::string("mocap.") + kSite + ".2.pose");
+    ASSERT_TRUE(poses.next(15s)) << "no frame on the cluster";
+    const std::string live = dir_.file("live.bvh"), nats = dir_.file("nats.bvh");
+    Process from_port({MOCAP_CLIENT_BIN, "--connect", "127.0.0.1:" + std::to_string(bvh_port_), "record", "--out", live,
+                       "--frames", "200", "--subject", "2"},
+                      dir_.file("record-live.log"));
+    Process from_nats(
+        {MOCAP_CLIENT_BIN, "--nats", "nats://127.0.0.1:" + std::to_string(nats_port_), "--site", kSite, "--nats-user",
+         kUser, "--nats-password", kPassword, "record", "--out", nats, "--frames", "200", "--subject", "2"},
+        dir_.file("record-nats.log"));
+    ASSERT_EQ(from_port.wait(30s).value_or(-1), 0) << from_port.log();
+    ASSERT_EQ(from_nats.wait(30s).value_or(-1), 0) << from_nats.log();
+    s->stop();
+    EXPECT_NE(from_nats.log().find("200 frames, 48 values per frame"), std::string::npos) << from_nats.log();
+
+    const auto [live_head, live_lines] = split_bvh(read_file(live));
+    const auto [nats_head, nats_lines] = split_bvh(read_file(nats));
+    EXPECT_EQ(nats_head, live_head) << "HIERARCHY, Frames and Frame Time";
+    EXPECT_NE(nats_head.find("Frames: 200\n"), std::string::npos);
+    ASSERT_EQ(live_lines.size(), 200u);
+    ASSERT_EQ(nats_lines.size(), 200u);
+    double live_y = 0, nats_y = 0;
+    for (std::size_t i = 0; i < 200; ++i) {
+        const auto a = bvh_values(live_lines[i]);
+        const auto b = bvh_values(nats_lines[i]);
+        ASSERT_EQ(a.size(), 48u) << live_lines[i];
+        ASSERT_EQ(b.size(), 48u) << nats_lines[i];
+        live_y += a[1] / 200.0;  // root Y: BVH is Y-up, centimetres
+        nats_y += b[1] / 200.0;
+    }
+    std::cout << "[ metrics  ] root height over 200 frames: live BVH port " << live_y << " cm, from NATS " << nats_y
+              << " cm\n";
+    EXPECT_GT(nats_y, 50.0) << "a standing subject's pelvis";
+    EXPECT_NEAR(nats_y, live_y, 5.0) << "the same subject as the live port's";
 }
 
 // `mocap-client --nats … load` measures the cluster path as `load` measures the pose service:
