@@ -10,6 +10,15 @@
 #   MOCAP_STATIC_JOBS=N       parallel clang-tidy processes and cppcheck threads (default 2)
 #   MOCAP_STATIC_TOOLS="..."  subset of "clang-tidy cppcheck" (default both)
 #   MOCAP_STATIC_FILES=REGEX  only the sources whose path matches REGEX (default all)
+#   MOCAP_STATIC_FULL=1       run clang-tidy on every unit, ignoring the record of clean ones
+#   MOCAP_STATIC_UPDATE=1     after a clean run, rewrite tests/static/tidy-clean.txt (commit it)
+#
+# clang-tidy skips a translation unit whose key is recorded as clean, in the committed
+# tests/static/tidy-clean.txt or in this machine's cache ($MOCAP_STATIC_CACHE, default
+# ~/.cache/mocapd-static). The key is a hash of everything clang-tidy's result depends on:
+# the unit as clang preprocesses it with its compile command (so every included header,
+# ours and the system's), that command, .clang-tidy, this script and the clang-tidy version.
+# Any change to one of them makes the unit's key new, and the unit is analysed again.
 #
 # The build must have been built at least up to the protobuf headers (mocap_proto), since
 # the sources include them. Prints every finding once (a header finding is reported by every
@@ -67,20 +76,115 @@ if ((nfiles == 0)); then
 fi
 say "$nfiles translation units from $DB"
 
+RECORD="$ROOT/tests/static/tidy-clean.txt"
+CACHE="${MOCAP_STATIC_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mocapd-static}/tidy-clean.txt"
+TIDY="$(command -v clang-tidy-14 || command -v clang-tidy || true)"
+
+# tidy_keys: $OUT/keys.tsv (file, key) for every unit, and $OUT/tidy-files.txt, the units
+# whose key is in neither the record nor the cache.
+tidy_keys() {
+  python3 - "$OUT" "$ROOT" "$BUILD" "$JOBS" "$TIDY" "$RECORD" "$CACHE" "${MOCAP_STATIC_FULL:-0}" \
+    "${BASH_SOURCE[0]}" <<'PY'
+import concurrent.futures, hashlib, json, os, shlex, subprocess, sys
+out, root, build, jobs, tidy, record, cache, full, script = sys.argv[1:]
+clangxx = "clang++-14" if subprocess.run(["sh", "-c", "command -v clang++-14"], capture_output=True).returncode == 0 else "clang++"
+def norm(text):
+    return text.replace(build, "@BUILD@").replace(root, "@ROOT@")
+salt = hashlib.sha256()
+salt.update(subprocess.run([tidy, "--version"], capture_output=True, text=True).stdout.encode())
+for f in (os.path.join(root, ".clang-tidy"), script):
+    salt.update(open(f, "rb").read())
+def key(e):
+    args = e["arguments"] if "arguments" in e else shlex.split(e["command"])
+    cmd, skip = [clangxx if args[0].endswith("++") else "clang-14"], False
+    for a in args[1:]:
+        if skip or a in ("-c", e["file"]) or a.startswith("-o"):
+            skip = a == "-o"
+            continue
+        cmd.append(a)
+    cmd += ["-Wno-unknown-warning-option", "-UNDEBUG", "-E", "-P", e["file"]]
+    pp = subprocess.run(cmd, cwd=e["directory"], capture_output=True)
+    if pp.returncode != 0:
+        return None  # not preprocessable here: always analysed, clang-tidy reports why
+    h = salt.copy()
+    h.update(norm(" ".join(cmd)).encode())
+    h.update(norm(pp.stdout.decode("utf-8", "replace")).encode())
+    return h.hexdigest()
+entries = json.load(open(os.path.join(out, "compile_commands.json")))
+with concurrent.futures.ThreadPoolExecutor(int(jobs)) as ex:
+    keys = list(ex.map(key, entries))
+clean = set()
+if full != "1":
+    for f in (record, cache):
+        if os.path.exists(f):
+            clean.update(line.split()[0] for line in open(f) if line.strip() and not line.startswith("#"))
+todo = 0
+with open(os.path.join(out, "keys.tsv"), "w") as kt, open(os.path.join(out, "tidy-files.txt"), "w") as tf:
+    for e, k in zip(entries, keys):
+        kt.write(f"{e['file']}\t{k or '-'}\n")
+        if k is None or k not in clean:
+            tf.write(e["file"] + "\n")
+            todo += 1
+print(f"[static] clang-tidy: {len(entries) - todo} of {len(entries)} units unchanged since a clean analysis; {todo} to analyse")
+PY
+}
+
+# tidy_record: the units analysed without a finding join the cache; with
+# MOCAP_STATIC_UPDATE=1 the record is rewritten: its entries for units that no longer exist
+# or now have findings go, this run's clean units are written with their current keys.
+tidy_record() {
+  python3 - "$OUT" "$ROOT" "$RECORD" "$CACHE" "$1" <<'PY'
+import os, re, sys
+out, root, record, cache, update = sys.argv[1:]
+finding = re.compile(r"^[^ ]+:[0-9]+:[0-9]+: (warning|error): .*\[[^]]+\]$", re.M)
+analysed = set(l.strip() for l in open(os.path.join(out, "tidy-files.txt")))
+clean, dirty = {}, set()
+for line in open(os.path.join(out, "keys.tsv")):
+    f, k = line.rstrip("\n").split("\t")
+    if k == "-":
+        dirty.add(f)
+        continue
+    if f in analysed:
+        log = os.path.join(out, "tidy", f.replace("/", "_") + ".log")
+        if finding.search(open(log, errors="replace").read()):
+            dirty.add(f)
+            continue
+    clean[os.path.relpath(f, root)] = k
+os.makedirs(os.path.dirname(cache), exist_ok=True)
+with open(cache, "a") as c:
+    c.writelines(f"{k} {f}\n" for f, k in clean.items() if os.path.join(root, f) in analysed)
+if update == "1":
+    rows = {}
+    if os.path.exists(record):
+        for line in open(record):
+            if line.strip() and not line.startswith("#"):
+                k, f = line.split()
+                rows[f] = k
+    dirty_rel = {os.path.relpath(f, root) for f in dirty}
+    rows = {f: k for f, k in rows.items() if f not in dirty_rel and os.path.exists(os.path.join(root, f))}
+    rows.update(clean)
+    with open(record, "w") as r:
+        r.write("# Translation units clang-tidy analysed without a finding, by key (tests/static/run_static.sh\n"
+                "# explains the key; MOCAP_STATIC_UPDATE=1 rewrites this file). A listed key is not analysed again.\n")
+        r.writelines(f"{rows[f]} {f}\n" for f in sorted(rows))
+    print(f"[static] {record}: {len(rows)} units recorded clean")
+PY
+}
+
 status=0
 hfilter="^$ROOT/(server|clients|firmware)/"
 
 run_tidy() {
-  local tidy
-  tidy="$(command -v clang-tidy-14 || command -v clang-tidy || true)"
+  local tidy="$TIDY"
   if [[ -z "$tidy" ]]; then say "clang-tidy not found (Debian package clang-tidy)"; return 2; fi
   local t0=$SECONDS
+  tidy_keys
   # One process per translation unit, each into its own log so outputs never interleave.
   # -UNDEBUG: the analyser takes assert()s as facts, which removes impossible paths.
   # The build uses g++ options clang does not know; they are not findings.
   export tidy OUT hfilter
   # shellcheck disable=SC2016
-  xargs -a "$OUT/files.txt" -P "$JOBS" -I{} sh -c '
+  xargs -r -a "$OUT/tidy-files.txt" -P "$JOBS" -I{} sh -c '
     log="$OUT/tidy/$(printf %s "$1" | tr / _).log"
     "$tidy" -p "$OUT" --quiet --header-filter="$hfilter" \
       --extra-arg=-Wno-unknown-warning-option --extra-arg=-UNDEBUG "$1" >"$log" 2>&1 || rc=$?
@@ -88,9 +192,13 @@ run_tidy() {
     if [ "${rc:-0}" -gt 1 ]; then echo "$1:1:1: error: clang-tidy exited with $rc [clang-tidy-failure]" >>"$log"; fi
   ' sh {}
   # A finding: "path:line:col: warning|error: message [check]". Keep each once.
-  cat "$OUT"/tidy/*.log | grep -E '^[^ ]+:[0-9]+:[0-9]+: (warning|error): .*\[[^]]+\]$' \
+  cat "$OUT"/tidy/*.log 2>/dev/null | grep -E '^[^ ]+:[0-9]+:[0-9]+: (warning|error): .*\[[^]]+\]$' \
     | sed -E 's/,-warnings-as-errors\]$/]/' | sort -u >"$OUT/clang-tidy.txt" || true
-  report clang-tidy "$t0" "($nfiles TUs, $JOBS jobs)"
+  local rc=0
+  report clang-tidy "$t0" "($(wc -l <"$OUT/tidy-files.txt") of $nfiles TUs analysed, $JOBS jobs)" || rc=$?
+  # The record is rewritten only by a run without findings; the cache learns either way.
+  if ((rc == 0)); then tidy_record "${MOCAP_STATIC_UPDATE:-0}"; else tidy_record 0; fi
+  return "$rc"
 }
 
 # report TOOL START_SECONDS NOTE: print $OUT/TOOL.txt with paths relative to the root and a
