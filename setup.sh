@@ -35,7 +35,7 @@ PACKAGES=(
   clang-14 libclang-rt-14-dev clang-tidy-14 clang-format-14 cppcheck ccache lld nlohmann-json3-dev
   assimp-utils qemu-system-x86 qemu-user busybox-static cpio kmod
   blender nodejs
-  python3-protobuf python3-numpy python3-matplotlib python3-pytest
+  python3-protobuf python3-numpy python3-matplotlib python3-pytest python3-venv python3-setuptools python3-wheel
   chromium
 )
 
@@ -47,6 +47,9 @@ deps() {
   for p in "${PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
   done
+  # Debian 12 packages npm apart from nodejs. Asked for only when the command is missing: a
+  # nodejs from elsewhere (NodeSource) brings its own npm and conflicts with Debian's.
+  if ! command -v npm >/dev/null; then missing+=(npm); fi
   if ((${#missing[@]} == 0)); then
     log "all Debian packages present"
     return

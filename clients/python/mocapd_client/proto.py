@@ -5,8 +5,10 @@ Generated code is not committed; it is looked up in this order:
 1. ``MOCAPD_CLIENT_PB2_DIR``: a ``protoc --python_out`` directory that holds
    ``mocap/v1/mocap_pb2.py``. The CMake build writes one to
    ``<build>/clients/python/generated`` (target ``mocapd_client_py``).
-2. An importable ``mocap.v1.mocap_pb2`` (a generated tree already on ``sys.path``).
-3. When this package runs from a source checkout and ``protoc`` is on PATH: generated now
+2. The copy inside the package, ``mocapd_client/_pb/``, which an installed package has
+   (``pip install ./clients/python`` generates it: setup.py).
+3. An importable ``mocap.v1.mocap_pb2`` (a generated tree already on ``sys.path``).
+4. When this package runs from a source checkout and ``protoc`` is on PATH: generated now
    from the checkout's ``proto/`` into ``$XDG_CACHE_HOME/mocapd_client/<hash>/`` (the hash
    of the .proto text, so an edited .proto is regenerated).
 """
@@ -26,6 +28,7 @@ from types import ModuleType
 PB2_DIR_ENV = "MOCAPD_CLIENT_PB2_DIR"
 _RELATIVE = Path("mocap") / "v1" / "mocap_pb2.py"
 _PROTO_ROOT = Path(__file__).resolve().parents[3] / "proto"
+_INSTALLED = Path(__file__).resolve().parent / "_pb"
 
 
 class ProtoNotFound(ImportError):
@@ -73,6 +76,8 @@ def load_mocap_pb2() -> ModuleType:
         if not path.is_file():
             raise ProtoNotFound(f"{PB2_DIR_ENV}={configured} holds no {_RELATIVE}")
         return _load_file(path)
+    if (_INSTALLED / _RELATIVE).is_file():
+        return _load_file(_INSTALLED / _RELATIVE)
     try:
         return importlib.import_module("mocap.v1.mocap_pb2")
     except ImportError:
