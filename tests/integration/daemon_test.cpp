@@ -254,8 +254,13 @@ TEST_F(Daemon, DeadNodeIsFlaggedStaleAndRecovers) {
         << "frames must keep flowing while a node is dead";
     EXPECT_EQ(stale_in_window, in_window) << "the dead node's segment is flagged stale";
     EXPECT_GT(after, 100u);
-    EXPECT_EQ(stale_after, 0u) << "the node's segment recovers when it returns";
-    EXPECT_EQ(others_stale, 0u);
+    // Stale beyond the cut node: the assembler's 20 ms deadline on a starved machine (1 and 7
+    // of ~9,000 in two runs at load 6). A segment that failed to recover, or a live node
+    // wrongly flagged, is stale in every frame, far above these bounds.
+    EXPECT_LT(static_cast<double>(stale_after), 0.02 * static_cast<double>(after))
+        << "the node's segment recovers when it returns";
+    EXPECT_LT(static_cast<double>(others_stale), 0.02 * 14.0 * static_cast<double>(frames.size()))
+        << "the live nodes' segments are not stale";
     EXPECT_EQ(uncalibrated_late, 0u) << "the subject is calibrated automatically from its first still period";
 }
 
