@@ -8,6 +8,7 @@
 #include "mocap_wire/mw_can.h"
 #include "mocap_wire/mw_common.h"
 #include "mocap_wire/mw_crc32.h"
+#include "mocap_wire/mw_keepalive.h"
 #include "mocap_wire/mw_packet.h"
 #include "mocap_wire/mw_scale.h"
 

@@ -20,8 +20,12 @@ extern "C" {
 /** Version of the CAN message set described in docs/protocol.md; nodes report it in STATUS. */
 #define MW_CAN_PROTOCOL_VERSION 1u
 
-/** Version of the sink -> host TCP packet; byte 4 of every packet. */
+/** Version of the sink -> host TCP packet; byte 4 of every packet. Unchanged by stream version 2. */
 #define MW_PACKET_VERSION 1u
+
+/** Version of the TCP stream as a whole (docs/protocol.md §3.6): 1 = sink -> host packets only,
+ * 2 = the host also sends keepalives (mw_keepalive.h), whose byte 4 carries this number. */
+#define MW_STREAM_VERSION 2u
 
 /** Error codes. All negative so that "ret < 0" means failure. */
 typedef enum mw_error {
