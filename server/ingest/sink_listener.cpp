@@ -8,6 +8,7 @@
 
 #include "core/peer_address.hpp"
 #include "core/saturating.hpp"
+#include "mocap_wire/mw_keepalive.h"
 #include "mocap_wire/mw_packet.h"
 
 namespace mocap::ingest {
@@ -27,11 +28,14 @@ std::int64_t steady_us() {
 // One sink's TCP connection: reads, decodes, hands packets to the listener.
 class SinkConnection : public std::enable_shared_from_this<SinkConnection> {
 public:
+    static constexpr int kSendBufferBytes = 4096;
+
     SinkConnection(SinkListener& owner, tcp::socket socket, std::shared_ptr<ConnectionSlots::Slot> slot)
         : owner_(owner),
           socket_(std::move(socket)),
           slot_(std::move(slot)),
           idle_timer_(socket_.get_executor()),
+          keepalive_timer_(socket_.get_executor()),
           decoder_(std::make_unique<mw_stream_decoder>()),
           packet_(std::make_unique<mw_packet>()) {
         mw_stream_decoder_init(decoder_.get());
@@ -39,11 +43,15 @@ public:
         const auto ep = socket_.remote_endpoint(ec);
         peer_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
         socket_.set_option(tcp::no_delay(true), ec);
+        // The host sends only keepalives (64 bytes a second): a small send buffer bounds what
+        // the kernel holds for a sink that never reads them.
+        socket_.set_option(asio::socket_base::send_buffer_size(kSendBufferBytes), ec);
     }
 
     void start() {
         last_packet_us_ = steady_us();
         arm_idle_timer(owner_.config_.idle_timeout_s);
+        if (owner_.config_.keepalive_period_ms > 0) send_keepalive();
         do_read();
     }
 
@@ -58,6 +66,7 @@ public:
         closed_ = true;
         error_code ec;
         idle_timer_.cancel();
+        keepalive_timer_.cancel();
         socket_.shutdown(tcp::socket::shutdown_both, ec);
         socket_.close(ec);
         owner_.on_closed(*this);
@@ -93,6 +102,30 @@ private:
                 spdlog::warn("sink {}: no valid packet for {} s, closing", self->peer_,
                              self->owner_.config_.idle_timeout_s);
             self->close();
+        });
+    }
+
+    // One keepalive in flight at most: the buffer is not touched while a write holds it, and a
+    // sink that does not read costs a skipped tick, not memory.
+    void send_keepalive() {
+        if (closed_) return;
+        if (keepalive_in_flight_) {
+            owner_.c_.keepalives_skipped.add();
+        } else {
+            const mw_keepalive k{owner_.config_.keepalive_period_ms, keepalive_sequence_++};
+            if (mw_keepalive_encode(&k, keepalive_buf_.data(), keepalive_buf_.size()) > 0) {
+                keepalive_in_flight_ = true;
+                asio::async_write(socket_, asio::buffer(keepalive_buf_),
+                                  [self = shared_from_this()](const error_code& ec, std::size_t) {
+                                      self->keepalive_in_flight_ = false;
+                                      if (ec) return self->fail(ec, "write");
+                                      self->owner_.c_.keepalives_sent.add();
+                                  });
+            }
+        }
+        keepalive_timer_.expires_after(std::chrono::milliseconds(owner_.config_.keepalive_period_ms));
+        keepalive_timer_.async_wait([self = shared_from_this()](const error_code& ec) {
+            if (!ec) self->send_keepalive();
         });
     }
 
@@ -148,6 +181,10 @@ private:
     std::shared_ptr<ConnectionSlots::Slot> slot_;
     std::int64_t last_packet_us_ = 0;  // connection start until the first valid packet
     asio::steady_timer idle_timer_;
+    asio::steady_timer keepalive_timer_;
+    std::array<std::uint8_t, MW_KEEPALIVE_SIZE> keepalive_buf_{};
+    std::uint32_t keepalive_sequence_ = 0;
+    bool keepalive_in_flight_ = false;
     std::unique_ptr<mw_stream_decoder> decoder_;
     std::unique_ptr<mw_packet> packet_;
     std::array<std::uint8_t, 8192> buf_{};
@@ -182,6 +219,8 @@ SinkListener::SinkListener(asio::io_context& io, SinkListenerConfig config, cons
     group_.add("unknown_sink_packets", c_.unknown_sink);
     group_.add("sink_takeovers", c_.takeovers);
     group_.add("implausible_timestamps", c_.implausible_timestamps);
+    group_.add("keepalives_sent", c_.keepalives_sent);
+    group_.add("keepalives_skipped", c_.keepalives_skipped);
     reassembly_.register_in(group_);
 }
 

@@ -12,6 +12,12 @@
 // connection takes the slot of one that has not delivered a valid packet yet (or has
 // delivered none for longest, beyond limits.stall_evict_s), which is closed; failed
 // accepts (EMFILE...) are retried after a pause (core/accept_backoff.hpp).
+// Keepalive (stream version 2, docs/protocol.md §3.5): every connection is sent a 16-byte
+// keepalive at once and then every keepalive_period_ms, so a sink notices a host that died
+// silently. Writes are asynchronous with at most one keepalive in flight per connection; a
+// tick that finds the previous one unsent (a sink that does not read: every version-1
+// sink) is skipped and counted, so a sink can neither block the ingest thread nor make it
+// buffer more than 16 bytes.
 //
 // Threading: every method and handler runs on the io_context passed in, which must be run
 // by ONE thread (the ingest thread: SampleSink is called from it, in packet order).
@@ -46,6 +52,7 @@ struct SinkListenerConfig {
     double idle_timeout_s = 10.0;             ///< no whole valid packet for this long closes the connection
     PeerLimits limits{};                      ///< [limits] sink_per_address, loopback, stall_evict_s
     std::size_t max_garbage_bytes = 1 << 20;  ///< discarded bytes without a valid packet -> close
+    std::uint16_t keepalive_period_ms = 250;  ///< host -> sink keepalive period; 0 = send none (stream version 1)
     /// A packet stamped further than this from the host's receive time has an implausible
     /// clock: counted (implausible_timestamps) and its samples carry sink_send_us = 0
     /// (latency unknown), so no latency figure sees it. Larger than any real latency (a
@@ -80,7 +87,8 @@ public:
     /// a sink delivering packets), connections_refused_per_address, connections_evicted,
     /// connections_closed, accept_errors, idle_timeouts, garbage_closes, bytes, packets,
     /// malformed_packets, crc_failures, bytes_discarded, sequence_gaps, unknown_sink_packets,
-    /// sink_takeovers, implausible_timestamps; plus the reassembly counters of every sink.
+    /// sink_takeovers, implausible_timestamps, keepalives_sent, keepalives_skipped; plus the
+    /// reassembly counters of every sink.
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
     /// Set-up: the counters and gauge "sinks_connected" (accepted - closed, read from the
     /// counters, so any thread may read it).
@@ -91,7 +99,7 @@ private:
     struct Counters {  // written on the io thread only (single writer)
         SingleWriterCounter accepted, refused, refused_per_address, evicted, closed, idle_timeouts, garbage_closes,
             bytes, packets, malformed, crc_failures, discarded, sequence_gaps, unknown_sink, takeovers,
-            implausible_timestamps;
+            implausible_timestamps, keepalives_sent, keepalives_skipped;
         Counter accept_errors;  // the type AcceptBackoff takes; written on the io thread too
     };
 

@@ -1,5 +1,7 @@
 #include "ingest/sink_listener.hpp"
 
+#include "mocap_wire/mw_keepalive.h"
+
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -46,6 +48,17 @@ std::vector<std::uint8_t> make_packet(std::uint8_t sink_id, std::uint32_t seq, s
     const auto n = mw_packet_encode(&h, frames.data(), frames.size(), out.data(), out.size());
     out.resize(static_cast<std::size_t>(n));
     return out;
+}
+
+/// Reads (keepalives, if any) until the server closes the connection; false if it never does.
+bool closed_by_server(tcp::socket& s) {
+    std::array<char, 256> b{};
+    for (int i = 0; i < 10'000; ++i) {
+        boost::system::error_code ec;
+        s.read_some(asio::buffer(b), ec);
+        if (ec) return true;
+    }
+    return false;
 }
 
 class SinkListenerTest : public ::testing::Test {
@@ -194,11 +207,8 @@ TEST_F(SinkListenerTest, IdleAndGarbageOnlyConnectionsAreClosed) {
     asio::write(noisy, asio::buffer(junk));
     EXPECT_TRUE(wait_until([&] { return counter("idle_timeouts") >= 1; }));
     EXPECT_TRUE(wait_until([&] { return counter("garbage_closes") == 1; }));
-    // Both sockets see the server close them.
-    std::array<char, 16> b{};
-    boost::system::error_code ec;
-    idle.read_some(asio::buffer(b), ec);
-    EXPECT_TRUE(ec);
+    // Both sockets see the server close them (after the keepalives it sent meanwhile).
+    EXPECT_TRUE(closed_by_server(idle));
 }
 
 TEST_F(SinkListenerTest, MaxSinksRefusesExtraConnections) {
@@ -209,11 +219,80 @@ TEST_F(SinkListenerTest, MaxSinksRefusesExtraConnections) {
     asio::write(a, asio::buffer(make_packet(1, 0, 0, 1)));
     ASSERT_TRUE(wait_until([&] { return count() == 1; }));
     auto b = connect();
-    std::array<char, 16> buf{};
-    boost::system::error_code ec;
-    b.read_some(asio::buffer(buf), ec);
-    EXPECT_TRUE(ec);
+    EXPECT_TRUE(closed_by_server(b));
     EXPECT_EQ(counter("connections_refused"), 1u);
+}
+
+TEST_F(SinkListenerTest, EveryConnectionGetsKeepalivesAtTheirPeriod) {
+    SinkListenerConfig cfg;
+    cfg.keepalive_period_ms = 40;
+    start(cfg);
+    auto s = connect();
+    // The first at once, then one per period: 5 within generous time, numbered from 0.
+    std::vector<std::uint8_t> bytes(5 * MW_KEEPALIVE_SIZE);
+    const auto t0 = std::chrono::steady_clock::now();
+    asio::read(s, asio::buffer(bytes));
+    const auto elapsed = std::chrono::steady_clock::now() - t0;
+    EXPECT_GE(elapsed, 4 * 40ms - 10ms) << "one per period, not a burst";
+    mw_keepalive_decoder d;
+    mw_keepalive_decoder_init(&d);
+    std::vector<mw_keepalive> got;
+    const std::uint8_t* p = bytes.data();
+    std::size_t left = bytes.size();
+    for (;;) {
+        std::size_t used = 0;
+        mw_keepalive k{};
+        const mw_stream_result r = mw_keepalive_decoder_feed(&d, p, left, &used, &k);
+        p += used;
+        left -= used;
+        if (r == MW_STREAM_NEED_MORE) break;
+        ASSERT_EQ(r, MW_STREAM_PACKET) << mw_error_name(d.last_error);
+        got.push_back(k);
+    }
+    ASSERT_EQ(got.size(), 5u);
+    for (std::uint32_t i = 0; i < 5; ++i) {
+        EXPECT_EQ(got[i].sequence, i);
+        EXPECT_EQ(got[i].period_ms, 40);
+    }
+    EXPECT_TRUE(wait_until([&] { return counter("keepalives_sent") >= 5; }));
+}
+
+TEST_F(SinkListenerTest, ASinkThatNeverReadsKeepsStreamingAndCostsNoMemory) {
+    SinkListenerConfig cfg;
+    cfg.keepalive_period_ms = 1;  // fills the socket buffers within a second
+    start(cfg);
+    tcp::socket s(client_io_);
+    s.open(tcp::v4());
+    s.set_option(asio::socket_base::receive_buffer_size(1024));
+    s.connect({asio::ip::make_address("127.0.0.1"), listener_->port()});
+    // Never read: the host's writes back up and it skips ticks instead of queueing them.
+    ASSERT_TRUE(wait_until([&] { return counter("keepalives_skipped") >= 100; }, 20s))
+        << "sent " << counter("keepalives_sent");
+    const std::uint64_t sent = counter("keepalives_sent");
+    for (std::uint32_t c = 0; c < 50; ++c)
+        asio::write(s, asio::buffer(make_packet(2, c, c, 15)));
+    ASSERT_TRUE(wait_until([&] { return count() == 50u * 15u; }, 10s)) << "packets still flow: " << count();
+    // What went out is what the two kernels' socket buffers hold (the daemon's send buffer
+    // is 4 KiB), not a queue in the daemon; the rest of the ticks were skipped.
+    const std::uint64_t skipped = counter("keepalives_skipped");
+    EXPECT_TRUE(wait_until([&] { return counter("keepalives_skipped") > skipped + 50; }, 10s));
+    EXPECT_LE(counter("keepalives_sent") * MW_KEEPALIVE_SIZE, 64u * 1024u) << "first stall after " << sent;
+    EXPECT_EQ(counter("malformed_packets"), 0u);
+}
+
+TEST_F(SinkListenerTest, KeepalivesCanBeTurnedOff) {
+    SinkListenerConfig cfg;
+    cfg.keepalive_period_ms = 0;
+    start(cfg);
+    auto s = connect();
+    asio::write(s, asio::buffer(make_packet(1, 0, 0, 1)));
+    ASSERT_TRUE(wait_until([&] { return count() == 1; }));
+    s.non_blocking(true);
+    std::array<std::uint8_t, 16> b{};
+    boost::system::error_code ec;
+    EXPECT_EQ(s.read_some(asio::buffer(b), ec), 0u);
+    EXPECT_EQ(ec, asio::error::would_block) << "stream version 1: the host sends nothing";
+    EXPECT_EQ(counter("keepalives_sent"), 0u);
 }
 
 }  // namespace
