@@ -71,10 +71,11 @@ struct PendingFrame {
 // One subject: sink core + HAL + its nodes and motion state.
 class SimSink {
 public:
-    SimSink(const Shared& shared, int subject, const sockaddr_in& peer)
+    SimSink(const Shared& shared, int subject, const std::vector<sockaddr_in>& hosts)
         : shared_(shared),
           subject_(subject),
-          uplink_(peer),
+          host_count_(hosts.size()),
+          uplink_(hosts),
           rng_(shared.options->seed, 1000u + static_cast<unsigned>(subject)) {
         const StreamCommandOptions& o = *shared.options;
         SimRng placement(o.seed, 2000u + static_cast<unsigned>(subject));
@@ -105,12 +106,16 @@ public:
         config.backoff_max_us = 2'000'000u;
         config.connect_timeout_us = 3'000'000u;
         config.early_close = o.early_close ? 1u : 0u;
+        config.host_count = static_cast<std::uint8_t>(host_count_);
         sink_node_hal hal{};
         hal.user = this;
         hal.can_transmit = [](void* u, const mw_can_frame* f) { return static_cast<SimSink*>(u)->can_transmit(*f); };
         hal.can_receive = [](void* u, mw_can_frame* f) { return static_cast<SimSink*>(u)->can_receive(*f); };
         hal.time_us = [](void*) { return realtime_us(); };
-        hal.uplink_connect = [](void* u) { return static_cast<SimSink*>(u)->uplink_.connect(); };
+        hal.uplink_connect = [](void* u, std::uint8_t host) { return static_cast<SimSink*>(u)->uplink_.connect(host); };
+        hal.uplink_read = [](void* u, std::uint8_t* d, std::size_t cap) {
+            return static_cast<SimSink*>(u)->uplink_.read(d, cap);
+        };
         hal.uplink_state = [](void* u) { return static_cast<SimSink*>(u)->uplink_.state(); };
         hal.uplink_write = [](void* u, const std::uint8_t* d, std::size_t n) {
             return static_cast<SimSink*>(u)->uplink_.write(d, n);
@@ -243,6 +248,7 @@ private:
 
     const Shared& shared_;
     int subject_;
+    std::size_t host_count_;
     PosixUplink uplink_;
     SimRng rng_;  // loss and jitter draws
     double heading_rad_ = 0.0;
@@ -286,12 +292,13 @@ void print_stats(const std::vector<std::unique_ptr<SimSink>>& sinks, const Strea
         std::snprintf(buf, sizeof buf,
                       "%s{\"subject\":%d,\"packets\":%u,\"frames\":%u,\"samples\":%llu,\"packets_dropped\":%u,"
                       "\"frames_dropped\":%u,\"lost_can_frames\":%llu,\"dropout_samples\":%llu,\"syncs_skipped\":%u,"
-                      "\"early_closes\":%u,\"connects\":%u,\"disconnects\":%u,\"packets_busy\":%u}",
+                      "\"early_closes\":%u,\"connects\":%u,\"disconnects\":%u,\"packets_busy\":%u,"
+                      "\"keepalives_in\":%u,\"keepalive_timeouts\":%u,\"host_switches\":%u}",
                       per.empty() ? "" : ",", s->subject(), c.packets_out, c.frames_in,
                       static_cast<unsigned long long>(st.samples), c.packets_dropped, c.frames_dropped,
                       static_cast<unsigned long long>(st.lost_can_frames),
                       static_cast<unsigned long long>(st.dropout_samples), c.syncs_skipped, c.early_closes, c.connects,
-                      c.disconnects, c.packets_busy);
+                      c.disconnects, c.packets_busy, c.keepalives_in, c.keepalive_timeouts, c.host_switches);
         per += buf;
     }
     std::printf(
@@ -328,7 +335,11 @@ bool parse_dropout(const std::string& text, NodeDropout* out, std::string* error
 CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
     CLI::App* cmd =
         app.add_subcommand("stream", "Act as K sink nodes with simulated sensor nodes, streaming to mocapd");
-    cmd->add_option("--connect", o.connect, "mocapd sink port, HOST:PORT")->required();
+    cmd->add_option("--connect", o.connect,
+                    "mocapd sink port HOST:PORT, or an ordered list HOST:PORT,HOST:PORT,... (up to 8): on a lost "
+                    "connection, or 750 ms without the host's keepalive, each sink moves to the next host, "
+                    "wrapping, at most one attempt per host per second")
+        ->required();
     cmd->add_option("--subjects", o.subjects, "Subjects = sinks, sink ids FIRST..FIRST+K-1")
         ->check(CLI::Range(1, 255))
         ->capture_default_str();
@@ -370,8 +381,8 @@ CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
 
 int run_stream_command(const StreamCommandOptions& o) {
     std::string error;
-    sockaddr_in peer{};
-    if (!resolve_ipv4(o.connect, &peer, &error)) {
+    std::vector<sockaddr_in> hosts;
+    if (!resolve_host_list(o.connect, SINK_NODE_MAX_HOSTS, &hosts, &error)) {
         std::fprintf(stderr, "mocap-sim stream: %s\n", error.c_str());
         return 2;
     }
@@ -426,7 +437,7 @@ int run_stream_command(const StreamCommandOptions& o) {
     std::vector<std::unique_ptr<SimSink>> sinks;
     sinks.reserve(static_cast<std::size_t>(o.subjects));
     for (int k = 0; k < o.subjects; ++k)
-        sinks.push_back(std::make_unique<SimSink>(shared, o.first_sink_id + k, peer));
+        sinks.push_back(std::make_unique<SimSink>(shared, o.first_sink_id + k, hosts));
 
     g_stop.store(false);
     std::signal(SIGINT, on_stop_signal);

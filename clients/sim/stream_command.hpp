@@ -1,7 +1,7 @@
 // stream_command.hpp — `mocap-sim stream`: K simulated sink nodes with their sensor nodes,
 // streaming to mocapd over TCP; the load generator of the integration tests and benchmarks.
 //
-//   mocap-sim stream --connect HOST:PORT [--subjects K] [--nodes N] [--rate HZ]
+//   mocap-sim stream --connect HOST:PORT[,HOST:PORT...] [--subjects K] [--nodes N] [--rate HZ]
 //                    [--mode raw|quat] [--duration S] [--motion walk|FILE.bvh] [--loss P]
 //                    [--seed N] [--truth FILE.csv] [--dropout NODE:START_S:END_S]...
 //                    [--jitter-us J] [--calibrate-s S] [--noise-scale X] [--sink-rate-stats]
@@ -16,6 +16,9 @@
 // --loss P drops each node frame with probability P before the sink sees it; --dropout
 // silences a node id in every subject for a time window (repeatable). The uplink is
 // stream_uplink.hpp. Subjects differ by a seeded heading and start 10 m apart.
+// --connect with several hosts is the sink's ordered host list (sink_node.h, "Host list and
+// failover"): a lost connection, or a host silent for 750 ms once it has sent keepalives,
+// moves each sink to the next host, wrapping.
 //
 // Clock: time_us is CLOCK_REALTIME in µs, so the sink timestamps compare directly with the
 // daemon's receive times on the same host (latency = daemon clock - sink timestamp).
@@ -87,7 +90,7 @@ CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& options);
 /// early_closes, cpu_percent (user + system of this process over the elapsed time), and
 /// per_subject: [{subject, packets, frames, samples, packets_dropped, frames_dropped,
 /// lost_can_frames, dropout_samples, syncs_skipped, early_closes, connects, disconnects,
-/// packets_busy}].
+/// packets_busy, keepalives_in, keepalive_timeouts, host_switches}].
 int run_stream_command(const StreamCommandOptions& options);
 
 }  // namespace mocap::sim

@@ -11,10 +11,11 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <utility>
 
 namespace mocap::sim {
 
-PosixUplink::PosixUplink(const sockaddr_in& peer) : peer_(peer) {
+PosixUplink::PosixUplink(std::vector<sockaddr_in> peers) : peers_(std::move(peers)) {
     pending_.reserve(SINK_NODE_PACKET_CAPACITY);
 }
 
@@ -22,13 +23,15 @@ PosixUplink::~PosixUplink() {
     close();
 }
 
-int PosixUplink::connect() {
+int PosixUplink::connect(std::uint8_t host) {
     close();
+    if (host >= peers_.size()) return -1;
+    const sockaddr_in& peer = peers_[host];
     fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
     if (fd_ < 0) return -1;
     const int one = 1;
     (void)::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-    if (::connect(fd_, reinterpret_cast<const sockaddr*>(&peer_), sizeof peer_) == 0) {
+    if (::connect(fd_, reinterpret_cast<const sockaddr*>(&peer), sizeof peer) == 0) {
         state_ = SINK_UPLINK_UP;
         return 0;
     }
@@ -55,7 +58,7 @@ sink_uplink_state PosixUplink::state() {
     } else if (state_ == SINK_UPLINK_UP) {
         char byte;
         const ssize_t n = ::recv(fd_, &byte, 1, MSG_PEEK | MSG_DONTWAIT);
-        // The daemon never sends on this connection: 0 means it closed.
+        // Whatever the daemon sent is read by read(); 0 here means it closed.
         if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) || !flush_pending()) {
             close();
         }
@@ -93,6 +96,15 @@ int PosixUplink::write(const std::uint8_t* data, std::size_t len) {
     return 0;
 }
 
+int PosixUplink::read(std::uint8_t* data, std::size_t cap) {
+    if (state_ != SINK_UPLINK_UP) return -1;
+    const ssize_t n = ::recv(fd_, data, cap, MSG_DONTWAIT);
+    if (n > 0) return static_cast<int>(n);
+    if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return 0;
+    close();
+    return -1;
+}
+
 void PosixUplink::close() {
     if (fd_ >= 0) ::close(fd_);
     fd_ = -1;
@@ -120,6 +132,25 @@ bool resolve_ipv4(const std::string& host_port, sockaddr_in* out, std::string* e
     }
     *out = *reinterpret_cast<const sockaddr_in*>(result->ai_addr);
     ::freeaddrinfo(result);
+    return true;
+}
+
+bool resolve_host_list(const std::string& list, std::size_t max, std::vector<sockaddr_in>* out, std::string* error) {
+    out->clear();
+    std::size_t start = 0;
+    for (;;) {
+        const std::size_t comma = list.find(',', start);
+        const std::string one = list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        sockaddr_in addr{};
+        if (!resolve_ipv4(one, &addr, error)) return false;
+        out->push_back(addr);
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    if (out->size() > max) {
+        *error = "at most " + std::to_string(max) + " hosts in --connect, got " + std::to_string(out->size());
+        return false;
+    }
     return true;
 }
 

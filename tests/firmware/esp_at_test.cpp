@@ -3,11 +3,13 @@
 // sink core on top of it.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <deque>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "mocap_wire/mw_keepalive.h"
 #include "mocap_wire/mw_packet.h"
 #include "sink_node/esp_at.h"
 #include "sink_node/sink_node.h"
@@ -38,6 +40,12 @@ struct fake_modem {
         for (char c : s) {
             to_client.emplace_back(static_cast<uint8_t>(c), modem_baud);
         }
+    }
+
+    // The host sends bytes: the module announces them as "+IPD,<n>:" and passes them raw.
+    void host_sends(const std::vector<uint8_t>& bytes) {
+        say("\r\n+IPD," + std::to_string(bytes.size()) + ":");
+        say(std::string(bytes.begin(), bytes.end()));
     }
 
     void peer_close() {
@@ -153,7 +161,9 @@ class EspAtTest : public ::testing::Test {
 protected:
     fake_modem modem;
     std::unique_ptr<esp_at> at = std::make_unique<esp_at>();
-    esp_at_config config{"my,net", "pa\"ss", "10.0.0.2", 7000, 921600};
+    const char* const backups[1] = {"10.0.0.3"};
+    const uint16_t backup_ports[1] = {7001};
+    esp_at_config config{"my,net", "pa\"ss", "10.0.0.2", 7000, 921600, 1, backups, backup_ports};
 
     void SetUp() override {
         const esp_at_serial s = modem.serial();
@@ -171,7 +181,7 @@ protected:
 };
 
 TEST_F(EspAtTest, SetupScriptThenConnect) {
-    ASSERT_EQ(esp_at_connect(at.get()), 0);
+    ASSERT_EQ(esp_at_connect(at.get(), 0), 0);
     EXPECT_EQ(esp_at_state(at.get()) == SINK_UPLINK_UP ? 0 : 1, 1) << "takes more than one call";
     EXPECT_EQ(settle(), SINK_UPLINK_UP);
     const std::vector<std::string> expected{"AT+RST",
@@ -187,7 +197,7 @@ TEST_F(EspAtTest, SetupScriptThenConnect) {
 }
 
 TEST_F(EspAtTest, SendsOnePacketAtATimeThroughThePrompt) {
-    esp_at_connect(at.get());
+    esp_at_connect(at.get(), 0);
     ASSERT_EQ(settle(), SINK_UPLINK_UP);
     std::vector<uint8_t> packet(300);
     for (std::size_t i = 0; i < packet.size(); ++i) {
@@ -207,22 +217,67 @@ TEST_F(EspAtTest, SendsOnePacketAtATimeThroughThePrompt) {
 }
 
 TEST_F(EspAtTest, PeerCloseTakesLinkDownAndReconnectSkipsSetup) {
-    esp_at_connect(at.get());
+    esp_at_connect(at.get(), 0);
     ASSERT_EQ(settle(), SINK_UPLINK_UP);
     modem.peer_close();
     EXPECT_EQ(esp_at_state(at.get()), SINK_UPLINK_DOWN);
     EXPECT_EQ(at->counters.link_closed, 1u);
     const std::size_t before = modem.commands.size();
-    esp_at_connect(at.get());
+    esp_at_connect(at.get(), 0);
     EXPECT_EQ(settle(), SINK_UPLINK_UP);
     ASSERT_EQ(modem.commands.size(), before + 1);
     EXPECT_EQ(modem.commands.back(), "AT+CIPSTART=\"TCP\",\"10.0.0.2\",7000");
     EXPECT_EQ(at->counters.resets, 1u);
 }
 
+TEST_F(EspAtTest, ConnectsToTheHostOfTheListTheCoreAsksFor) {
+    esp_at_connect(at.get(), 0);
+    ASSERT_EQ(settle(), SINK_UPLINK_UP);
+    modem.peer_close();
+    EXPECT_EQ(esp_at_state(at.get()), SINK_UPLINK_DOWN);
+    ASSERT_EQ(esp_at_connect(at.get(), 1), 0);
+    EXPECT_EQ(settle(), SINK_UPLINK_UP);
+    EXPECT_EQ(modem.commands.back(), "AT+CIPSTART=\"TCP\",\"10.0.0.3\",7001");
+    modem.peer_close();
+    EXPECT_EQ(esp_at_state(at.get()), SINK_UPLINK_DOWN);
+    EXPECT_EQ(esp_at_connect(at.get(), 2), -1) << "no host 2 in a list of two";
+}
+
+TEST_F(EspAtTest, HostBytesArriveThroughIpdWhateverTheyContain) {
+    esp_at_connect(at.get(), 0);
+    ASSERT_EQ(settle(), SINK_UPLINK_UP);
+    // Line ends, a "CLOSED" and a '>' inside the data are data, not module responses.
+    const std::vector<uint8_t> odd{'C', 'L', 'O', 'S', 'E', 'D', '\r', '\n', '>', 0x00, 0xFF};
+    modem.host_sends(odd);
+    const mw_keepalive k{250, 3};
+    std::vector<uint8_t> ka(MW_KEEPALIVE_SIZE);
+    ASSERT_EQ(mw_keepalive_encode(&k, ka.data(), ka.size()), static_cast<int32_t>(MW_KEEPALIVE_SIZE));
+    modem.host_sends(ka);
+    EXPECT_EQ(settle(5), SINK_UPLINK_UP) << "the CLOSED inside the data must not close the link";
+    uint8_t buf[64];
+    const int n = esp_at_read(at.get(), buf, sizeof buf);
+    ASSERT_EQ(n, static_cast<int>(odd.size() + ka.size()));
+    EXPECT_TRUE(std::equal(odd.begin(), odd.end(), buf));
+    EXPECT_TRUE(std::equal(ka.begin(), ka.end(), buf + odd.size()));
+    EXPECT_EQ(esp_at_read(at.get(), buf, sizeof buf), 0);
+    // A packet write still works after received data.
+    const std::vector<uint8_t> packet(40, 0x11);
+    ASSERT_EQ(esp_at_write(at.get(), packet.data(), packet.size()), 0);
+    settle(5);
+    ASSERT_EQ(modem.payloads.size(), 1u);
+    // More than the buffer holds is dropped and counted, never overrun.
+    modem.host_sends(std::vector<uint8_t>(ESP_AT_RX_MAX + 10, 0x22));
+    settle(5);
+    EXPECT_EQ(at->counters.rx_dropped, 10u);
+    EXPECT_EQ(esp_at_read(at.get(), buf, sizeof buf), static_cast<int>(sizeof buf));
+    modem.peer_close();
+    EXPECT_EQ(esp_at_state(at.get()), SINK_UPLINK_DOWN);
+    EXPECT_EQ(esp_at_read(at.get(), buf, sizeof buf), -1);
+}
+
 TEST_F(EspAtTest, ServerDownFailsConnectButKeepsWifi) {
     modem.server_up = false;
-    esp_at_connect(at.get());
+    esp_at_connect(at.get(), 0);
     EXPECT_EQ(settle(), SINK_UPLINK_DOWN);
     EXPECT_EQ(at->counters.errors, 1u);
     EXPECT_EQ(at->wifi_ready, 1);
@@ -230,18 +285,18 @@ TEST_F(EspAtTest, ServerDownFailsConnectButKeepsWifi) {
 
 TEST_F(EspAtTest, WrongPasswordFailsAndNextConnectResetsAgain) {
     modem.password = "other";
-    esp_at_connect(at.get());
+    esp_at_connect(at.get(), 0);
     EXPECT_EQ(settle(), SINK_UPLINK_DOWN);
     EXPECT_EQ(at->wifi_ready, 0);
     modem.password = "pa\"ss";
-    esp_at_connect(at.get());
+    esp_at_connect(at.get(), 0);
     EXPECT_EQ(settle(), SINK_UPLINK_UP);
     EXPECT_EQ(at->counters.resets, 2u);
 }
 
 TEST_F(EspAtTest, SilentModuleTimesOut) {
     modem.silent = true;
-    esp_at_connect(at.get());
+    esp_at_connect(at.get(), 0);
     EXPECT_EQ(settle(4000), SINK_UPLINK_CONNECTING) << "the reset may take 5 s";
     EXPECT_EQ(settle(1100), SINK_UPLINK_DOWN);
     EXPECT_EQ(at->counters.timeouts, 1u);
@@ -295,12 +350,55 @@ TEST_F(EspAtTest, SinkCoreStreamsDecodablePacketsOverTheModem) {
     EXPECT_EQ(packets, sink->counters.packets_out);
 }
 
+TEST_F(EspAtTest, SinkCoreLeavesASilentHostForTheNextOverTheModem) {
+    static fake_modem* g_modem;
+    g_modem = &modem;
+    sink_node_hal hal{};
+    esp_at_uplink(at.get(), &hal);
+    hal.can_transmit = [](void*, const mw_can_frame*) { return 0; };
+    hal.can_receive = [](void*, mw_can_frame*) { return 0; };
+    hal.time_us = [](void*) { return g_modem->now_us; };
+    sink_node_config c{};
+    sink_node_default_config(&c);
+    c.status_period_s = 0;
+    c.config_period_s = 0;
+    c.host_count = 2;
+    auto sink = std::make_unique<sink_node>();
+    ASSERT_EQ(sink_node_init(sink.get(), &hal, &c), MW_OK);
+    uint32_t seq = 0;
+    for (int ms = 0; ms < 1500; ++ms) {  // host 0 sends a keepalive every 250 ms
+        if (ms % 250 == 200 && sink->link == SINK_UPLINK_UP) {
+            const mw_keepalive k{250, seq++};
+            std::vector<uint8_t> ka(MW_KEEPALIVE_SIZE);
+            ASSERT_EQ(mw_keepalive_encode(&k, ka.data(), ka.size()), static_cast<int32_t>(MW_KEEPALIVE_SIZE));
+            modem.host_sends(ka);
+        }
+        sink_node_poll(sink.get());
+        modem.now_us += 1000;
+    }
+    ASSERT_EQ(sink->counters.connects, 1u);
+    EXPECT_GE(sink->counters.keepalives_in, 4u);
+    for (int ms = 0; ms < 1500; ++ms) {  // then silence
+        sink_node_poll(sink.get());
+        modem.now_us += 1000;
+    }
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 1u);
+    EXPECT_EQ(sink->counters.connects, 2u);
+    EXPECT_NE(std::find(modem.commands.begin(), modem.commands.end(), "AT+CIPSTART=\"TCP\",\"10.0.0.3\",7001"),
+              modem.commands.end())
+        << "the second host of the list";
+}
+
 TEST(EspAtInit, RejectsMissingPieces) {
     fake_modem modem;
     esp_at at{};
     esp_at_serial s = modem.serial();
-    esp_at_config c{"a", "b", "h", 0, 0};
+    esp_at_config c{"a", "b", "h", 0, 0, 0, nullptr, nullptr};
     EXPECT_EQ(esp_at_init(&at, &s, &c), MW_ERR_ARGUMENT) << "port 0";
+    c.port = 7000;
+    c.more_count = 1;
+    EXPECT_EQ(esp_at_init(&at, &s, &c), MW_ERR_ARGUMENT) << "a second host without its address";
+    c.more_count = 0;
     c.port = 7000;
     c.baud = 921600;
     s.set_baud = nullptr;

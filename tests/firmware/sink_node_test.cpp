@@ -2,12 +2,14 @@
 // reaches the uplink is decoded with the wire library's stream decoder.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <deque>
 #include <memory>
 #include <set>
 #include <vector>
 
+#include "mocap_wire/mw_keepalive.h"
 #include "mocap_wire/mw_packet.h"
 #include "sink_node/sink_node.h"
 
@@ -29,6 +31,18 @@ struct fake_sink_hal {
     std::vector<uint64_t> connect_times;
     int closes = 0;
     std::vector<std::vector<uint8_t>> connections;  // bytes written, per connection
+    std::vector<uint8_t> connect_hosts;             // host index of every attempt
+    std::set<uint8_t> dead_hosts;                   // attempts to these fail at once
+    std::vector<uint8_t> inbox;                     // host -> sink bytes not yet read
+    uint32_t keepalive_sequence = 0;
+
+    // The connected host sends one keepalive (docs/protocol.md §3.5).
+    void host_keepalive() {
+        const mw_keepalive k{250, keepalive_sequence++};
+        uint8_t b[MW_KEEPALIVE_SIZE];
+        ASSERT_EQ(mw_keepalive_encode(&k, b, sizeof b), static_cast<int32_t>(MW_KEEPALIVE_SIZE));
+        inbox.insert(inbox.end(), b, b + sizeof b);
+    }
 
     sink_node_hal hal() {
         sink_node_hal h{};
@@ -52,10 +66,13 @@ struct fake_sink_hal {
             return 1;
         };
         h.time_us = [](void* u) { return static_cast<fake_sink_hal*>(u)->now_us; };
-        h.uplink_connect = [](void* u) {
+        h.uplink_connect = [](void* u, uint8_t host) {
             auto* self = static_cast<fake_sink_hal*>(u);
             self->connect_times.push_back(self->now_us);
-            if (!self->server_up) {
+            self->connect_hosts.push_back(host);
+            self->inbox.clear();
+            self->keepalive_sequence = 0;
+            if (!self->server_up || self->dead_hosts.count(host) != 0) {
                 return -1;
             }
             self->state = self->connect_completes ? SINK_UPLINK_UP : SINK_UPLINK_CONNECTING;
@@ -76,6 +93,16 @@ struct fake_sink_hal {
             }
             self->connections.back().insert(self->connections.back().end(), d, d + n);
             return 0;
+        };
+        h.uplink_read = [](void* u, uint8_t* d, size_t cap) {
+            auto* self = static_cast<fake_sink_hal*>(u);
+            if (self->state != SINK_UPLINK_UP) {
+                return -1;
+            }
+            const size_t n = std::min(cap, self->inbox.size());
+            std::copy(self->inbox.begin(), self->inbox.begin() + static_cast<std::ptrdiff_t>(n), d);
+            self->inbox.erase(self->inbox.begin(), self->inbox.begin() + static_cast<std::ptrdiff_t>(n));
+            return static_cast<int>(n);
         };
         h.uplink_close = [](void* u) {
             auto* self = static_cast<fake_sink_hal*>(u);
@@ -166,6 +193,20 @@ protected:
         while (fake.now_us < end) {
             sink_node_poll(sink.get());
             fake.now_us += step_us;
+        }
+    }
+
+    // The same, while the connected host sends a keepalive every 250 ms.
+    void run_with_keepalives(uint64_t duration_us) {
+        const uint64_t end = fake.now_us + duration_us;
+        uint64_t next = fake.now_us;
+        while (fake.now_us < end) {
+            if (fake.now_us >= next && fake.state == SINK_UPLINK_UP) {
+                fake.host_keepalive();
+                next = fake.now_us + 250'000;
+            }
+            sink_node_poll(sink.get());
+            fake.now_us += 1000;
         }
     }
 };
@@ -406,6 +447,106 @@ TEST_F(SinkNodeTest, UplinkDropBacksOffExponentiallyThenReconnects) {
     EXPECT_EQ(fake.connect_times.back(), t_drop2 + 100'000);
 }
 
+TEST_F(SinkNodeTest, ALostConnectionMovesToTheNextHostOfTheList) {
+    config.host_count = 3;
+    start();
+    run(50'000);
+    ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0}));
+    fake.state = SINK_UPLINK_DOWN;  // host 0 resets the connection
+    const uint64_t t_drop = fake.now_us;
+    run(200'000);
+    ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0, 1}));
+    EXPECT_EQ(fake.connect_times[1], t_drop + 100'000) << "the next host after the minimum back-off";
+    EXPECT_EQ(sink->counters.host_switches, 1u);
+    fake.state = SINK_UPLINK_DOWN;
+    run(200'000);
+    fake.state = SINK_UPLINK_DOWN;
+    run(1'200'000);
+    EXPECT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0, 1, 2, 0})) << "wraps to the first";
+    EXPECT_EQ(sink->counters.connects, 4u);
+    EXPECT_EQ(fake.connections.size(), 4u);
+    EXPECT_FALSE(decode_all(fake.connections.back()).empty()) << "packets flow to the new host";
+}
+
+TEST_F(SinkNodeTest, DeadHostsAreTriedInTurnAtMostOncePerSecondEach) {
+    config.host_count = 3;
+    config.backoff_min_us = 100'000;
+    config.backoff_max_us = 400'000;
+    fake.dead_hosts = {0, 1, 2};
+    start();
+    run(10'000'000);
+    ASSERT_GE(fake.connect_hosts.size(), 9u);
+    std::vector<uint64_t> last(3, 0);
+    std::vector<bool> seen(3, false);
+    for (std::size_t i = 0; i < fake.connect_hosts.size(); ++i) {
+        const uint8_t h = fake.connect_hosts[i];
+        EXPECT_EQ(h, i % 3) << "in list order, wrapping";
+        if (seen[h]) {
+            EXPECT_GE(fake.connect_times[i] - last[h], 1'000'000u) << "host " << int(h) << " attempt " << i;
+        }
+        seen[h] = true;
+        last[h] = fake.connect_times[i];
+    }
+    // Host 1 is tried 100 ms after host 0 failed: one dead host does not delay the next.
+    EXPECT_EQ(fake.connect_times[1] - fake.connect_times[0], 100'000u);
+    fake.dead_hosts = {0, 2};
+    run(2'000'000);
+    EXPECT_EQ(sink->link, SINK_UPLINK_UP);
+    EXPECT_EQ(fake.connect_hosts.back(), 1);
+}
+
+TEST_F(SinkNodeTest, ASilentHostIsLeftWithinItsKeepaliveTimeout) {
+    config.host_count = 2;
+    start();
+    run_with_keepalives(1'000'000);
+    ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0}));
+    EXPECT_GE(sink->counters.keepalives_in, 4u);
+    // Host 0 freezes: the connection stays up, nothing more arrives.
+    const uint64_t last_keepalive = sink->last_keepalive_us;
+    run(1'000'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 1u);
+    EXPECT_EQ(fake.closes, 1);
+    ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0, 1}));
+    // Time-out after 750 ms of silence (+1 poll), then the next host after 100 ms.
+    EXPECT_LE(fake.connect_times[1] - last_keepalive, 750'000u + 1'000u + 100'000u);
+    EXPECT_GT(fake.connect_times[1] - last_keepalive, 750'000u);
+    run_with_keepalives(2'000'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 1u) << "host 1 is alive";
+    EXPECT_FALSE(decode_all(fake.connections.back()).empty());
+}
+
+TEST_F(SinkNodeTest, AHostThatNeverSentAKeepaliveIsNeverTimedOut) {
+    // Stream version 1 hosts send nothing: the sink must not take them for dead.
+    config.host_count = 2;
+    start();
+    run(5'000'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 0u);
+    EXPECT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0}));
+    // Bytes that are no keepalive do not arm it either.
+    fake.inbox.assign(64, 0x55);
+    run(2'000'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 0u);
+    EXPECT_EQ(sink->counters.keepalives_in, 0u);
+}
+
+TEST_F(SinkNodeTest, OnceKeepalivesWereHeardANewSilentConnectionIsAbandoned) {
+    // A frozen host's kernel still completes the TCP handshake: the new connection is up
+    // but silent, and must not hold the sink.
+    config.host_count = 2;
+    start();
+    run_with_keepalives(600'000);
+    fake.state = SINK_UPLINK_DOWN;  // host 0 goes away
+    run(300'000);                   // host 1 accepts but never sends a keepalive
+    ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0, 1}));
+    const uint64_t t_connect = fake.connect_times[1];
+    run(1'000'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 1u);
+    ASSERT_EQ(fake.connect_hosts.size(), 3u);
+    EXPECT_EQ(fake.connect_hosts[2], 0);
+    // 750 ms of silence, then host 0 again (its last attempt was over a second ago).
+    EXPECT_EQ(fake.connect_times[2] - t_connect, 751'000u + 100'000u);
+}
+
 TEST_F(SinkNodeTest, WriteErrorClosesAndRetries) {
     start();
     run(30'000);
@@ -580,6 +721,11 @@ TEST(SinkNodeInit, RejectsBadConfig) {
     EXPECT_EQ(sink_node_init(sink.get(), &h, &c), MW_ERR_RANGE);
     sink_node_default_config(&c);
     c.backoff_max_us = c.backoff_min_us - 1;
+    EXPECT_EQ(sink_node_init(sink.get(), &h, &c), MW_ERR_RANGE);
+    sink_node_default_config(&c);
+    c.host_count = 0;
+    EXPECT_EQ(sink_node_init(sink.get(), &h, &c), MW_ERR_RANGE);
+    c.host_count = SINK_NODE_MAX_HOSTS + 1;
     EXPECT_EQ(sink_node_init(sink.get(), &h, &c), MW_ERR_RANGE);
     sink_node_default_config(&c);
     h.uplink_close = nullptr;

@@ -4,7 +4,9 @@
  * - AT+UART_CUR is not persistent, so after AT+RST the port goes back to 115200 baud, the
  *   rate the module boots with.
  * - Responses are matched as whole lines; the CIPSEND prompt "> " has no line end, so a '>'
- *   at the start of a line is taken as the prompt only while one is expected. */
+ *   at the start of a line is taken as the prompt only while one is expected.
+ * - Received data ("+IPD,<n>:" and n raw bytes) is cut out of the line stream by its count,
+ *   since the bytes may contain anything, line ends included. */
 #include "sink_node/esp_at.h"
 
 #define BOOT_BAUD 115200u
@@ -121,9 +123,9 @@ static void begin_step(esp_at* at, uint8_t step, uint32_t timeout_us) {
             break;
         case STEP_START:
             out_str(at, "AT+CIPSTART=\"TCP\",");
-            out_quoted(at, at->config.host);
+            out_quoted(at, at->host == 0u ? at->config.host : at->config.more_hosts[at->host - 1u]);
             out_str(at, ",");
-            out_u32(at, at->config.port);
+            out_u32(at, at->host == 0u ? at->config.port : at->config.more_ports[at->host - 1u]);
             out_str(at, "\r\n");
             break;
         case STEP_SEND_PROMPT:
@@ -163,6 +165,8 @@ static void fail(esp_at* at) {
     at->step = STEP_IDLE;
     at->link = SINK_UPLINK_DOWN;
     at->payload_len = 0;
+    at->ipd_left = 0;
+    at->rx_len = 0;
     out_reset(at);
 }
 
@@ -285,7 +289,48 @@ static void on_line(esp_at* at) {
     }
 }
 
+/* "+IPD,<n>" is in the line and ':' arrived: n raw bytes follow. */
+static int start_ipd(esp_at* at) {
+    static const char prefix[] = "+IPD,";
+    const size_t plen = sizeof prefix - 1u;
+    if (at->line_len <= plen || at->line_len > sizeof at->line) {
+        return 0;
+    }
+    for (size_t i = 0; i < plen; ++i) {
+        if (at->line[i] != prefix[i]) {
+            return 0;
+        }
+    }
+    uint32_t n = 0;
+    for (size_t i = plen; i < at->line_len; ++i) {
+        if (at->line[i] < '0' || at->line[i] > '9' || n > 100000u) {
+            return 0;
+        }
+        n = n * 10u + (uint32_t)(at->line[i] - '0');
+    }
+    at->ipd_left = n;
+    at->line_len = 0;
+    return 1;
+}
+
 static void on_byte(esp_at* at, uint8_t c) {
+    if (at->ipd_left > 0u) {
+        --at->ipd_left;
+        ++at->counters.rx_bytes;
+        if (at->rx_len < sizeof at->rx) {
+            at->rx[at->rx_len++] = c;
+        } else {
+            ++at->counters.rx_dropped;
+        }
+        if (at->ipd_left == 0u) {
+            at->at_line_start = 1;
+        }
+        return;
+    }
+    if (c == ':' && start_ipd(at)) {
+        at->at_line_start = 0;
+        return;
+    }
     if (at->step == STEP_SEND_PROMPT && at->at_line_start && c == '>') {
         begin_step(at, STEP_SEND_DATA, TIMEOUT_SEND_US);
         at->at_line_start = 0;
@@ -330,8 +375,14 @@ static void pump(esp_at* at) {
 int esp_at_init(esp_at* at, const esp_at_serial* serial, const esp_at_config* config) {
     if (at == NULL || serial == NULL || config == NULL || serial->write == NULL || serial->read == NULL ||
         serial->time_us == NULL || (config->baud != 0u && serial->set_baud == NULL) || config->ssid == NULL ||
-        config->password == NULL || config->host == NULL || config->port == 0u) {
+        config->password == NULL || config->host == NULL || config->port == 0u ||
+        (config->more_count > 0u && (config->more_hosts == NULL || config->more_ports == NULL))) {
         return MW_ERR_ARGUMENT;
+    }
+    for (uint8_t i = 0; i < config->more_count; ++i) {
+        if (config->more_hosts[i] == NULL || config->more_ports[i] == 0u) {
+            return MW_ERR_ARGUMENT;
+        }
     }
     const esp_at_counters zero = {0};
     at->serial = *serial;
@@ -339,21 +390,25 @@ int esp_at_init(esp_at* at, const esp_at_serial* serial, const esp_at_config* co
     at->counters = zero;
     at->link = SINK_UPLINK_DOWN;
     at->wifi_ready = 0;
+    at->host = 0;
     at->step = STEP_IDLE;
     at->at_line_start = 1;
     at->deadline_us = 0;
     at->baud_after_flush = 0;
     at->line_len = 0;
     at->payload_len = 0;
+    at->ipd_left = 0;
+    at->rx_len = 0;
     out_reset(at);
     return MW_OK;
 }
 
-int esp_at_connect(void* user) {
+int esp_at_connect(void* user, uint8_t host) {
     esp_at* at = (esp_at*)user;
-    if (at->step != STEP_IDLE) {
+    if (at->step != STEP_IDLE || host > at->config.more_count) {
         return -1;
     }
+    at->host = host;
     at->link = SINK_UPLINK_CONNECTING;
     if (at->wifi_ready) {
         begin_step(at, STEP_START, TIMEOUT_START_US);
@@ -398,10 +453,30 @@ void esp_at_close(void* user) {
     pump_out(at);
 }
 
+int esp_at_read(void* user, uint8_t* data, size_t cap) {
+    esp_at* at = (esp_at*)user;
+    if (at->link != SINK_UPLINK_UP) {
+        return -1;
+    }
+    size_t n = at->rx_len < cap ? at->rx_len : cap;
+    if (n > 0x7FFFu) {
+        n = 0x7FFFu; /* the return value is an int */
+    }
+    for (size_t i = 0; i < n; ++i) {
+        data[i] = at->rx[i];
+    }
+    for (size_t i = n; i < at->rx_len; ++i) {
+        at->rx[i - n] = at->rx[i];
+    }
+    at->rx_len -= n;
+    return (int)n;
+}
+
 void esp_at_uplink(esp_at* at, sink_node_hal* hal) {
     hal->user = at;
     hal->uplink_connect = esp_at_connect;
     hal->uplink_state = esp_at_state;
     hal->uplink_write = esp_at_write;
     hal->uplink_close = esp_at_close;
+    hal->uplink_read = esp_at_read;
 }

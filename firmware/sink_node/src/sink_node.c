@@ -37,6 +37,9 @@ void sink_node_default_config(sink_node_config* config) {
     config->node_config.mode = MW_MODE_RAW;
     config->node_config.status_period_s = 1;
     config->early_close = 1;
+    config->host_count = 1;
+    config->host_retry_us = 1000000u;
+    config->keepalive_timeout_us = 750000u;
 }
 
 /* ---- CAN transmit queue ------------------------------------------------------------------ */
@@ -64,16 +67,35 @@ static void flush_can(sink_node* sink) {
 
 /* ---- uplink --------------------------------------------------------------------------------- */
 
+/* After a failure: the next host of the list, after the back-off (and, with several hosts,
+ * not sooner than host_retry_us after the last attempt to that host). The back-off doubles
+ * once every host has failed in turn, so one dead host does not slow the move to the next. */
 static void schedule_retry(sink_node* sink, uint64_t now) {
-    sink->next_connect_us = now + sink->backoff_us;
-    const uint64_t doubled = 2u * (uint64_t)sink->backoff_us;
-    sink->backoff_us = doubled > sink->config.backoff_max_us ? sink->config.backoff_max_us : (uint32_t)doubled;
+    const uint8_t count = sink->config.host_count;
+    uint64_t at = now + sink->backoff_us;
+    if (count > 1u) {
+        sink->host = (uint8_t)((sink->host + 1u) % count);
+        ++sink->counters.host_switches;
+        if (sink->host_tried[sink->host]) {
+            const uint64_t spaced = sink->host_attempt_us[sink->host] + sink->config.host_retry_us;
+            if (spaced > at) {
+                at = spaced;
+            }
+        }
+    }
+    sink->next_connect_us = at;
+    if (++sink->round_failures >= count) {
+        sink->round_failures = 0;
+        const uint64_t doubled = 2u * (uint64_t)sink->backoff_us;
+        sink->backoff_us = doubled > sink->config.backoff_max_us ? sink->config.backoff_max_us : (uint32_t)doubled;
+    }
 }
 
 static void link_lost(sink_node* sink, uint64_t now) {
     ++sink->counters.disconnects;
     sink->link = SINK_UPLINK_DOWN;
     sink->backoff_us = sink->config.backoff_min_us;
+    sink->round_failures = 0;
     schedule_retry(sink, now);
 }
 
@@ -81,6 +103,51 @@ static void attempt_failed(sink_node* sink, uint64_t now) {
     ++sink->counters.connect_failures;
     sink->link = SINK_UPLINK_DOWN;
     schedule_retry(sink, now);
+}
+
+/* Reads what the host sent (bounded per poll) and judges its keepalives. Returns 0 when the
+ * connection was closed here. */
+static int supervise_host(sink_node* sink, uint64_t now) {
+    if (sink->hal.uplink_read == NULL) {
+        return 1;
+    }
+    uint8_t buf[64];
+    for (unsigned reads = 0; reads < 8u; ++reads) {
+        const int n = sink->hal.uplink_read(sink->hal.user, buf, sizeof buf);
+        if (n < 0) {
+            sink->hal.uplink_close(sink->hal.user);
+            link_lost(sink, now);
+            return 0;
+        }
+        if (n == 0) {
+            break;
+        }
+        const uint8_t* p = buf;
+        size_t left = (size_t)n;
+        for (;;) {
+            size_t used = 0;
+            mw_keepalive keepalive;
+            const mw_stream_result r = mw_keepalive_decoder_feed(&sink->keepalives, p, left, &used, &keepalive);
+            p += used;
+            left -= used;
+            if (r == MW_STREAM_NEED_MORE) {
+                break;
+            }
+            if (r == MW_STREAM_PACKET) {
+                ++sink->counters.keepalives_in;
+                sink->keepalive_seen = 1;
+                sink->last_keepalive_us = now;
+            }
+        }
+    }
+    if (sink->keepalive_seen && sink->config.keepalive_timeout_us != 0u &&
+        now - sink->last_keepalive_us > sink->config.keepalive_timeout_us) {
+        ++sink->counters.keepalive_timeouts;
+        sink->hal.uplink_close(sink->hal.user);
+        link_lost(sink, now);
+        return 0;
+    }
+    return 1;
 }
 
 static void manage_uplink(sink_node* sink, uint64_t now) {
@@ -93,6 +160,13 @@ static void manage_uplink(sink_node* sink, uint64_t now) {
         sink->link = SINK_UPLINK_UP;
         sink->sequence = 0;
         sink->backoff_us = sink->config.backoff_min_us;
+        sink->round_failures = 0;
+        sink->last_keepalive_us = now;
+        mw_keepalive_decoder_init(&sink->keepalives);
+        return;
+    }
+    if (state == SINK_UPLINK_UP) {
+        (void)supervise_host(sink, now);
         return;
     }
     if (state == SINK_UPLINK_DOWN) {
@@ -104,7 +178,9 @@ static void manage_uplink(sink_node* sink, uint64_t now) {
         if (now >= sink->next_connect_us) {
             ++sink->counters.connect_attempts;
             sink->connect_started_us = now;
-            if (sink->hal.uplink_connect(sink->hal.user) < 0) {
+            sink->host_tried[sink->host] = 1;
+            sink->host_attempt_us[sink->host] = now;
+            if (sink->hal.uplink_connect(sink->hal.user, sink->host) < 0) {
                 attempt_failed(sink, now);
                 return;
             }
@@ -290,7 +366,8 @@ int sink_node_init(sink_node* sink, const sink_node_hal* hal, const sink_node_co
     }
     if (config->rate_hz < MW_RATE_HZ_MIN || config->rate_hz > MW_RATE_HZ_MAX || config->max_batch_frames < 2u ||
         config->max_batch_frames > SINK_NODE_MAX_BATCH_FRAMES || config->backoff_min_us == 0u ||
-        config->backoff_max_us < config->backoff_min_us) {
+        config->backoff_max_us < config->backoff_min_us || config->host_count == 0u ||
+        config->host_count > SINK_NODE_MAX_HOSTS) {
         return MW_ERR_RANGE;
     }
     mw_can_frame probe;
@@ -315,6 +392,15 @@ int sink_node_init(sink_node* sink, const sink_node_hal* hal, const sink_node_co
     sink->connect_started_us = 0;
     sink->backoff_us = config->backoff_min_us;
     sink->sequence = 0;
+    sink->host = 0;
+    sink->round_failures = 0;
+    sink->keepalive_seen = 0;
+    for (unsigned i = 0; i < SINK_NODE_MAX_HOSTS; ++i) {
+        sink->host_tried[i] = 0;
+        sink->host_attempt_us[i] = 0;
+    }
+    sink->last_keepalive_us = 0;
+    mw_keepalive_decoder_init(&sink->keepalives);
     sink->batch_open = 0;
     sink->batch_timestamp_us = 0;
     sink->batch_node_frames = 0;
@@ -369,6 +455,12 @@ uint64_t sink_node_next_deadline_us(const sink_node* sink) {
     uint64_t deadline = sync_due_us(sink, sink->sync_index);
     if (sink->link == SINK_UPLINK_DOWN && sink->next_connect_us < deadline) {
         deadline = sink->next_connect_us;
+    }
+    if (sink->link == SINK_UPLINK_UP && sink->keepalive_seen && sink->config.keepalive_timeout_us != 0u) {
+        const uint64_t silent_at = sink->last_keepalive_us + sink->config.keepalive_timeout_us + 1u;
+        if (silent_at < deadline) {
+            deadline = silent_at;
+        }
     }
     if (sink->next_config_us < deadline) {
         deadline = sink->next_config_us;

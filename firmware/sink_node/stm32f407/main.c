@@ -18,6 +18,11 @@
 #ifndef MOCAP_HOST_PORT
 #define MOCAP_HOST_PORT 7000
 #endif
+/* MOCAP_HOST2 (optional): second host of the ordered list; the sink fails over to it when
+ * the first dies (docs/firmware.md, "Host list and failover"). */
+#ifndef MOCAP_HOST2_PORT
+#define MOCAP_HOST2_PORT 7000
+#endif
 #ifndef MOCAP_ESP_BAUD
 #define MOCAP_ESP_BAUD 921600u
 #endif
@@ -29,7 +34,15 @@ int main(void) {
     (void)board_init();
 
     const esp_at_serial serial = board_serial();
-    const esp_at_config wifi = {MOCAP_WIFI_SSID, MOCAP_WIFI_PASSWORD, MOCAP_HOST, MOCAP_HOST_PORT, MOCAP_ESP_BAUD};
+#ifdef MOCAP_HOST2
+    static const char* const more_hosts[1] = {MOCAP_HOST2};
+    static const uint16_t more_ports[1] = {MOCAP_HOST2_PORT};
+    const esp_at_config wifi = {MOCAP_WIFI_SSID, MOCAP_WIFI_PASSWORD, MOCAP_HOST, MOCAP_HOST_PORT, MOCAP_ESP_BAUD, 1u,
+                                more_hosts,      more_ports};
+#else
+    const esp_at_config wifi = {
+        MOCAP_WIFI_SSID, MOCAP_WIFI_PASSWORD, MOCAP_HOST, MOCAP_HOST_PORT, MOCAP_ESP_BAUD, 0u, NULL, NULL};
+#endif
     (void)esp_at_init(&g_at, &serial, &wifi);
 
     sink_node_hal hal = {0};
@@ -41,6 +54,7 @@ int main(void) {
     config.sink_id = MOCAP_SINK_ID;
     /* One packet per AT+CIPSEND: (2048 - 26) / 13 = 155 frames at most. */
     config.max_batch_frames = 128u;
+    config.host_count = (uint8_t)(1u + wifi.more_count);
     if (sink_node_init(&g_sink, &hal, &config) != MW_OK) {
         for (;;) {
             wait_for_interrupt(); /* a build with an invalid configuration: stay off the bus */

@@ -35,6 +35,16 @@
  *   dropped and counted. After a drop or a failed attempt the next attempt waits
  *   backoff_min_us, doubling per failed attempt up to backoff_max_us; a successful connect
  *   resets it. An attempt still CONNECTING after connect_timeout_us is closed and failed.
+ * - Host list and failover: config.host_count hosts, tried in order (uplink_connect gets the
+ *   index; the HAL knows the addresses). A lost connection, a failed attempt or a silent host
+ *   moves to the next host, wrapping; the back-off doubles only once every host has failed
+ *   in turn, and with more than one host an attempt to a host waits at least host_retry_us
+ *   (1 s) after the previous attempt to that same host, so a dead list is never hammered.
+ * - Keepalive (stream version 2, docs/protocol.md §3.5): with uplink_read, the core reads what
+ *   the host sends and decodes keepalives. Once it has received one keepalive (from any
+ *   host, since init), a connection without a keepalive for keepalive_timeout_us (750 ms)
+ *   is taken for a dead host: closed, counted, and the next host is tried. A sink that never
+ *   heard one (version-1 hosts send none) never times out.
  *
  * HAL (libcanard style): a struct of function pointers plus one user pointer, filled by the
  * caller and copied at init. The core calls it only from sink_node_init() and
@@ -53,6 +63,7 @@
 #include <stdint.h>
 
 #include "mocap_wire/mw_can.h"
+#include "mocap_wire/mw_keepalive.h"
 #include "mocap_wire/mw_packet.h"
 
 #ifdef __cplusplus
@@ -65,6 +76,8 @@ extern "C" {
 #endif
 #define SINK_NODE_PACKET_CAPACITY \
     (MW_PACKET_HEADER_SIZE + SINK_NODE_MAX_BATCH_FRAMES * MW_PACKET_RECORD_MAX + MW_PACKET_CRC_SIZE)
+/* Most hosts in the ordered host list. */
+#define SINK_NODE_MAX_HOSTS 8u
 /* CAN frames (SYNC, CONFIG) the core holds while the controller's mailboxes are busy. */
 #define SINK_NODE_CAN_TX_QUEUE_LEN 8u
 
@@ -84,9 +97,10 @@ typedef struct sink_node_hal {
     int (*can_receive)(void* user, mw_can_frame* frame);
     /* Monotonic microseconds since an arbitrary origin. */
     uint64_t (*time_us)(void* user);
-    /* Starts a connection attempt (it may complete before returning): 0 = started or
-     * connected, negative = failed at once. Called only when uplink_state() is DOWN. */
-    int (*uplink_connect)(void* user);
+    /* Starts a connection attempt to host `host` (0..config.host_count-1, the ordered host
+     * list; it may complete before returning): 0 = started or connected, negative = failed at
+     * once. Called only when uplink_state() is DOWN. */
+    int (*uplink_connect)(void* user, uint8_t host);
     /* Current connection state; the HAL reports a connection the peer dropped as DOWN. */
     sink_uplink_state (*uplink_state)(void* user);
     /* Writes one whole packet or nothing: 0 = taken, 1 = busy (the packet is dropped and
@@ -94,43 +108,53 @@ typedef struct sink_node_hal {
     int (*uplink_write)(void* user, const uint8_t* data, size_t len);
     /* Closes the connection or abandons the attempt; uplink_state() is DOWN afterwards. */
     void (*uplink_close)(void* user);
+    /* Optional (may be NULL: no keepalive supervision, a stream-version-1 sink): takes up to
+     * cap bytes the host sent, without blocking: >= 0 = bytes read (0 = none pending),
+     * negative = the connection failed (the core closes it). Called only while UP. */
+    int (*uplink_read)(void* user, uint8_t* data, size_t cap);
     /* Optional (may be NULL): CAN frames lost on reception so far (controller FIFO or driver
      * ring overruns), reported in the sink's STATUS. */
     uint32_t (*can_rx_lost)(void* user);
 } sink_node_hal;
 
 typedef struct sink_node_config {
-    uint8_t sink_id;             /* written into every packet header */
-    uint16_t rate_hz;            /* SYNC rate, MW_RATE_HZ_MIN..MW_RATE_HZ_MAX */
-    uint32_t first_counter;      /* counter of the first SYNC (tests start near the wrap) */
-    uint16_t max_batch_frames;   /* packet size limit in frames, 2..SINK_NODE_MAX_BATCH_FRAMES */
-    uint32_t backoff_min_us;     /* first reconnect delay */
-    uint32_t backoff_max_us;     /* largest reconnect delay */
-    uint32_t connect_timeout_us; /* a CONNECTING attempt older than this has failed */
-    uint8_t status_period_s;     /* sink STATUS into the stream every N s, 0 = never */
-    uint8_t config_period_s;     /* CONFIG broadcast every N s, 0 = only at start */
-    mw_config node_config;       /* what the nodes are told (node_id is forced to 0) */
-    uint8_t early_close;         /* 1 = close an instant's packet once it is complete (above) */
+    uint8_t sink_id;               /* written into every packet header */
+    uint16_t rate_hz;              /* SYNC rate, MW_RATE_HZ_MIN..MW_RATE_HZ_MAX */
+    uint32_t first_counter;        /* counter of the first SYNC (tests start near the wrap) */
+    uint16_t max_batch_frames;     /* packet size limit in frames, 2..SINK_NODE_MAX_BATCH_FRAMES */
+    uint32_t backoff_min_us;       /* first reconnect delay */
+    uint32_t backoff_max_us;       /* largest reconnect delay */
+    uint32_t connect_timeout_us;   /* a CONNECTING attempt older than this has failed */
+    uint8_t status_period_s;       /* sink STATUS into the stream every N s, 0 = never */
+    uint8_t config_period_s;       /* CONFIG broadcast every N s, 0 = only at start */
+    mw_config node_config;         /* what the nodes are told (node_id is forced to 0) */
+    uint8_t early_close;           /* 1 = close an instant's packet once it is complete (above) */
+    uint8_t host_count;            /* hosts in the ordered list, 1..SINK_NODE_MAX_HOSTS */
+    uint32_t host_retry_us;        /* with several hosts: least time between attempts to one host */
+    uint32_t keepalive_timeout_us; /* no keepalive for this long = dead host (0 = never) */
 } sink_node_config;
 
 /* Counters only go up (wrap at 2^32). */
 typedef struct sink_node_counters {
-    uint32_t frames_in;        /* CAN frames received */
-    uint32_t frames_dropped;   /* received frames in packets that were not delivered */
-    uint32_t packets_out;      /* packets the uplink took */
-    uint32_t packets_dropped;  /* packets built while down, or refused as busy */
-    uint32_t packets_busy;     /* of which refused as busy */
-    uint32_t batch_splits;     /* packets closed early (max_batch_frames or offset_us range) */
-    uint32_t bytes_out;        /* bytes the uplink took */
-    uint32_t syncs_sent;       /* SYNC frames queued for the bus */
-    uint32_t syncs_skipped;    /* SYNC instants skipped because the loop was late */
-    uint32_t can_tx_overflows; /* SYNC/CONFIG frames dropped, CAN TX queue full */
-    uint32_t connect_attempts; /* uplink_connect calls */
-    uint32_t connect_failures; /* attempts that failed or timed out */
-    uint32_t connects;         /* attempts that reached UP */
-    uint32_t reconnects;       /* connects after the first one */
-    uint32_t disconnects;      /* UP -> DOWN transitions (peer drop or write error) */
-    uint32_t early_closes;     /* packets closed before the next SYNC: instant complete */
+    uint32_t frames_in;          /* CAN frames received */
+    uint32_t frames_dropped;     /* received frames in packets that were not delivered */
+    uint32_t packets_out;        /* packets the uplink took */
+    uint32_t packets_dropped;    /* packets built while down, or refused as busy */
+    uint32_t packets_busy;       /* of which refused as busy */
+    uint32_t batch_splits;       /* packets closed early (max_batch_frames or offset_us range) */
+    uint32_t bytes_out;          /* bytes the uplink took */
+    uint32_t syncs_sent;         /* SYNC frames queued for the bus */
+    uint32_t syncs_skipped;      /* SYNC instants skipped because the loop was late */
+    uint32_t can_tx_overflows;   /* SYNC/CONFIG frames dropped, CAN TX queue full */
+    uint32_t connect_attempts;   /* uplink_connect calls */
+    uint32_t connect_failures;   /* attempts that failed or timed out */
+    uint32_t connects;           /* attempts that reached UP */
+    uint32_t reconnects;         /* connects after the first one */
+    uint32_t disconnects;        /* UP -> DOWN transitions (peer drop or write error) */
+    uint32_t early_closes;       /* packets closed before the next SYNC: instant complete */
+    uint32_t keepalives_in;      /* valid keepalives received from hosts */
+    uint32_t keepalive_timeouts; /* connections closed for want of a keepalive */
+    uint32_t host_switches;      /* moves to the next host of the list */
 } sink_node_counters;
 
 typedef struct sink_node {
@@ -147,8 +171,15 @@ typedef struct sink_node {
     sink_uplink_state link; /* state seen at the last poll */
     uint64_t next_connect_us;
     uint64_t connect_started_us;
-    uint32_t backoff_us; /* delay before the next attempt */
-    uint32_t sequence;   /* of the next packet on this connection */
+    uint32_t backoff_us;    /* delay before the next attempt */
+    uint32_t sequence;      /* of the next packet on this connection */
+    uint8_t host;           /* index of the host being tried or connected */
+    uint8_t round_failures; /* failures in a row since the last connect, for the back-off */
+    uint8_t keepalive_seen; /* a keepalive has been received since init: supervise */
+    uint8_t host_tried[SINK_NODE_MAX_HOSTS];
+    uint64_t host_attempt_us[SINK_NODE_MAX_HOSTS]; /* last attempt per host */
+    uint64_t last_keepalive_us;                    /* on this connection (its start until the first) */
+    mw_keepalive_decoder keepalives;
     /* batch */
     uint8_t batch_open;
     uint64_t batch_timestamp_us;
@@ -169,7 +200,7 @@ typedef struct sink_node {
 
 /* Defaults: 100 Hz, 128 frames per packet, back-off 100 ms .. 5 s, connect timeout 10 s,
  * STATUS every 1 s, CONFIG every 1 s, nodes at +-16 g, +-2000 dps, raw mode, STATUS 1 s,
- * early close on. */
+ * early close on, one host, 1 s between attempts to one host, keepalive time-out 750 ms. */
 void sink_node_default_config(sink_node_config* config);
 
 /* Validates the config, copies the HAL, starts the schedule (the first SYNC is due at once)
