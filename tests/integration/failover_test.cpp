@@ -1,0 +1,196 @@
+// Sink failover between two mocapd hosts of one site (docs/cluster.md, "Failures"): one
+// nats-server, hosts A and B both publishing to it, one simulated sink given the ordered
+// host list A,B, and a subscriber on mocap.<site>.*.pose. Host A dies twice over, in
+// separate tests: kill -9 (the kernel resets the connection) and SIGSTOP (a silent host: the
+// connection stays up and only the missing keepalives, docs/protocol.md §3.5, tell). Each
+// time the sink moves to B and the subscriber's largest gap in that subject's poses must
+// stay within 1.5 s (relaxed under the sanitizers, whose builds run several times slower).
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <csignal>
+#include <iostream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include "harness.hpp"
+#include "nats_harness.hpp"
+
+namespace mocap::itest {
+namespace {
+
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+
+constexpr const char* kSite = "arena";
+constexpr std::uint32_t kSubject = 5;
+constexpr int kRateHz = 100;
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr auto kGapBound = 3000ms;  // sanitizer builds: the bound is the plain build's
+#else
+constexpr auto kGapBound = 1500ms;
+#endif
+
+/// Arrival times and SYNCs of one subject's pose frames, taken on a thread of its own.
+class PoseTimeline {
+public:
+    PoseTimeline(std::uint16_t port, const std::string& subject) : sub_(port, subject), thread_([this] { run(); }) {}
+    ~PoseTimeline() { stop(); }
+    PoseTimeline(const PoseTimeline&) = delete;
+    PoseTimeline& operator=(const PoseTimeline&) = delete;
+
+    void stop() {
+        stop_ = true;
+        if (thread_.joinable()) thread_.join();
+    }
+    std::size_t frames_after(Clock::time_point t) {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        std::size_t n = 0;
+        for (const auto& a : arrivals_)
+            n += a > t ? 1 : 0;
+        return n;
+    }
+    std::size_t size() {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        return arrivals_.size();
+    }
+    /// The longest time between two consecutive frames, and the most SYNCs one step skipped.
+    std::pair<std::chrono::milliseconds, std::uint64_t> largest_gap() {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        std::chrono::milliseconds worst{0};
+        std::uint64_t frames = 0;
+        for (std::size_t i = 1; i < arrivals_.size(); ++i) {
+            worst =
+                std::max(worst, std::chrono::duration_cast<std::chrono::milliseconds>(arrivals_[i] - arrivals_[i - 1]));
+            if (syncs_[i] > syncs_[i - 1]) frames = std::max(frames, syncs_[i] - syncs_[i - 1] - 1);
+        }
+        return {worst, frames};
+    }
+
+private:
+    void run() {
+        while (!stop_) {
+            auto m = sub_.next(100ms);
+            if (!m) continue;
+            const auto now = Clock::now();
+            const v1::SkeletonFrame f = decode_pose_payload(m->second);
+            EXPECT_EQ(m->first, std::string("mocap.") + kSite + "." + std::to_string(f.subject_id()) + ".pose");
+            if (f.subject_id() != kSubject) continue;
+            const std::lock_guard<std::mutex> lock(mutex_);
+            arrivals_.push_back(now);
+            syncs_.push_back(f.sync());
+        }
+    }
+
+    NatsSubscriber sub_;
+    std::mutex mutex_;
+    std::vector<Clock::time_point> arrivals_;
+    std::vector<std::uint64_t> syncs_;
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+class Failover : public ::testing::Test {
+protected:
+    struct Host {
+        std::string id;
+        std::uint16_t sink_port = 0, pose_port = 0;
+        std::unique_ptr<Process> daemon;
+        bool killed = false;
+    };
+
+    void SetUp() override {
+        if (!have_nats_server())
+            GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
+        nats_port_ = free_port();
+        nats_ = start_nats(nats_port_, dir_.file("nats.log"));
+        start_host(a_, "host-a");
+        start_host(b_, "host-b");
+        sim_ = std::make_unique<Process>(
+            std::vector<std::string>{
+                MOCAP_SIM_BIN, "stream", "--connect",
+                "127.0.0.1:" + std::to_string(a_.sink_port) + ",127.0.0.1:" + std::to_string(b_.sink_port),
+                "--subjects", "1", "--first-sink-id", std::to_string(kSubject), "--nodes", "15", "--mode", "quat",
+                "--rate", std::to_string(kRateHz), "--duration", "120", "--sink-rate-stats"},
+            dir_.file("sim.log"));
+    }
+
+    void TearDown() override {
+        if (sim_) sim_->stop();
+        for (Host* h : {&a_, &b_}) {
+            if (!h->daemon) continue;
+            if (HasFailure()) std::cerr << "--- " << h->id << " log ---\n" << h->daemon->log();
+            if (!h->killed) {
+                EXPECT_EQ(h->daemon->stop(10s), 0) << h->id << " must exit 0 on SIGTERM";
+            }
+        }
+        if (HasFailure() && sim_) std::cerr << "--- simulator ---\n" << sim_->log();
+    }
+
+    void start_host(Host& h, const std::string& id) {
+        h.id = id;
+        h.sink_port = free_port();
+        h.pose_port = free_port();
+        const std::string cal_dir = dir_.file(id + "-cal");
+        std::filesystem::create_directories(cal_dir);
+        std::ostringstream cfg;
+        cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
+            << "[ingest]\nsink_listen = \"127.0.0.1:" << h.sink_port << "\"\n"
+            << "[pipeline]\nworkers = 1\nmax_subjects = 8\n"
+            << "[skeleton]\ncalibration_dir = \"" << cal_dir << "\"\n"
+            << "[serve]\npose_listen = \"127.0.0.1:" << h.pose_port << "\"\n"
+            << "[outputs]\nbvh_live = false\n[http]\nenabled = false\n"
+            << cluster_section(nats_port_, kSite, id, cluster_credentials());
+        const std::string path = dir_.file(id + ".toml");
+        write_file(path, cfg.str());
+        h.daemon = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", path},
+                                             dir_.file(id + ".log"), dir_.path().string());
+        ASSERT_TRUE(wait_for_port(h.sink_port, 10s)) << h.daemon->log();
+    }
+
+    /// Streams through A, stops A with `sig`, and returns the subscriber's largest gap once
+    /// B has served two more seconds of the subject.
+    std::pair<std::chrono::milliseconds, std::uint64_t> fail_over(int sig) {
+        PoseTimeline poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
+        EXPECT_TRUE(wait_until([&] { return poses.size() >= 2u * kRateHz; }, 60s)) << "2 s of poses through A";
+        EXPECT_GT(stats_counter(a_.pose_port, "ingest_tcp.packets"), 0u);
+        EXPECT_EQ(stats_counter(b_.pose_port, "ingest_tcp.packets"), 0u) << "the sink starts on the first host";
+
+        const auto t_fault = Clock::now();
+        a_.daemon->signal(sig);
+        if (sig == SIGKILL) {
+            a_.killed = true;
+            EXPECT_TRUE(a_.daemon->wait(10s).has_value()) << "host A did not die";
+        }
+        EXPECT_TRUE(wait_until([&] { return poses.frames_after(t_fault) >= 2u * kRateHz; }, 60s))
+            << "B serves the subject: 2 s of poses after the fault";
+        poses.stop();  // before a frozen A could be woken
+        EXPECT_GT(stats_counter(b_.pose_port, "ingest_tcp.packets"), 0u) << "the sink moved to B";
+        return poses.largest_gap();
+    }
+
+    TempDir dir_;
+    std::uint16_t nats_port_ = 0;
+    std::unique_ptr<Process> nats_, sim_;
+    Host a_, b_;
+};
+
+TEST_F(Failover, KilledHostTheSinkMovesToTheNextWithinTheBound) {
+    const auto [gap, frames] = fail_over(SIGKILL);
+    std::cout << "[ metrics  ] kill -9 host A: largest pose gap " << gap.count() << " ms, " << frames
+              << " SYNCs skipped in one step, at " << kRateHz << " Hz\n";
+    EXPECT_LE(gap, kGapBound) << "the subscriber's largest gap when the sink's host is killed";
+}
+
+TEST_F(Failover, FrozenHostIsNoticedByItsSilenceAndTheSinkMovesOn) {
+    const auto [gap, frames] = fail_over(SIGSTOP);
+    a_.daemon->signal(SIGCONT);  // so that TearDown can stop it
+    std::cout << "[ metrics  ] SIGSTOP host A: largest pose gap " << gap.count() << " ms, " << frames
+              << " SYNCs skipped in one step, at " << kRateHz << " Hz\n";
+    EXPECT_LE(gap, kGapBound) << "the subscriber's largest gap when the sink's host freezes";
+}
+
+}  // namespace
+}  // namespace mocap::itest
