@@ -1,10 +1,13 @@
 // Sink failover between two mocapd hosts of one site (docs/cluster.md, "Failures"): one
-// nats-server, hosts A and B both publishing to it, one simulated sink given the ordered
-// host list A,B, and a subscriber on mocap.<site>.*.pose. Host A dies twice over, in
-// separate tests: kill -9 (the kernel resets the connection) and SIGSTOP (a silent host: the
-// connection stays up and only the missing keepalives, docs/protocol.md §3.5, tell). Each
-// time the sink moves to B and the subscriber's largest gap in that subject's poses must
+// nats-server with JetStream, hosts A and B both publishing to it, one simulated sink given
+// the ordered host list A,B, and a subscriber on mocap.<site>.*.pose. Host A dies twice over,
+// in separate tests: kill -9 (the kernel resets the connection) and SIGSTOP (a silent host:
+// the connection stays up and only the missing keepalives, docs/protocol.md §3.5, tell).
+// Each time the sink moves to B and the subscriber's largest gap in that subject's poses must
 // stay within 1.5 s (relaxed under the sanitizers, whose builds run several times slower).
+// The calibration is kept: A calibrates the subject from the simulator's opening T-pose and
+// shares it (docs/cluster.md, "Shared calibration"); B never calibrates by itself, and every
+// pose B publishes after the failover carries A's calibration.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -56,6 +59,17 @@ public:
         const std::lock_guard<std::mutex> lock(mutex_);
         return arrivals_.size();
     }
+    /// Frames after `t`, and how many of them had every segment calibrated.
+    std::pair<std::size_t, std::size_t> calibrated_after(Clock::time_point t) {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        std::size_t n = 0, calibrated = 0;
+        for (std::size_t i = 0; i < arrivals_.size(); ++i) {
+            if (arrivals_[i] <= t) continue;
+            ++n;
+            calibrated += calibrated_[i] ? 1 : 0;
+        }
+        return {n, calibrated};
+    }
     /// The longest time between two consecutive frames, and the most SYNCs one step skipped.
     std::pair<std::chrono::milliseconds, std::uint64_t> largest_gap() {
         const std::lock_guard<std::mutex> lock(mutex_);
@@ -79,8 +93,12 @@ private:
             EXPECT_EQ(m->first, std::string("mocap.") + kSite + "." + std::to_string(f.subject_id()) + ".pose");
             if (f.subject_id() != kSubject) continue;
             const std::lock_guard<std::mutex> lock(mutex_);
+            bool calibrated = f.flags_size() > 0;
+            for (int i = 0; i < f.flags_size(); ++i)
+                calibrated = calibrated && (f.flags(i) & v1::SEGMENT_CALIBRATED) != 0;
             arrivals_.push_back(now);
             syncs_.push_back(f.sync());
+            calibrated_.push_back(calibrated);
         }
     }
 
@@ -88,6 +106,7 @@ private:
     std::mutex mutex_;
     std::vector<Clock::time_point> arrivals_;
     std::vector<std::uint64_t> syncs_;
+    std::vector<bool> calibrated_;
     std::atomic<bool> stop_{false};
     std::thread thread_;
 };
@@ -105,9 +124,9 @@ protected:
         if (!have_nats_server())
             GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
         nats_port_ = free_port();
-        nats_ = start_nats(nats_port_, dir_.file("nats.log"));
-        start_host(a_, "host-a");
-        start_host(b_, "host-b");
+        nats_ = start_nats(nats_port_, dir_.file("nats.log"), {"-js", "-sd", dir_.file("js")});
+        start_host(a_, "host-a", "t-pose");
+        start_host(b_, "host-b", "off");
         sim_ = std::make_unique<Process>(
             std::vector<std::string>{
                 MOCAP_SIM_BIN, "stream", "--connect",
@@ -129,7 +148,8 @@ protected:
         if (HasFailure() && sim_) std::cerr << "--- simulator ---\n" << sim_->log();
     }
 
-    void start_host(Host& h, const std::string& id) {
+    /// auto_calibrate: A calibrates from the opening T-pose, B only ever gets A's calibration.
+    void start_host(Host& h, const std::string& id, const std::string& auto_calibrate) {
         h.id = id;
         h.sink_port = free_port();
         h.pose_port = free_port();
@@ -139,7 +159,7 @@ protected:
         cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
             << "[ingest]\nsink_listen = \"127.0.0.1:" << h.sink_port << "\"\n"
             << "[pipeline]\nworkers = 1\nmax_subjects = 8\n"
-            << "[skeleton]\ncalibration_dir = \"" << cal_dir << "\"\n"
+            << "[skeleton]\ncalibration_dir = \"" << cal_dir << "\"\nauto_calibrate = \"" << auto_calibrate << "\"\n"
             << "[serve]\npose_listen = \"127.0.0.1:" << h.pose_port << "\"\n"
             << "[outputs]\nbvh_live = false\n[http]\nenabled = false\n"
             << cluster_section(nats_port_, kSite, id, cluster_credentials());
@@ -150,11 +170,19 @@ protected:
         ASSERT_TRUE(wait_for_port(h.sink_port, 10s)) << h.daemon->log();
     }
 
-    /// Streams through A, stops A with `sig`, and returns the subscriber's largest gap once
-    /// B has served two more seconds of the subject.
+    /// Streams through A until B holds A's calibration of the subject, stops A with `sig`,
+    /// and returns the subscriber's largest gap once B has served two more seconds of it.
     std::pair<std::chrono::milliseconds, std::uint64_t> fail_over(int sig) {
         PoseTimeline poses(nats_port_, std::string("mocap.") + kSite + ".*.pose");
         EXPECT_TRUE(wait_until([&] { return poses.size() >= 2u * kRateHz; }, 60s)) << "2 s of poses through A";
+        EXPECT_GE(wait_stats_counter(
+                      a_.pose_port, "skeleton.calibrations_ok", [](auto v) { return v >= 1; }, 30s),
+                  1u)
+            << "A calibrates the subject from the simulator's opening T-pose";
+        EXPECT_GE(wait_stats_counter(
+                      b_.pose_port, "calibration_kv.received", [](auto v) { return v >= 1; }, 30s),
+                  1u)
+            << "B receives A's calibration through the bucket";
         EXPECT_GT(stats_counter(a_.pose_port, "ingest_tcp.packets"), 0u);
         EXPECT_EQ(stats_counter(b_.pose_port, "ingest_tcp.packets"), 0u) << "the sink starts on the first host";
 
@@ -168,6 +196,10 @@ protected:
             << "B serves the subject: 2 s of poses after the fault";
         poses.stop();  // before a frozen A could be woken
         EXPECT_GT(stats_counter(b_.pose_port, "ingest_tcp.packets"), 0u) << "the sink moved to B";
+        const auto [after, calibrated] = poses.calibrated_after(t_fault);
+        EXPECT_EQ(calibrated, after) << "every pose B publishes carries A's calibration";
+        EXPECT_EQ(stats_counter(b_.pose_port, "skeleton.calibrations_ok"), 0u) << "B never calibrated by itself";
+        EXPECT_GE(stats_counter(b_.pose_port, "skeleton.calibrations_shared"), 1u);
         return poses.largest_gap();
     }
 

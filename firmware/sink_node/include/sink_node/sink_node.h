@@ -150,7 +150,7 @@ typedef struct sink_node_counters {
     uint32_t connect_failures;   /* attempts that failed or timed out */
     uint32_t connects;           /* attempts that reached UP */
     uint32_t reconnects;         /* connects after the first one */
-    uint32_t disconnects;        /* UP -> DOWN transitions (peer drop or write error) */
+    uint32_t disconnects;        /* UP -> DOWN transitions (peer drop, write error, keepalive time-out) */
     uint32_t early_closes;       /* packets closed before the next SYNC: instant complete */
     uint32_t keepalives_in;      /* valid keepalives received from hosts */
     uint32_t keepalive_timeouts; /* connections closed for want of a keepalive */
