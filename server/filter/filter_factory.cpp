@@ -144,6 +144,9 @@ const Entry<MocapFilterParams, MocapFilter>& mocap_entry() {
                                           {"mag_min_undisturbed_time_s", &P::mag_min_undisturbed_time_s},
                                           {"mag_max_rejection_time_s", &P::mag_max_rejection_time_s},
                                           {"mag_rejection_factor", &P::mag_rejection_factor},
+                                          {"mag_offset_tau_s", &P::mag_offset_tau_s},
+                                          {"mag_offset_ridge", &P::mag_offset_ridge},
+                                          {"mag_offset_min", &P::mag_offset_min},
                                           {"max_step_s", &P::max_step_s}},
                                          [](const P& p) { return p.check(); }};
     return e;

@@ -120,6 +120,9 @@ std::string MocapFilterParams::check() const {
     if (!(mag_max_rejection_time_s >= 0.0)) return "mag_max_rejection_time_s must be >= 0";
     if (!(mag_rejection_factor >= 1.0)) return "mag_rejection_factor must be >= 1";
     if (!(gyro_noise_ref_deg_s >= 0.0)) return "gyro_noise_ref_deg_s must be >= 0";
+    if (!(mag_offset_tau_s >= 0.0)) return "mag_offset_tau_s must be >= 0";
+    if (!(mag_offset_ridge > 0.0 && mag_offset_ridge <= 1.0)) return "mag_offset_ridge must be in (0, 1]";
+    if (!(mag_offset_min > 0.0)) return "mag_offset_min must be > 0";
     if (!(max_step_s > 0.0)) return "max_step_s must be > 0";
     return {};
 }
@@ -177,6 +180,7 @@ void MocapFilter::compute_coeffs(double ts_s) {
     k_dis_ = gain_from_tau(p.mag_heading_tau_s, ts_s);
     k_noise_fast_ = gain_from_tau(1.0, ts_s);
     k_noise_floor_ = gain_from_tau(300.0, ts_s);
+    k_mag_offset_ = p.mag_offset_tau_s > 0.0 ? gain_from_tau(p.mag_offset_tau_s, ts_s) : 0.0;
     // Bias Kalman filter in units of 0.01 °/s, which keeps the numbers near 1.
     bias_p0_ = std::pow(p.bias_sigma_init_deg_s * 100.0, 2);
     bias_v_ = std::pow(0.1 * p.bias_sigma_init_deg_s * 100.0, 2) * ts_s / p.bias_forgetting_time_s;
@@ -443,10 +447,48 @@ void MocapFilter::update_heading_guard() {
     }
 }
 
-void MocapFilter::update_mag(const math::Vec3& mag) {
+// A magnet carried by the sensor adds a constant offset b to every reading in the sensor
+// frame: in the 6D earth frame the field becomes m_e = c + R b (R: sensor -> 6D earth, c the
+// earth field), a field that no longer turns with the gyro. Exponentially weighted least
+// squares over mag_offset_tau_s with regressor [I, R] has normal equations that need only
+// n = Σ1, S = ΣR, Σm_e and Σm_s (because Rᵀ m_e = m_s and RᵀR = I):
+//   (n² I − SᵀS) b = n Σm_s − Sᵀ Σm_e.
+// n² I − SᵀS measures how much the sensor turned in the window: zero at rest (b is then
+// unobservable), about n² when its attitudes are spread evenly. A ridge of
+// mag_offset_ridge·n² shrinks the components the motion does not reveal towards zero. The
+// offset is subtracted in full from 2·mag_offset_min of the field norm, not below
+// mag_offset_min (what a calibrated sensor leaves), linearly in between, so it comes and goes
+// without a step in the field.
+void MocapFilter::update_mag_offset(const math::Vec3& mag_s, const math::Mat3& r_e_s) {
+    MocapFilterState& s = state_;
+    // At rest the samples say nothing about b and would only make the window forget it.
+    if (s.rest_detected) return;
+    const double l = 1.0 - k_mag_offset_;
+    s.mag_off_n = l * s.mag_off_n + 1.0;
+    s.mag_off_r = l * s.mag_off_r + r_e_s;
+    s.mag_off_sum_e = l * s.mag_off_sum_e + r_e_s * mag_s;
+    s.mag_off_sum_s = l * s.mag_off_sum_s + mag_s;
+    const double n2 = s.mag_off_n * s.mag_off_n;
+    const math::Mat3 g =
+        (1.0 + params_.mag_offset_ridge) * n2 * math::Mat3::Identity() - s.mag_off_r.transpose() * s.mag_off_r;
+    const math::Vec3 rhs = s.mag_off_n * s.mag_off_sum_s - s.mag_off_r.transpose() * s.mag_off_sum_e;
+    s.mag_offset_ut = g.inverse() * rhs;
+    const double norm = s.mag_ref_norm > 0.0 ? s.mag_ref_norm : s.mag_off_sum_s.norm() / s.mag_off_n;
+    const double rel = norm > 0.0 ? s.mag_offset_ut.norm() / norm : 0.0;
+    // A field too noisy for the guard is too noisy for this estimate as well.
+    s.mag_offset_weight = s.mag_guard_blind ? 0.0 : std::clamp(rel / params_.mag_offset_min - 1.0, 0.0, 1.0);
+}
+
+void MocapFilter::update_mag(const math::Vec3& mag_raw) {
     MocapFilterState& s = state_;
     const MocapFilterParams& p = params_;
-    const math::Vec3 mag_e = math::rotate(s.q_e6_i * s.q_i_sensor, mag);
+    const math::Quat q6 = s.q_e6_i * s.q_i_sensor;
+    math::Vec3 mag = mag_raw;
+    if (k_mag_offset_ > 0.0) {
+        update_mag_offset(mag_raw, q6.toRotationMatrix());
+        mag -= s.mag_offset_weight * s.mag_offset_ut;
+    }
+    const math::Vec3 mag_e = math::rotate(q6, mag);
     if (p.mag_guard) update_mag_guard(mag_e);
 
     // Heading disagreement from the horizontal component only, measured as the cross

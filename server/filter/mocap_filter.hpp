@@ -22,6 +22,13 @@
 //    measured field noise; when that noise is so large that no disturbance of the
 //    configured size could be seen, the guard stands aside (mag_guard_blind) rather than
 //    reject at random. Counters and flags are in MocapFilterState.
+//  * field offset fixed to the sensor (a magnet it carries, a steel part of its mount): the
+//    reading is c + b with b constant in the sensor frame, a field that no longer turns with
+//    the gyro; least squares over mag_offset_tau_s of the field in the 6D earth frame against
+//    the attitude gives b whenever the sensor turns, and b is subtracted from every reading
+//    once it exceeds mag_offset_min of the field (fully from twice that, so it comes and goes
+//    without a step). At rest the estimate is held. The guard above then sees the corrected
+//    field; what the estimate cannot explain it still rejects.
 //
 // Output: q_earth_sensor = Rz(delta) ⊗ q_E'_I ⊗ q_I_sensor, ENU.
 //
@@ -45,7 +52,8 @@
 // not mistaken for noise.
 //
 // Thread-safety: none (one instance per worker). Cost: ~0.3 µs per update (docs/
-// performance.md), no allocation.
+// performance.md; the field-offset estimate adds about 10 %), no allocation.
+
 #pragma once
 
 #include <array>
@@ -124,6 +132,14 @@ struct MocapFilterParams {
                                               ///< rejection, s
     double mag_rejection_factor = 2.0;        ///< key "mag_rejection_factor": gain divisor after the
                                               ///< rejection time, and the recovery rate of that time
+    double mag_offset_tau_s = 20.0;           ///< key "mag_offset_tau_s": window of the estimate of a field
+                                              ///< offset fixed to the sensor (a magnet it carries), s;
+                                              ///< 0 disables
+    double mag_offset_ridge = 0.15;           ///< key "mag_offset_ridge": shrinks the offset components
+                                              ///< the window's rotation does not reveal, 0..1
+    double mag_offset_min = 0.04;             ///< key "mag_offset_min": an offset below this fraction of the
+                                              ///< field norm is not applied (calibration residue); it is
+                                              ///< applied in full from twice this
     double max_step_s = 0.5;                  ///< key "max_step_s": larger timestamp steps restart the time base, s
 
     /// Empty if every value is usable, else a message naming the first bad key.
@@ -204,6 +220,14 @@ struct MocapFilterState {
     math::Vec3 mag_horizontal_lp = math::Vec3::Zero();  ///< horizontal field in the 6D earth frame, averaged
                                                         ///< over tau_mag_s (vector mean at the start)
 
+    // Field offset fixed to the sensor (update_mag_offset): weighted sums of the least squares
+    double mag_off_n = 0.0;                         ///< Σ weights
+    math::Mat3 mag_off_r = math::Mat3::Zero();      ///< Σ R (sensor -> 6D earth)
+    math::Vec3 mag_off_sum_e = math::Vec3::Zero();  ///< Σ field in the 6D earth frame, µT
+    math::Vec3 mag_off_sum_s = math::Vec3::Zero();  ///< Σ field in the sensor frame, µT
+    math::Vec3 mag_offset_ut = math::Vec3::Zero();  ///< estimated offset, µT
+    double mag_offset_weight = 0.0;                 ///< share of it subtracted from readings, 0..1
+
     // Counters (only go up until reset())
     std::uint64_t samples = 0;
     std::uint64_t mag_samples_rejected = 0;  ///< mag readings not used (disturbed, gain 0)
@@ -241,6 +265,7 @@ private:
     void update_mag_guard(const math::Vec3& mag_earth);
     void update_bias(const math::Vec3& acc_earth_unit);
     void update_heading_guard();
+    void update_mag_offset(const math::Vec3& mag_sensor, const math::Mat3& r_earth_sensor);
     void adapt_time_constants();
     void accept_candidate_field();
 
@@ -249,7 +274,7 @@ private:
     // Derived coefficients, functions of params_ and state_.ts_s.
     LowPassCoeffs acc_lp_, rest_lp_, mag_current_lp_;
     double k_mag_ = 0.0, k_mag_ref_ = 0.0, k_mag_noise_ = 0.0, k_dis_ = 0.0;
-    double k_noise_fast_ = 0.0, k_noise_floor_ = 0.0;
+    double k_noise_fast_ = 0.0, k_noise_floor_ = 0.0, k_mag_offset_ = 0.0;
     double bias_p0_ = 0.0, bias_v_ = 0.0, bias_motion_w_ = 0.0, bias_vertical_w_ = 0.0, bias_rest_w_ = 0.0;
 };
 
