@@ -66,12 +66,8 @@ protected:
         c.skeleton = "auto_calibrate = \"off\"\nheading = \"earth\"\nfacing = \"given\"\nfacing_heading_deg = 0.0\n";
         c.serve = "client_queue_frames = 4096\n[control]\ntoken = \"" + std::string(kToken) + "\"\n";
         c.cluster = cluster_section(nats_port_, kSite, id, cluster_credentials());
-        const std::string path = h.dir->file("mocapd.toml");
-        write_file(path, daemon_config(c));
-        h.daemon = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", path},
-                                             h.dir->file("mocapd.log"), h.dir->path().string());
-        ASSERT_TRUE(wait_for_port(h.pose_port, 10s)) << h.daemon->log();
-        ASSERT_TRUE(wait_for_port(h.sink_port, 10s)) << h.daemon->log();
+        h.daemon = start_mocapd(MOCAPD_BIN, c, *h.dir);
+        ASSERT_FALSE(HasFailure());
     }
 
     /// The simulated subject 1 (seed 11: the same body, sensor mounting and facing on every

@@ -36,20 +36,12 @@ protected:
 
     /// mocapd with the cluster at nats_port_ as `password`, and a simulator feeding it.
     void start_host(const std::string& password) {
-        std::ostringstream cfg;
-        cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
-            << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\n"
-            << "[pipeline]\nworkers = 1\nmax_subjects = 4\n"
-            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
-            << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\n"
-            << "[outputs]\nbvh_live = false\n[http]\nenabled = false\n"
-            << "[cluster]\nnats_url = \"nats://127.0.0.1:" << nats_port_ << "\"\nsite = \"" << kSite
-            << "\"\nhost_id = \"h\"\nuser = \"" << kUser << "\"\npassword = \"" << password << "\"\n";
-        write_file(dir_.file("mocapd.toml"), cfg.str());
-        daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", dir_.file("mocapd.toml")},
-                                            dir_.file("mocapd.log"), dir_.path().string());
-        ASSERT_TRUE(wait_for_port(pose_port_, 10s)) << daemon_->log();
-        ASSERT_TRUE(wait_for_port(sink_port_, 10s)) << daemon_->log();
+        HostConfig h{.sink_port = sink_port_, .pose_port = pose_port_, .calibration_dir = dir_.path().string()};
+        h.workers = 1;
+        h.cluster = "[cluster]\nnats_url = \"nats://127.0.0.1:" + std::to_string(nats_port_) + "\"\nsite = \"" + kSite +
+                    "\"\nhost_id = \"h\"\nuser = \"" + kUser + "\"\npassword = \"" + password + "\"\n";
+        daemon_ = start_mocapd(MOCAPD_BIN, h, dir_);
+        ASSERT_FALSE(HasFailure());
         sim_ = std::make_unique<Process>(
             std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(sink_port_),
                                      "--subjects", "1", "--nodes", "15", "--mode", "quat", "--rate", "100",

@@ -157,20 +157,13 @@ protected:
     void start_host(Host& h, const std::string& host_id, int first_sink_id) {
         h.sink_port = free_port();
         h.pose_port = free_port();
-        std::ostringstream cfg;
-        cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
-            << "[ingest]\nsink_listen = \"127.0.0.1:" << h.sink_port << "\"\n"
-            << "[pipeline]\nworkers = 1\nmax_subjects = 4\n"
-            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
-            << "[serve]\npose_listen = \"127.0.0.1:" << h.pose_port << "\"\n"
-            << "[outputs]\nbvh_live = false\n[http]\nenabled = false\n"
-            << "[cluster]\nnats_url = \"nats://127.0.0.1:" << client_ports_[0] << "\"\nsite = \"" << kSite
-            << "\"\nhost_id = \"" << host_id << "\"\nuser = \"" << kUser << "\"\npassword = \"" << kPassword << "\"\n";
-        const std::string path = dir_.file(host_id + ".toml");
-        write_file(path, cfg.str());
-        h.daemon = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", path},
-                                             dir_.file(host_id + ".log"), dir_.path().string());
-        ASSERT_TRUE(wait_for_port(h.sink_port, 10s)) << h.daemon->log();
+        HostConfig c{.sink_port = h.sink_port, .pose_port = h.pose_port, .calibration_dir = dir_.path().string()};
+        c.workers = 1;
+        c.cluster = "[cluster]\nnats_url = \"nats://127.0.0.1:" + std::to_string(client_ports_[0]) + "\"\nsite = \"" +
+                    kSite + "\"\nhost_id = \"" + host_id + "\"\nuser = \"" + kUser + "\"\npassword = \"" + kPassword +
+                    "\"\n";
+        h.daemon = start_mocapd(MOCAPD_BIN, c, dir_, host_id);
+        ASSERT_FALSE(HasFailure());
         h.sim = std::make_unique<Process>(
             std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(h.sink_port),
                                      "--subjects", "2", "--first-sink-id", std::to_string(first_sink_id), "--nodes",

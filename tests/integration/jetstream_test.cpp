@@ -75,20 +75,13 @@ protected:
 
     /// mocapd with the raw recorder and the cluster on; `more` goes into [cluster].
     void start_daemon(const std::string& more = "") {
-        std::ostringstream cfg;
-        cfg << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"
-            << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\nsink_idle_timeout_s = 5.0\n"
-            << "[pipeline]\nworkers = 2\nmax_subjects = 4\n"
-            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
-            << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 4096\n"
-            << "[outputs]\nbvh_live = false\nraw_record = true\nrecord_dir = \"" << dir_.file("rec") << "\"\n"
-            << "[http]\nenabled = false\n"
-            << cluster_section(nats_port_, kSite, "rack1", cluster_credentials() + more);
-        write_file(dir_.file("mocapd.toml"), cfg.str());
-        daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", dir_.file("mocapd.toml")},
-                                            dir_.file("mocapd.log"), dir_.path().string());
-        ASSERT_TRUE(wait_for_port(pose_port_, 10s)) << daemon_->log();
-        ASSERT_TRUE(wait_for_port(sink_port_, 10s)) << daemon_->log();
+        HostConfig h{.sink_port = sink_port_, .pose_port = pose_port_, .calibration_dir = dir_.path().string()};
+        h.ingest = "sink_idle_timeout_s = 5.0\n";
+        h.serve = "client_queue_frames = 4096\n";
+        h.outputs = "bvh_live = false\nraw_record = true\nrecord_dir = \"" + dir_.file("rec") + "\"\n";
+        h.cluster = cluster_section(nats_port_, kSite, "rack1", cluster_credentials() + more);
+        daemon_ = start_mocapd(MOCAPD_BIN, h, dir_);
+        ASSERT_FALSE(HasFailure());
     }
 
     std::unique_ptr<Process> sim(int subjects, int seconds) {

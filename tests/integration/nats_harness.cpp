@@ -89,6 +89,17 @@ std::string daemon_config(const HostConfig& h) {
     return s.str();
 }
 
+std::unique_ptr<Process> start_mocapd(const char* mocapd_bin, const HostConfig& host, const TempDir& dir,
+                                      const std::string& name) {
+    const std::string path = dir.file(name + ".toml");
+    write_file(path, daemon_config(host));
+    auto p = std::make_unique<Process>(std::vector<std::string>{mocapd_bin, "--config", path}, dir.file(name + ".log"),
+                                       dir.path().string());
+    EXPECT_TRUE(wait_for_port(host.pose_port, 10s)) << p->log();
+    EXPECT_TRUE(wait_for_port(host.sink_port, 10s)) << p->log();
+    return p;
+}
+
 std::string cluster_section(std::uint16_t nats_port, const std::string& site, const std::string& host_id,
                             const std::string& more) {
     std::ostringstream s;

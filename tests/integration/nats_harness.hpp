@@ -63,19 +63,24 @@ v1::SkeletonFrame decode_pose_payload(const std::string& payload);
 struct HostConfig {
     std::uint16_t sink_port = 0;
     std::uint16_t pose_port = 0;
-    std::string calibration_dir;
+    std::string calibration_dir{};
     int workers = 2;
-    std::string ingest;                          ///< more [ingest] lines
-    std::string skeleton;                        ///< more [skeleton] lines
-    std::string serve;                           ///< more [serve] lines
+    std::string ingest{};                        ///< more [ingest] lines
+    std::string skeleton{};                      ///< more [skeleton] lines
+    std::string serve{};                         ///< more [serve] lines
     std::string outputs = "bvh_live = false\n";  ///< the [outputs] lines
     std::string http = "enabled = false\n";      ///< the [http] lines
-    std::string cluster;                         ///< the [cluster] section (cluster_section()), last
+    std::string cluster{};                       ///< the [cluster] section (cluster_section()), last
 };
 /// mocapd's config for one host: [log] at info without the periodic stats line, sinks and
 /// pose clients on the loopback ports, [pipeline] workers and 4 subjects, the calibration
 /// directory, then the host's own lines and sections.
 std::string daemon_config(const HostConfig& host);
+/// Writes daemon_config(host) to `dir`/`name`.toml and starts mocapd (the binary
+/// `mocapd_bin`) on it, logging to `name`.log, in `dir`; returns once its pose and sink ports
+/// accept connections (a test failure with its log when they do not within 10 s).
+std::unique_ptr<Process> start_mocapd(const char* mocapd_bin, const HostConfig& host, const TempDir& dir,
+                                      const std::string& name = "mocapd");
 
 /// "[cluster]" with nats_url on the port, site, host_id, queue_frames = 64, then `more`
 /// (credentials and other keys, one per line).
