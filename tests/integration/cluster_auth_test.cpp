@@ -32,24 +32,8 @@ std::string test_nkey_public_key() {
     return {};
 }
 
-class ClusterAuth : public ::testing::Test {
+class ClusterAuth : public OneHostClusterTest {
 protected:
-    void SetUp() override {
-        if (!have_nats_server()) {
-            GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
-        }
-        nats_port_ = free_port();
-        sink_port_ = free_port();
-        pose_port_ = free_port();
-    }
-
-    void TearDown() override {
-        if (sim_) sim_->stop();
-        if (!daemon_) return;
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        EXPECT_EQ(daemon_->stop(10s), 0) << "mocapd must exit 0 on SIGTERM";
-    }
-
     /// nats-server with `conf` (listen and anything else) from a config file.
     void start_server(const std::string& conf) {
         const std::string path = dir_.file("nats.conf");
@@ -104,10 +88,6 @@ protected:
     }
 
     bool have_openssl() const { return ::access(kOpenssl, X_OK) == 0; }
-
-    TempDir dir_;
-    std::uint16_t nats_port_ = 0, sink_port_ = 0, pose_port_ = 0;
-    std::unique_ptr<Process> nats_, daemon_, sim_;
 };
 
 TEST_F(ClusterAuth, AnNkeyUserConnectsWithItsSeedFile) {

@@ -17,23 +17,8 @@ using namespace std::chrono_literals;
 constexpr const char* kUser = kNatsUser;
 constexpr const char* kSite = "faults";
 
-class ClusterFaults : public ::testing::Test {
+class ClusterFaults : public OneHostClusterTest {
 protected:
-    void SetUp() override {
-        if (!have_nats_server())
-            GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
-        nats_port_ = free_port();
-        sink_port_ = free_port();
-        pose_port_ = free_port();
-    }
-
-    void TearDown() override {
-        if (sim_) sim_->stop();
-        if (!daemon_) return;
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        EXPECT_EQ(daemon_->stop(10s), 0) << "mocapd must exit 0 on SIGTERM, cluster or not";
-    }
-
     /// mocapd with the cluster at nats_port_ as `password`, and a simulator feeding it.
     void start_host(const std::string& password) {
         HostConfig h{.sink_port = sink_port_, .pose_port = pose_port_, .calibration_dir = dir_.path().string()};
@@ -63,10 +48,6 @@ protected:
             if (c.next_frame(f, 200ms) == client::ReadStatus::kMessage) ++got;
         return got >= n;
     }
-
-    TempDir dir_;
-    std::uint16_t nats_port_ = 0, sink_port_ = 0, pose_port_ = 0;
-    std::unique_ptr<Process> nats_, daemon_, sim_;
 };
 
 TEST_F(ClusterFaults, WrongCredentialsAreNamedAndTheHostConnectsOnceTheServerAcceptsThem) {

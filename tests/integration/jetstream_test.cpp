@@ -50,18 +50,15 @@ std::vector<std::uint64_t> csv_syncs(const std::string& text) {
     return syncs;
 }
 
-class JetStream : public ::testing::Test {
+class JetStream : public OneHostClusterTest {
 protected:
     void SetUp() override {
-        if (!have_nats_server()) {
-            GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
-        }
-        nats_port_ = free_port();
-        sink_port_ = free_port();
-        pose_port_ = free_port();
+        OneHostClusterTest::SetUp();
+        if (IsSkipped()) return;
         std::filesystem::create_directories(dir_.file("rec"));
     }
 
+    // Not the base's: some tests kill mocapd on purpose (kill -9 mid-take).
     void TearDown() override {
         if (HasFailure() && daemon_) std::cerr << "--- mocapd log ---\n" << daemon_->log();
         if (daemon_ && daemon_->running()) {
@@ -106,11 +103,6 @@ protected:
     std::vector<std::string> jetstream_args(std::uint32_t subject) const {
         return {"--jetstream", "nats://127.0.0.1:" + std::to_string(nats_port_), "--subject", std::to_string(subject)};
     }
-
-    TempDir dir_;
-    std::uint16_t nats_port_ = 0, sink_port_ = 0, pose_port_ = 0;
-    std::unique_ptr<Process> nats_;
-    std::unique_ptr<Process> daemon_;
 };
 
 TEST_F(JetStream, AReplayFromJetStreamEqualsTheReplayOfTheRawFileRecordedBesideIt) {

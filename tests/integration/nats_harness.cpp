@@ -76,6 +76,22 @@ v1::SkeletonFrame decode_pose_payload(const std::string& payload) {
     return m.frame();
 }
 
+void OneHostClusterTest::SetUp() {
+    if (!have_nats_server()) {
+        GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
+    }
+    nats_port_ = free_port();
+    sink_port_ = free_port();
+    pose_port_ = free_port();
+}
+
+void OneHostClusterTest::TearDown() {
+    if (sim_) sim_->stop();
+    if (!daemon_) return;
+    if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
+    EXPECT_EQ(daemon_->stop(10s), 0) << "mocapd must exit 0 on SIGTERM, cluster or not";
+}
+
 std::string daemon_config(const HostConfig& h) {
     std::ostringstream s;
     s << "[log]\nlevel = \"info\"\nstats_interval_s = 0\n"

@@ -14,6 +14,8 @@
 #include <utility>
 #include <vector>
 
+#include <gtest/gtest.h>
+
 #include "harness.hpp"
 #include "mocap/v1/mocap.pb.h"
 
@@ -58,6 +60,20 @@ private:
 /// The SkeletonFrame of a pose-subject payload (a ServerMessage without a length prefix);
 /// a test failure when it is not one.
 v1::SkeletonFrame decode_pose_payload(const std::string& payload);
+
+/// A test of one mocapd host against nats-server: skipped (with the reason) when there is no
+/// nats-server binary; free loopback ports for the server, the host's sinks and its pose
+/// service; at the end the simulator is stopped, the host must stop with exit 0, and its log
+/// is shown when the test failed.
+class OneHostClusterTest : public ::testing::Test {
+protected:
+    void SetUp() override;
+    void TearDown() override;
+
+    TempDir dir_;
+    std::uint16_t nats_port_ = 0, sink_port_ = 0, pose_port_ = 0;
+    std::unique_ptr<Process> nats_, daemon_, sim_;
+};
 
 /// What one mocapd host of the cluster tests sets; daemon_config() writes the rest.
 struct HostConfig {

@@ -94,6 +94,12 @@ struct Rig {
         for (; t_us < end; t_us += 10'000)
             frame(subject_id, rz(rate_rad_s * static_cast<double>(t_us) * 1e-6) * q0);
     }
+    /// Subject 1 stands still with sensors at q_sensor and is calibrated (T-pose) on request.
+    void calibrate_still(const Quat& q_sensor) {
+        run(0.2, q_sensor);
+        ASSERT_EQ(solver->request_calibration(1, CalibrationPose::kTPose), "");
+        run(0.7, q_sensor);
+    }
     std::uint64_t counter(std::string_view name) const { return solver->counters().value(name).value_or(999); }
     bool logged(LogLevel level, const std::string& line) const {
         for (const auto& [l, text] : log)
@@ -254,9 +260,7 @@ TEST(PoseSolver, ACalibrationOfferedByTheStoreIsAppliedAtTheNextFrame) {
     EXPECT_EQ(rig.shelf.serving, std::vector<std::uint32_t>{1}) << "the store hears of the subject's first frame once";
     // What a T-pose calibration with these sensors gives, made by another solver.
     Rig other;
-    other.run(0.2, kMounted);
-    ASSERT_EQ(other.solver->request_calibration(1, CalibrationPose::kTPose), "");
-    other.run(0.7, kMounted);
+    other.calibrate_still(kMounted);
     ASSERT_EQ(other.shelf.saved.count(1), 1u);
 
     rig.shelf.offer(1, other.shelf.saved.at(1), "bucket (key venue.1, revision 3)", 0);
@@ -274,9 +278,7 @@ TEST(PoseSolver, ACalibrationOfferedByTheStoreIsAppliedAtTheNextFrame) {
 // the solver takes the offer after its own calibration: the local one is newer and stays.
 TEST(PoseSolver, AnOfferOlderThanALocalCalibrationIsNotApplied) {
     Rig rig;
-    rig.run(0.2, kMounted);
-    ASSERT_EQ(rig.solver->request_calibration(1, CalibrationPose::kTPose), "");
-    rig.run(0.7, kMounted);
+    rig.calibrate_still(kMounted);
     ASSERT_EQ(rig.counter("calibrations_ok"), 1u);
     Calibration elsewhere = rig.shelf.saved.at(1);
     elsewhere.q_sensor_segment[0] = rz(0.5);  // different from the local one
