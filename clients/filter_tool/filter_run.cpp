@@ -1,5 +1,9 @@
 #include "filter_tool/filter_run.hpp"
 
+#include <cstdio>
+#include <numbers>
+#include <ostream>
+
 namespace mocap::tools {
 
 std::optional<EarthFrame> parse_earth_frame(std::string_view name) {
@@ -17,6 +21,7 @@ RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, c
     RunOutput out;
     out.estimates.reserve(recording.rows.size());
     out.compared.reserve(recording.rows.size());
+    if (options.trace) out.trace.reserve(recording.rows.size());
     f.reset();
     const std::int64_t t0_us = recording.rows.empty() ? 0 : recording.rows.front().sample.t_us;
     for (const RecordingRow& row : recording.rows) {
@@ -30,8 +35,26 @@ RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, c
         s.has_reference = recording.has_reference && row.ref_valid;
         s.evaluated = row.movement && s.t_s >= options.skip_seconds;
         out.compared.push_back(s);
+        if (options.trace) out.trace.push_back({row.sample.t_us, f.diagnostics(), f.gyro_bias_rad_s()});
     }
     return out;
+}
+
+bool write_trace_csv(std::ostream& out, const std::vector<TraceRow>& rows) {
+    out << "t,rest,mag_field_disturbed,mag_heading_disturbed,mag_rejected,mag_offset_weight,bias_x,bias_y,bias_z,"
+           "mag_offset_x,mag_offset_y,mag_offset_z\n";
+    constexpr double kDeg = 180.0 / std::numbers::pi;
+    char buf[320];
+    for (const TraceRow& r : rows) {
+        const filter::FilterDiagnostics& d = r.diagnostics;
+        const math::Vec3 b = r.gyro_bias_rad_s * kDeg;
+        const int n = std::snprintf(buf, sizeof buf, "%.6f,%d,%d,%d,%d,%.4g,%.6g,%.6g,%.6g,%.5g,%.5g,%.5g\n",
+                                    static_cast<double>(r.t_us) * 1e-6, d.rest, d.mag_field_disturbed,
+                                    d.mag_heading_disturbed, d.mag_rejected, d.mag_offset_weight, b.x(), b.y(), b.z(),
+                                    d.mag_offset_ut.x(), d.mag_offset_ut.y(), d.mag_offset_ut.z());
+        out.write(buf, n);
+    }
+    return static_cast<bool>(out);
 }
 
 }  // namespace mocap::tools

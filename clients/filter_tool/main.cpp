@@ -1,11 +1,13 @@
 // mocap-filter: runs one orientation filter over a benchmark recording (docs/design.md, "Command-line contracts").
 //
 //   mocap-filter --filter NAME [--param k=v]... [--frame enu|ned] --in IN.csv --out OUT.csv
-//                [--eval] [--skip-seconds S]
+//                [--eval] [--skip-seconds S] [--trace TRACE.csv]
 //   mocap-filter --list        prints every filter name with its parameter keys and defaults
 //
 // Exit codes: 0 success, 1 bad input file / output not writable, 2 bad command line or
-// filter parameters. --eval prints one JSON object (evaluation.hpp) on stdout.
+// filter parameters. --eval prints one JSON object (evaluation.hpp) on stdout. --trace writes
+// the filter's disturbance flags and bias estimate per sample (filter_run.hpp) and changes
+// nothing else.
 #include <CLI/CLI.hpp>
 
 #include <fstream>
@@ -36,6 +38,7 @@ static int run(int argc, char** argv) {
     std::string frame_name = "enu";
     std::string in_path;
     std::string out_path;
+    std::string trace_path;
     bool eval = false;
     double skip_seconds = 0.0;
     bool list = false;
@@ -49,6 +52,9 @@ static int run(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--in", in_path, "Input CSV: t,gx,gy,gz,ax,ay,az,mx,my,mz[,qw,qx,qy,qz][,movement]");
     app.add_option("--out", out_path, "Output CSV: t,qw,qx,qy,qz");
+    app.add_option("--trace", trace_path,
+                   "Per-sample CSV of the filter's disturbance flags and gyro bias estimate (why an estimate went "
+                   "wrong)");
     app.add_flag("--eval", eval, "Print the error metrics against the reference as one JSON object");
     app.add_option("--skip-seconds", skip_seconds, "Do not evaluate the first S seconds (convergence)")
         ->check(CLI::NonNegativeNumber)
@@ -94,11 +100,18 @@ static int run(int argc, char** argv) {
     mocap::tools::RunOptions options;
     options.frame = *mocap::tools::parse_earth_frame(frame_name);
     options.skip_seconds = skip_seconds;
+    options.trace = !trace_path.empty();
     const mocap::tools::RunOutput run = mocap::tools::run_filter(*filter, recording, options);
 
     std::ofstream out(out_path, std::ios::binary | std::ios::trunc);
     if (!out || !mocap::tools::write_orientation_csv(out, run.estimates) || !out.flush()) {
         return fail(1, "cannot write '" + out_path + "'");
+    }
+    if (options.trace) {
+        std::ofstream trace(trace_path, std::ios::binary | std::ios::trunc);
+        if (!trace || !mocap::tools::write_trace_csv(trace, run.trace) || !trace.flush()) {
+            return fail(1, "cannot write '" + trace_path + "'");
+        }
     }
     if (eval) {
         const mocap::tools::EvalResult result = mocap::tools::evaluate(run.compared);

@@ -535,6 +535,17 @@ void MocapFilter::update_mag(const math::Vec3& mag_raw) {
     s.delta_rad = math::wrap_pi(s.delta_rad + k * s.last_mag_disagreement_rad);
 }
 
+FilterDiagnostics MocapFilter::diagnostics() const {
+    FilterDiagnostics d;
+    d.rest = state_.rest_detected;
+    d.mag_field_disturbed = params_.mag_guard && state_.mag_disturbed;
+    d.mag_heading_disturbed = params_.mag_guard && state_.mag_heading_disturbed;
+    d.mag_rejected = params_.mag_guard && mag_rejected();
+    d.mag_offset_weight = state_.mag_offset_weight;
+    d.mag_offset_ut = state_.mag_offset_ut;
+    return d;
+}
+
 math::Quat MocapFilter::orientation_6d() const {
     return (state_.q_e6_i * state_.q_i_sensor).normalized();
 }

@@ -16,6 +16,17 @@
 
 namespace mocap::filter {
 
+/// Why an estimate is what it is, sample by sample (mocap-filter --trace). Filters that do
+/// not detect a condition leave its flag false.
+struct FilterDiagnostics {
+    bool rest = false;                              ///< the sensor is taken to be at rest (bias learning)
+    bool mag_field_disturbed = false;               ///< field norm / dip off their learned references
+    bool mag_heading_disturbed = false;             ///< field heading disagrees with the gyro-propagated one
+    bool mag_rejected = false;                      ///< magnetometer not used, or down-weighted, for heading
+    double mag_offset_weight = 0.0;                 ///< share of mag_offset_ut subtracted from readings, 0..1
+    math::Vec3 mag_offset_ut = math::Vec3::Zero();  ///< field offset fixed to the sensor, µT
+};
+
 class OrientationFilter {
 public:
     virtual ~OrientationFilter() = default;
@@ -31,6 +42,9 @@ public:
 
     /// Current gyroscope bias estimate, rad/s, sensor frame (zero if not estimated).
     [[nodiscard]] virtual math::Vec3 gyro_bias_rad_s() const { return math::Vec3::Zero(); }
+
+    /// Disturbance and rest flags of the last update (all false if the filter has none).
+    [[nodiscard]] virtual FilterDiagnostics diagnostics() const { return {}; }
 
     /// Returns the filter to its freshly constructed state (Params kept).
     virtual void reset() = 0;

@@ -5,12 +5,14 @@ mocap-filter --eval). Writes docs/accuracy.md.
 
     python3 tests/bench/accuracy_table.py [--build build] [--seeds 5] [--out docs/accuracy.md]
                                           [--filters a,b,...] [--scenarios a,b,...]
-                                          [--real DIR [--real-only]]
+                                          [--real DIR [--real-only] [--trace-plot NAME]]
 
 --real DIR evaluates every *.csv and *.csv.gz of DIR (the mocap-filter CSV format with a
 reference) and writes the "Real recordings" section; --real-only recomputes only that section
 and keeps the rest of --out as it is. Without --real, an existing real-recordings section of
---out is kept (the recordings are not in the repository).
+--out is kept (the recordings are not in the repository). --trace-plot NAME also plots the
+default filter's error and disturbance flags over time on recording NAME of DIR
+(tests/bench/accuracy_trace_plot.py, needs matplotlib) next to --out.
 
 Python 3 standard library only. Runs one process at a time (about a minute on one core).
 Exit status 1 if a tool fails or a number is not finite.
@@ -151,6 +153,8 @@ def main():
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--real", default="", metavar="DIR",
                     help="directory of real recordings (*.csv, *.csv.gz in the mocap-filter format with a reference)")
+    ap.add_argument("--trace-plot", default="", metavar="NAME",
+                    help="with --real: plot error and flags over time of the default filter on recording NAME")
     ap.add_argument("--real-only", action="store_true", help="with --real: recompute only the real-recordings "
                                                              "section of --out, keep the rest")
     args = ap.parse_args()
@@ -174,7 +178,8 @@ def main():
         if args.real:
             real = real_table(tools, names, args.real)
             real_runs = tools.runs
-            real_block = render_real(args, names, real)
+            plot = trace_plot(args, names[0]) if args.trace_plot else None
+            real_block = render_real(args, names, real, plot)
             print_real(names, real)
         else:
             real_block = extract_block(previous)
@@ -273,6 +278,27 @@ def real_columns(names, rows):
     return header, body, mean
 
 
+TRACE_PLOT_PNG = "accuracy_trace.png"
+
+
+def trace_plot(args, default):
+    """Runs accuracy_trace_plot.py on DIR/NAME(.csv|.csv.gz); the PNG goes next to --out.
+    Returns (file name, recording) or None (with a warning) if it could not be drawn."""
+    matches = [p for p in recording_paths(args.real) if recording_name(p) == args.trace_plot]
+    if not matches:
+        raise ToolError("--trace-plot %s: no such recording in %s" % (args.trace_plot, args.real))
+    png = os.path.join(os.path.dirname(os.path.abspath(args.out)), TRACE_PLOT_PNG)
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "accuracy_trace_plot.py")
+    python = "/usr/bin/python3" if os.access("/usr/bin/python3", os.X_OK) else sys.executable
+    p = subprocess.run([python, script, "--build", args.build, "--filter", default, "--in", matches[0],
+                        "--out", png, "--title", "%s on %s" % (default, args.trace_plot)],
+                       capture_output=True, text=True)
+    if p.returncode != 0:
+        print("accuracy_table: no trace plot: %s" % p.stderr.strip(), file=sys.stderr)
+        return None
+    return TRACE_PLOT_PNG, args.trace_plot
+
+
 def print_real(names, rows):
     header, body, mean = real_columns(names, rows)
     width = max(len(rec) for rec, _ in body)
@@ -281,7 +307,7 @@ def print_real(names, rows):
         print("%-*s %s" % (width, rec, " ".join("%11s" % c for c in cells)), file=sys.stderr)
 
 
-def render_real(args, names, rows):
+def render_real(args, names, rows, plot=None):
     header, body, mean = real_columns(names, rows)
     default = names[0]
     L = [REAL_BEGIN, "## Real recordings (BROAD)", ""]
@@ -289,7 +315,8 @@ def render_real(args, names, rows):
              "argument (it recomputes this section only and keeps the rest of the file):")
     L.append("")
     L.append("```sh")
-    L.append("python3 tests/bench/accuracy_table.py --real DIR --real-only")
+    L.append("python3 tests/bench/accuracy_table.py --real DIR --real-only"
+             + (" --trace-plot %s" % args.trace_plot if args.trace_plot else ""))
     L.append("```")
     L.append("")
     L.append("(`--seeds 5 --real DIR` regenerates the whole file, this section and the simulated ones; a run "
@@ -323,6 +350,18 @@ def render_real(args, names, rows):
         worst = max(with_ref, key=lambda t: t[1][default]["rmse_total_deg"] - t[2][0])
         L.append("Default `%s`: mean %.2f° over %d recordings; its largest excess over VQF online is %+.2f° (%s)."
                  % (default, float(mean[0]), len(rows), worst[1][default]["rmse_total_deg"] - worst[2][0], worst[0]))
+        L.append("")
+    if plot:
+        png, rec = plot
+        L.append("**Why an estimate is what it is**: `mocap-filter --trace FILE` writes, per sample, the "
+                 "filter's rest and magnetic-disturbance flags, its gyro bias estimate and its estimate of a "
+                 "field offset fixed to the sensor (`t,rest,mag_field_disturbed,mag_heading_disturbed,"
+                 "mag_rejected,mag_offset_weight,bias_x,bias_y,bias_z,mag_offset_x,mag_offset_y,mag_offset_z`; "
+                 "°/s and µT, sensor frame). Below, the default `%s` on %s (`--trace-plot`, drawn by "
+                 "`tests/bench/accuracy_trace_plot.py`): error over the evaluated samples, the flags, and the "
+                 "offset estimate with the share of it subtracted from the readings." % (default, rec))
+        L.append("")
+        L.append("![error and disturbance flags over time on %s](%s)" % (rec, png))
         L.append("")
     L.append(REAL_END)
     return "\n".join(L)

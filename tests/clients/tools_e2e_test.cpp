@@ -13,6 +13,7 @@
 #include <regex>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "math/quaternion.hpp"
 
@@ -129,6 +130,51 @@ TEST_F(ToolsEndToEnd, FilterEvaluatesASimulatedRecording) {
     const ToolRun quiet = run(filt("--filter madgwick --in " + in + " --out " + out));
     EXPECT_EQ(quiet.exit_code, 0);
     EXPECT_TRUE(quiet.out.empty());
+}
+
+TEST_F(ToolsEndToEnd, TraceWritesFlagsAndBiasPerSampleAndChangesNothingElse) {
+    const std::string in = path("in.csv").string(), out = path("out.csv").string(), out2 = path("out2.csv").string();
+    const std::string trace = path("trace.csv").string();
+    ASSERT_EQ(run(sim("--scenario magnetic --seed 2 --out " + in)).exit_code, 0);
+    const ToolRun plain = run(filt("--filter mocap --in " + in + " --out " + out + " --eval"));
+    const ToolRun traced = run(filt("--filter mocap --in " + in + " --out " + out2 + " --eval --trace " + trace));
+    ASSERT_EQ(plain.exit_code, 0) << plain.err;
+    ASSERT_EQ(traced.exit_code, 0) << traced.err;
+    EXPECT_EQ(traced.out, plain.out);  // --eval still prints one JSON object, the same one
+    EXPECT_EQ(slurp(out2), slurp(out));
+    const std::string tr = slurp(trace);
+    EXPECT_EQ(tr.rfind("t,rest,mag_field_disturbed,mag_heading_disturbed,mag_rejected,mag_offset_weight,bias_x,"
+                       "bias_y,bias_z,mag_offset_x,mag_offset_y,mag_offset_z\n",
+                       0),
+              0u);
+    EXPECT_EQ(count_lines(tr), 9002u);  // header + one row per sample
+    // The scenario rests first (rest flag), turns the field by 39° from 37 s to 53 s (rejected)
+    // and has a gyro bias of 0.5-2 °/s per axis, which the last row estimates.
+    std::istringstream lines(tr);
+    std::string line;
+    std::getline(lines, line);
+    int rest = 0, rejected_in_disturbance = 0, rejected_before = 0;
+    double bias_norm = 0.0;
+    while (std::getline(lines, line)) {
+        std::istringstream row(line);
+        std::vector<double> v;
+        for (std::string cell; std::getline(row, cell, ',');)
+            v.push_back(std::stod(cell));
+        ASSERT_EQ(v.size(), 12u) << line;
+        rest += v[1] != 0.0;
+        if (v[0] > 40.0 && v[0] < 52.0) rejected_in_disturbance += v[4] != 0.0;
+        if (v[0] > 10.0 && v[0] < 35.0) rejected_before += v[4] != 0.0;
+        bias_norm = std::hypot(v[6], v[7], v[8]);
+    }
+    EXPECT_GT(rest, 100);
+    EXPECT_GT(rejected_in_disturbance, 1000);  // most of the 12 s at 100 Hz
+    EXPECT_EQ(rejected_before, 0);
+    EXPECT_GT(bias_norm, 0.5);
+    // A filter without diagnostics writes zero flags; an unwritable trace is an I/O error.
+    ASSERT_EQ(run(filt("--filter madgwick --in " + in + " --out " + out + " --trace " + trace)).exit_code, 0);
+    EXPECT_EQ(count_lines(slurp(trace)), 9002u);
+    EXPECT_EQ(run(filt("--filter mocap --in " + in + " --out " + out + " --trace /nonexistent-dir/t.csv")).exit_code,
+              1);
 }
 
 TEST_F(ToolsEndToEnd, NedFrameGivesTheSameTotalErrorAndNedOutput) {
