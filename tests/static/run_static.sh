@@ -80,13 +80,15 @@ RECORD="$ROOT/tests/static/tidy-clean.txt"
 CACHE="${MOCAP_STATIC_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mocapd-static}/tidy-clean.txt"
 TIDY="$(command -v clang-tidy-14 || command -v clang-tidy || true)"
 
-# tidy_keys: $OUT/keys.tsv (file, key) for every unit, and $OUT/tidy-files.txt, the units
-# whose key is in neither the record nor the cache.
+# tidy_keys plan: $OUT/keys.tsv (file, key) for every unit, and $OUT/tidy-files.txt, the
+# units whose key is in neither the record nor the cache.
+# tidy_keys verify: $OUT/keys-after.tsv, the keys of the analysed units computed again after
+# the analysis; a unit whose sources changed while it was analysed is not recorded.
 tidy_keys() {
-  python3 - "$OUT" "$ROOT" "$BUILD" "$JOBS" "$TIDY" "$RECORD" "$CACHE" "${MOCAP_STATIC_FULL:-0}" \
+  python3 - "$1" "$OUT" "$ROOT" "$BUILD" "$JOBS" "$TIDY" "$RECORD" "$CACHE" "${MOCAP_STATIC_FULL:-0}" \
     "${BASH_SOURCE[0]}" <<'PY'
 import concurrent.futures, hashlib, json, os, shlex, subprocess, sys
-out, root, build, jobs, tidy, record, cache, full, script = sys.argv[1:]
+mode, out, root, build, jobs, tidy, record, cache, full, script = sys.argv[1:]
 clangxx = "clang++-14" if subprocess.run(["sh", "-c", "command -v clang++-14"], capture_output=True).returncode == 0 else "clang++"
 def norm(text):
     return text.replace(build, "@BUILD@").replace(root, "@ROOT@")
@@ -111,8 +113,15 @@ def key(e):
     h.update(norm(pp.stdout.decode("utf-8", "replace")).encode())
     return h.hexdigest()
 entries = json.load(open(os.path.join(out, "compile_commands.json")))
+if mode == "verify":
+    analysed = set(l.strip() for l in open(os.path.join(out, "tidy-files.txt")))
+    entries = [e for e in entries if e["file"] in analysed]
 with concurrent.futures.ThreadPoolExecutor(int(jobs)) as ex:
     keys = list(ex.map(key, entries))
+if mode == "verify":
+    with open(os.path.join(out, "keys-after.tsv"), "w") as kt:
+        kt.writelines(f"{e['file']}\t{k or '-'}\n" for e, k in zip(entries, keys))
+    sys.exit(0)
 clean = set()
 if full != "1":
     for f in (record, cache):
@@ -138,11 +147,12 @@ import os, re, sys
 out, root, record, cache, update = sys.argv[1:]
 finding = re.compile(r"^[^ ]+:[0-9]+:[0-9]+: (warning|error): .*\[[^]]+\]$", re.M)
 analysed = set(l.strip() for l in open(os.path.join(out, "tidy-files.txt")))
+after = dict(l.rstrip("\n").split("\t") for l in open(os.path.join(out, "keys-after.tsv")))
 clean, dirty = {}, set()
 for line in open(os.path.join(out, "keys.tsv")):
     f, k = line.rstrip("\n").split("\t")
-    if k == "-":
-        dirty.add(f)
+    if k == "-" or (f in analysed and after.get(f) != k):
+        dirty.add(f)  # not preprocessable, or its sources changed while it was analysed
         continue
     if f in analysed:
         log = os.path.join(out, "tidy", f.replace("/", "_") + ".log")
@@ -178,7 +188,7 @@ run_tidy() {
   local tidy="$TIDY"
   if [[ -z "$tidy" ]]; then say "clang-tidy not found (Debian package clang-tidy)"; return 2; fi
   local t0=$SECONDS
-  tidy_keys
+  tidy_keys plan
   # One process per translation unit, each into its own log so outputs never interleave.
   # -UNDEBUG: the analyser takes assert()s as facts, which removes impossible paths.
   # The build uses g++ options clang does not know; they are not findings.
@@ -194,6 +204,7 @@ run_tidy() {
   # A finding: "path:line:col: warning|error: message [check]". Keep each once.
   cat "$OUT"/tidy/*.log 2>/dev/null | grep -E '^[^ ]+:[0-9]+:[0-9]+: (warning|error): .*\[[^]]+\]$' \
     | sed -E 's/,-warnings-as-errors\]$/]/' | sort -u >"$OUT/clang-tidy.txt" || true
+  tidy_keys verify
   local rc=0
   report clang-tidy "$t0" "($(wc -l <"$OUT/tidy-files.txt") of $nfiles TUs analysed, $JOBS jobs)" || rc=$?
   # The record is rewritten only by a run without findings; the cache learns either way.
