@@ -8,10 +8,17 @@
 // The calibration is kept: A calibrates the subject from the simulator's opening T-pose and
 // shares it (docs/cluster.md, "Shared calibration"); B never calibrates by itself, and every
 // pose B publishes after the failover carries A's calibration.
+// The take survives too: both hosts publish the subject's raw samples to the JetStream stream
+// MOCAP_RAW (docs/outputs.md, "Durable takes"). After the kill -9, the take replayed from
+// the stream up to the kill holds every sample A had acknowledged, with no SYNC missing; B's
+// samples follow on the same stream subject, after A's with no SYNC of both, and one hole
+// between: what A received but had not yet stored, and what the sink sent while it moved.
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cinttypes>
 #include <csignal>
+#include <cstdio>
 #include <iostream>
 #include <mutex>
 #include <sstream>
@@ -30,6 +37,7 @@ using Clock = std::chrono::steady_clock;
 constexpr const char* kSite = "arena";
 constexpr std::uint32_t kSubject = 5;
 constexpr int kRateHz = 100;
+constexpr std::uint64_t kNodes = 15;  // the simulated body: one raw sample per node per SYNC
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 constexpr auto kGapBound = 3000ms;  // sanitizer builds: the bound is the plain build's
 #else
@@ -186,12 +194,26 @@ protected:
         EXPECT_GT(stats_counter(a_.pose_port, "ingest_tcp.packets"), 0u);
         EXPECT_EQ(stats_counter(b_.pose_port, "ingest_tcp.packets"), 0u) << "the sink starts on the first host";
 
-        const auto t_fault = Clock::now();
+        // What A's raw stream publisher had acknowledged (stored by JetStream), read just
+        // before the fault: the take must hold at least this much of A's part.
+        EXPECT_GE(wait_stats_counter(
+                      a_.pose_port, "cluster.raw_samples_acked", [](auto v) { return v >= 2 * kNodes * kRateHz; }, 30s),
+                  2 * kNodes * kRateHz)
+            << "A acknowledges the raw samples of the take while it runs";
+        a_acked_ = stats_counter(a_.pose_port, "cluster.raw_samples_acked");
+        const auto t_acked = Clock::now();
         a_.daemon->signal(sig);
+        const auto t_fault = Clock::now();
+        acked_before_fault_ = std::chrono::duration_cast<std::chrono::microseconds>(t_fault - t_acked);
         if (sig == SIGKILL) {
             a_.killed = true;
             EXPECT_TRUE(a_.daemon->wait(10s).has_value()) << "host A did not die";
         }
+        // A receives nothing after this (it is dead or frozen), B nothing before it: the sink
+        // comes to B only after its reconnect back-off of 100 ms.
+        dead_wall_us_ =
+            std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+                .count();
         EXPECT_TRUE(wait_until([&] { return poses.frames_after(t_fault) >= 2u * kRateHz; }, 60s))
             << "B serves the subject: 2 s of poses after the fault";
         poses.stop();  // before a frozen A could be woken
@@ -203,17 +225,102 @@ protected:
         return poses.largest_gap();
     }
 
+    /// What `mocapd --jetstream` replays of the subject's take: its sample count and the SYNC
+    /// of every frame it solved. `range` selects by received time (--from/--to).
+    struct Replayed {
+        std::uint64_t samples = 0;
+        std::vector<std::uint64_t> syncs;
+    };
+    Replayed replay_take(const std::string& name, const std::vector<std::string>& range) {
+        std::vector<std::string> argv{MOCAPD_BIN, "--config", dir_.file("host-b.toml")};
+        for (const auto& a : jetstream_replay_args(nats_port_, kSubject))
+            argv.push_back(a);
+        argv.insert(argv.end(), range.begin(), range.end());
+        argv.insert(argv.end(), {"--angles-out", dir_.file(name + ".csv")});
+        Process p(argv, dir_.file(name + ".log"));
+        const int rc = p.wait(120s).value_or(-1);
+        EXPECT_EQ(rc, 0) << p.log();
+        const auto samples = replayed_samples(p.log());
+        EXPECT_TRUE(samples) << p.log();
+        if (rc != 0 || !samples) return {};
+        return {*samples, csv_syncs(read_file(dir_.file(name + ".csv")))};
+    }
+
+    /// Epoch seconds with six decimals, as --from/--to take them.
+    static std::string epoch_text(std::int64_t us) {
+        char text[32];
+        std::snprintf(text, sizeof text, "%" PRId64 ".%06" PRId64, us / 1'000'000, us % 1'000'000);
+        return text;
+    }
+
     TempDir dir_;
     std::uint16_t nats_port_ = 0;
     std::unique_ptr<Process> nats_, sim_;
     Host a_, b_;
+    std::uint64_t a_acked_ = 0;                       // A's cluster.raw_samples_acked just before the fault
+    std::chrono::microseconds acked_before_fault_{};  // from that reply to the signal
+    std::int64_t dead_wall_us_ = 0;                   // wall clock once A stopped receiving
 };
+
+/// Frames missing between consecutive SYNCs (the SYNCs are strictly increasing: a test failure
+/// otherwise).
+std::uint64_t missing_syncs(const std::vector<std::uint64_t>& syncs) {
+    std::uint64_t missing = 0;
+    for (std::size_t i = 1; i < syncs.size(); ++i) {
+        EXPECT_GT(syncs[i], syncs[i - 1]) << "row " << i << ": each SYNC once, in order";
+        if (syncs[i] > syncs[i - 1]) missing += syncs[i] - syncs[i - 1] - 1;
+    }
+    return missing;
+}
 
 TEST_F(Failover, KilledHostTheSinkMovesToTheNextWithinTheBound) {
     const auto [gap, frames] = fail_over(SIGKILL);
     std::cout << "[ metrics  ] kill -9 host A: largest pose gap " << gap.count() << " ms, " << frames
               << " SYNCs skipped in one step, at " << kRateHz << " Hz\n";
     EXPECT_LE(gap, kGapBound) << "the subscriber's largest gap when the sink's host is killed";
+
+    // The take: the sink stops, B settles what it still owes the stream.
+    sim_->stop();
+    const std::uint64_t b_queued = stats_counter(b_.pose_port, "cluster.raw_samples_queued");
+    const std::uint64_t b_acked = wait_stats_counter(
+        b_.pose_port, "cluster.raw_samples_acked", [&](auto v) { return v >= b_queued; }, 30s);
+    EXPECT_EQ(b_acked, b_queued) << "B stores every raw sample it received";
+    EXPECT_EQ(stats_counter(b_.pose_port, "cluster.raw_samples_dropped"), 0u);
+    EXPECT_EQ(stats_counter(b_.pose_port, "cluster.raw_samples_failed"), 0u);
+
+    // A's part, up to the kill: every acknowledged sample, every SYNC from the first, each
+    // frame whole but possibly the last (A's last message may end mid-SYNC).
+    const Replayed a_part = replay_take("a-part", {"--to", epoch_text(dead_wall_us_)});
+    EXPECT_GE(a_part.samples, a_acked_) << "every sample A had acknowledged is in the take";
+    ASSERT_GE(a_part.syncs.size(), a_acked_ / kNodes);
+    // The simulator counts the SYNCs it skipped itself (a late timer on a loaded host).
+    const std::uint64_t sim_skipped = sim_syncs_skipped(sim_->log()).value_or(0);
+    const std::uint64_t a_missing = missing_syncs(a_part.syncs);
+    EXPECT_LE(a_missing, sim_skipped) << "A's part of the take has no hole but what the sink never sent";
+    EXPECT_GE(a_part.samples, (a_part.syncs.size() - 1) * kNodes) << "every frame but the last is complete";
+
+    // B's part, after the kill: exactly what B acknowledged, no hole either.
+    const Replayed b_part = replay_take("b-part", {"--from", epoch_text(dead_wall_us_)});
+    EXPECT_EQ(b_part.samples, b_acked) << "B's part of the take is what B stored";
+    ASSERT_FALSE(b_part.syncs.empty());
+    const std::uint64_t b_missing = missing_syncs(b_part.syncs);
+    EXPECT_LE(b_missing, sim_skipped) << "B's part of the take has no hole but what the sink never sent";
+
+    // The whole take, by subject alone, reads both parts in order: A's, then B's, no SYNC in
+    // both (the sink sends each packet to one host), one hole at the switch.
+    const Replayed whole = replay_take("whole", {});
+    EXPECT_EQ(whole.samples, a_part.samples + b_part.samples);
+    ASSERT_FALSE(a_part.syncs.empty());
+    EXPECT_LT(a_part.syncs.back(), b_part.syncs.front()) << "no overlap: B's samples begin after A's end";
+    const std::uint64_t hole = b_part.syncs.front() - a_part.syncs.back() - 1;
+    EXPECT_EQ(missing_syncs(whole.syncs), a_missing + hole + b_missing) << "the switch is the take's only hole";
+    EXPECT_LE(hole * 1000 / kRateHz, static_cast<std::uint64_t>(kGapBound.count()))
+        << "the take's hole at the switch stays within the subscriber's bound";
+    std::cout << "[ metrics  ] kill -9 host A: take: A acknowledged " << a_acked_ << " samples ("
+              << acked_before_fault_.count() << " us before the kill), the stream holds " << a_part.samples << " of A ("
+              << a_part.syncs.size() << " SYNCs, " << a_part.samples - a_acked_ << " beyond the last ack read) and "
+              << b_part.samples << " of B (" << b_part.syncs.size() << " SYNCs); hole at the switch " << hole
+              << " SYNCs\n";
 }
 
 TEST_F(Failover, FrozenHostIsNoticedByItsSilenceAndTheSinkMovesOn) {

@@ -11,7 +11,6 @@
 #include <atomic>
 #include <csignal>
 #include <filesystem>
-#include <regex>
 #include <sstream>
 #include <thread>
 
@@ -27,28 +26,6 @@ using namespace std::chrono_literals;
 
 constexpr const char* kSite = "take";
 constexpr std::uint64_t kNodes = 15;  // mocap-sim's body: one sample per node per SYNC
-
-/// "replayed N samples ..." of `mocapd --replay`/`--jetstream`.
-std::optional<std::uint64_t> replayed_samples(const std::string& log) {
-    std::smatch m;
-    static const std::regex re("replayed ([0-9]+) samples");
-    if (!std::regex_search(log, m, re)) return std::nullopt;
-    return std::stoull(m[1]);
-}
-
-/// The SYNC column (second) of a joint-angle CSV, in row order.
-std::vector<std::uint64_t> csv_syncs(const std::string& text) {
-    std::vector<std::uint64_t> syncs;
-    std::istringstream lines(text);
-    std::string line;
-    std::getline(lines, line);  // header
-    while (std::getline(lines, line)) {
-        const auto a = line.find(',');
-        const auto b = line.find(',', a + 1);
-        syncs.push_back(std::stoull(line.substr(a + 1, b - a - 1)));
-    }
-    return syncs;
-}
 
 class JetStream : public OneHostClusterTest {
 protected:
@@ -101,7 +78,7 @@ protected:
     }
 
     std::vector<std::string> jetstream_args(std::uint32_t subject) const {
-        return {"--jetstream", "nats://127.0.0.1:" + std::to_string(nats_port_), "--subject", std::to_string(subject)};
+        return jetstream_replay_args(nats_port_, subject);
     }
 };
 

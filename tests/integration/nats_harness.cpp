@@ -4,6 +4,7 @@
 #include <nats/nats.h>
 #include <unistd.h>
 
+#include <regex>
 #include <sstream>
 
 #include "mocap/v1/mocap.pb.h"
@@ -160,6 +161,30 @@ std::uint64_t wait_stats_counter(std::uint16_t pose_port, const std::string& nam
         },
         limit);
     return v;
+}
+
+std::optional<std::uint64_t> replayed_samples(const std::string& log) {
+    std::smatch m;
+    static const std::regex re("replayed ([0-9]+) samples");
+    if (!std::regex_search(log, m, re)) return std::nullopt;
+    return std::stoull(m[1]);
+}
+
+std::vector<std::uint64_t> csv_syncs(const std::string& text) {
+    std::vector<std::uint64_t> syncs;
+    std::istringstream lines(text);
+    std::string line;
+    std::getline(lines, line);  // header
+    while (std::getline(lines, line)) {
+        const auto a = line.find(',');
+        const auto b = line.find(',', a + 1);
+        syncs.push_back(std::stoull(line.substr(a + 1, b - a - 1)));
+    }
+    return syncs;
+}
+
+std::vector<std::string> jetstream_replay_args(std::uint16_t nats_port, std::uint32_t subject) {
+    return {"--jetstream", "nats://127.0.0.1:" + std::to_string(nats_port), "--subject", std::to_string(subject)};
 }
 
 }  // namespace mocap::itest
