@@ -11,7 +11,6 @@
 #include <atomic>
 #include <csignal>
 #include <filesystem>
-#include <sstream>
 #include <thread>
 
 #include "harness.hpp"
