@@ -18,6 +18,7 @@
 #include "serve/angles_csv.hpp"
 #include "serve/bvh_frame_encoder.hpp"
 #include "serve/bvh_text.hpp"
+#include "serve/frame_interval.hpp"
 #include "skeleton/euler.hpp"
 
 namespace mocap::client {
@@ -244,6 +245,7 @@ int run_record_bvh_nats(const NatsOptions& nats, const ExportOptions& o) {
     lines.reserve(o.frames);
     v1::SkeletonFrame frame;
     skeleton::SkeletonPose pose;
+    serve::FrameInterval interval;  // Frame Time, unless the host configured one
     while (lines.size() < o.frames) {
         const ReadStatus s = client.next_frame(frame, o.timeout);
         if (s != ReadStatus::kMessage) {
@@ -266,6 +268,7 @@ int run_record_bvh_nats(const NatsOptions& nats, const ExportOptions& o) {
                 pose.q_world_segment_wxyz[i][k] = frame.q_world_segment_wxyz(static_cast<int>(4 * i + k));
         }
         pose.position_m[0] = {frame.position_m(0), frame.position_m(1), frame.position_m(2)};
+        interval.add(frame.sync(), frame.sample_us());
         std::string line;
         encoder->append_motion_line(pose, line);
         lines.push_back(std::move(line));
@@ -273,7 +276,9 @@ int run_record_bvh_nats(const NatsOptions& nats, const ExportOptions& o) {
     if (client.drops_announced() != 0) {
         std::cerr << "mocap-client: the client library dropped " << client.drops_announced() << " frame(s)\n";
     }
-    return write_bvh_file(o, encoder->hierarchy(), encoder->frame_time_line(), lines, encoder->values_per_frame());
+    // A single frame has no interval: the sinks' default rate (100 Hz) then.
+    return write_bvh_file(o, encoder->hierarchy(), encoder->frame_time_line(interval.seconds().value_or(0.01)), lines,
+                          encoder->values_per_frame());
 }
 
 int run_angles_csv(const ExportOptions& o) {

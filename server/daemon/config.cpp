@@ -356,7 +356,7 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
             r.fail("bvh_rotation_order", r.take("bvh_rotation_order"),
                    "must be three distinct letters of XYZ, e.g. \"ZXY\"");
     }
-    r.read("bvh_frame_time_s", c.bvh_frame_time_s, 0.0001, 10.0);
+    r.read("bvh_frame_time_s", c.bvh_frame_time_s, 0.0, 10.0);
     r.read("record_dir", c.record_dir);
     r.read("record_flush_interval_s", c.record_flush_interval_s, 0.01, 60.0);
     if (const auto* n = r.take("raw_record")) {

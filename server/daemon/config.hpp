@@ -95,7 +95,7 @@ struct DaemonConfig {
     std::uint32_t bvh_subject = 0;   ///< 0 = first subject with a frame
     double bvh_units_per_m = 100.0;  ///< "cm" = 100, "m" = 1, "mm" = 1000
     std::string bvh_rotation_order = "ZXY";
-    double bvh_frame_time_s = 0.01;
+    double bvh_frame_time_s = 0.0;  ///< 0 = measured from the subject's frames
     std::string record_dir = ".";
     double record_flush_interval_s = 1.0;
     bool raw_record = false;       ///< record every raw sample from start

@@ -12,9 +12,9 @@ BvhFrameEncoder::BvhFrameEncoder(skeleton::BodyModel model, const BvhOutputOptio
       hierarchy_(skeleton::bvh_hierarchy_text(model_, options_.write)),
       values_per_frame_(skeleton::bvh_values_per_frame(model_)) {}
 
-std::string BvhFrameEncoder::frame_time_line() const {
+std::string BvhFrameEncoder::frame_time_line(double measured_s) const {
     char buf[64];
-    std::snprintf(buf, sizeof buf, "Frame Time: %.6f\n", options_.frame_time_s);
+    std::snprintf(buf, sizeof buf, "Frame Time: %.6f\n", fixed_frame_time() ? options_.frame_time_s : measured_s);
     return buf;
 }
 

@@ -25,7 +25,9 @@ namespace mocap::serve {
 
 struct BvhOutputOptions {
     skeleton::BvhWriteOptions write{};  ///< unit, rotation order, decimals
-    double frame_time_s = 0.01;         ///< "Frame Time:" (1 / nominal sample rate)
+    /// "Frame Time:" when set ([outputs] bvh_frame_time_s); 0 = the interval the subject is
+    /// actually sampled at, measured from its frames (serve/frame_interval.hpp).
+    double frame_time_s = 0.0;
 };
 
 class BvhFrameEncoder {
@@ -39,8 +41,10 @@ public:
     [[nodiscard]] std::size_t values_per_frame() const { return values_per_frame_; }
     [[nodiscard]] const BvhOutputOptions& options() const { return options_; }
     [[nodiscard]] const skeleton::BodyModel& model() const { return model_; }
-    /// "Frame Time: 0.010000\n".
-    [[nodiscard]] std::string frame_time_line() const;
+    /// A fixed Frame Time was configured (options().frame_time_s > 0).
+    [[nodiscard]] bool fixed_frame_time() const { return options_.frame_time_s > 0.0; }
+    /// "Frame Time: 0.010000\n": the configured value, else `measured_s`.
+    [[nodiscard]] std::string frame_time_line(double measured_s) const;
 
     /// Appends one '\n'-terminated MOTION line for `pose` (pose.segment_count must equal
     /// the model's segment count; asserted).

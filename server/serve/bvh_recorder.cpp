@@ -4,11 +4,13 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include "core/errno_text.hpp"
@@ -22,6 +24,13 @@ std::string count_digits(std::uint64_t frames) {
     char buf[32];
     std::snprintf(buf, sizeof buf, "%0*llu", kBvhCountDigits, static_cast<unsigned long long>(frames));
     return buf;
+}
+
+// A measured Frame Time is rewritten in place, so it keeps the width of this placeholder:
+// "%.6f" of a value in [0.000001, 9.999999] is eight characters.
+constexpr double kUnmeasuredFrameTimeS = 0.01;
+double fit(double seconds) {
+    return std::clamp(seconds, 0.000001, 9.999999);
 }
 
 }  // namespace
@@ -67,7 +76,7 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
         return false;
     }
     const std::string head = encoder_.hierarchy() + "MOTION\nFrames: ";
-    const std::string header = head + count_digits(0) + "\n" + encoder_.frame_time_line();
+    const std::string header = head + count_digits(0) + "\n" + encoder_.frame_time_line(kUnmeasuredFrameTimeS);
     if (const int err = write_whole(file_writer_, fd, header.data(), header.size(), 0); err != 0) {
         if (is_disk_full(err)) disk_full_.add();
         write_errors_.add();
@@ -88,6 +97,7 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
         pending_frames_ = 0;
         stop_writer_ = false;
         subject_ = config_.subject;
+        interval_ = FrameInterval();
     }
     writer_ = std::thread([this] {
         pthread_setname_np(pthread_self(), "mocap-bvhrec");
@@ -141,6 +151,7 @@ void BvhRecorder::publish(const SubjectFrame& frame, const skeleton::SkeletonPos
     std::lock_guard lock(mutex_);
     if (subject_ == 0) subject_ = frame.subject_id;
     if (frame.subject_id != subject_) return;
+    interval_.add(frame.sync, frame.sample_us);
     line_.clear();
     encoder_.append_motion_line(pose, line_);
     if (pending_.size() + line_.size() > config_.max_buffer_bytes) {
@@ -153,18 +164,23 @@ void BvhRecorder::publish(const SubjectFrame& frame, const skeleton::SkeletonPos
 
 bool BvhRecorder::write_pending(std::string& scratch) {
     std::uint64_t frames = 0;
+    std::optional<double> frame_time_s;
     {
         std::lock_guard lock(mutex_);
         scratch.swap(pending_);
         frames = pending_frames_;
         pending_frames_ = 0;
+        frame_time_s = interval_.seconds();
     }
     if (scratch.empty()) return true;
     // Lines first, then the count; a failure of either cuts the file back to its last
     // whole line, so the count written before still matches the lines.
     int err = write_whole(file_writer_, fd_, scratch.data(), scratch.size(), static_cast<off_t>(file_end_));
     if (err == 0) {
-        const std::string digits = count_digits(frames_written_ + frames);
+        // The count and, when measured, the Frame Time right after it: one write.
+        std::string digits = count_digits(frames_written_ + frames);
+        if (!encoder_.fixed_frame_time() && frame_time_s) digits += "\n" + encoder_.frame_time_line(fit(*frame_time_s));
+        if (digits.back() == '\n') digits.pop_back();
         err = write_whole(file_writer_, fd_, digits.data(), digits.size(), static_cast<off_t>(count_offset_));
         if (err != 0) {
             while (file_writer_.ftruncate(fd_, static_cast<off_t>(file_end_)) != 0 && errno == EINTR) {

@@ -2,7 +2,9 @@
 // request (StartRecording / StopRecording), and the repair of a file a crash left behind.
 //
 // File layout: BvhFrameEncoder::hierarchy(), "MOTION\n", "Frames: NNNNNNNNNN\n" (ten
-// digits, zero-padded, so the count can be rewritten in place), "Frame Time: T\n", then
+// digits, zero-padded, so the count can be rewritten in place), "Frame Time: T\n" (the
+// configured value, or the recorded subject's measured interval: "%.6f" of a value under
+// 10 s, eight characters, rewritten in place with the count; 0.010000 until measured), then
 // one MOTION line per frame of ONE subject (the configured `subject`, or with 0 the first
 // subject that delivers a frame after start). Every importer reads the zero-padded count
 // as a number (checked with assimp, Blender and three.js: docs/outputs.md).
@@ -35,6 +37,7 @@
 #include "core/frame.hpp"
 #include "core/metrics_registry.hpp"
 #include "serve/bvh_frame_encoder.hpp"
+#include "serve/frame_interval.hpp"
 #include "serve/record_file.hpp"
 #include "skeleton/skeleton_pose.hpp"
 
@@ -98,6 +101,7 @@ private:
     std::string pending_;  // whole lines not yet written
     std::uint64_t pending_frames_ = 0;
     std::uint32_t subject_ = 0;  // assembler thread once recording (set at start)
+    FrameInterval interval_;     // of the recorded subject's frames
     bool stop_writer_ = false;
 
     int fd_ = -1;

@@ -42,6 +42,7 @@ public:
           slot_(std::move(slot)),
           id_(slot_->id()),
           subject_(server.config_.subject),
+          greeting_(server.fixed_greeting_),
           queue_(server.config_.queue_frames, server.counters_.frames_dropped) {}
 
     void start() {
@@ -53,6 +54,7 @@ public:
         if (closed_) return;
         if (subject_ == 0) subject_ = line.subject_id;  // first subject with a frame
         if (line.subject_id != subject_) return;
+        if (!greeting_ && line.frame_time_s > 0.0) greeting_ = server_.greeting(line.frame_time_s);
         queue_.push(line.text);  // drops are not announced: BVH text has no line for them
         if (!writing_) do_write();
     }
@@ -71,8 +73,10 @@ private:
         if (closed_ || writing_) return;
         in_flight_.clear();
         if (!greeted_) {
-            in_flight_.push_back(server_.greeting_);
+            if (!greeting_) return;  // lines wait in the queue until the Frame Time is known
+            in_flight_.push_back(greeting_);
             greeted_ = true;
+            greeting_in_flight_ = true;
         }
         queue_.move_into(in_flight_, kMaxBatch);
         if (in_flight_.empty()) return;
@@ -89,7 +93,8 @@ private:
         writing_ = false;
         if (ec) return fail(ec, "write");
         // The greeting is not a frame; every other buffer is one MOTION line.
-        const std::size_t lines = in_flight_.size() - (in_flight_.front() == server_.greeting_ ? 1 : 0);
+        const std::size_t lines = in_flight_.size() - (greeting_in_flight_ ? 1 : 0);
+        greeting_in_flight_ = false;
         server_.counters_.frames_sent.add(lines);
         // Lines the kernel took are progress: with the bounded send buffer a client that stops
         // reading stops making it within seconds. The greeting alone is not (a dead
@@ -155,7 +160,9 @@ private:
     ServeThread::SlotPtr slot_;
     std::uint64_t id_;
     std::uint32_t subject_;
+    std::shared_ptr<const std::string> greeting_;  // null until the Frame Time is known
     bool greeted_ = false;
+    bool greeting_in_flight_ = false;
     bool writing_ = false;
     bool closed_ = false;
     ClientSendQueue queue_;  // MOTION lines only; the greeting is written apart
@@ -180,7 +187,20 @@ BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
       sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections_closed)),
       backlog_(serve_.ios(), config_.publish_backlog_frames,
                [this](std::size_t lane, const SubjectText& line) { deliver(lane, line); }) {
-    greeting_ = std::make_shared<const std::string>(encoder_.hierarchy() + "MOTION\n" + encoder_.frame_time_line());
+    if (encoder_.fixed_frame_time()) fixed_greeting_ = greeting(0.0);
+}
+
+std::shared_ptr<const std::string> BvhServer::greeting(double measured_s) const {
+    return std::make_shared<const std::string>(encoder_.hierarchy() + "MOTION\n" +
+                                               encoder_.frame_time_line(measured_s));
+}
+
+double BvhServer::measure(const SubjectFrame& frame) {
+    if (encoder_.fixed_frame_time()) return 0.0;
+    std::lock_guard lock(intervals_mutex_);
+    FrameInterval& interval = intervals_.try_emplace(frame.subject_id, kMeasuredIntervals).first->second;
+    interval.add(frame.sync, frame.sample_us);
+    return interval.seconds().value_or(0.0);
 }
 
 BvhServer::~BvhServer() {
@@ -212,13 +232,15 @@ void BvhServer::on_closed(std::size_t lane, std::uint64_t id) {
 }
 
 void BvhServer::publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) {
+    // Measured with or without clients, so a client that connects later is greeted at once.
+    const double frame_time_s = measure(frame);
     if (client_count() == 0 || !serve_.running()) return;
     auto text = std::make_shared<std::string>();
     text->reserve(16 * encoder_.values_per_frame());
     encoder_.append_motion_line(pose, *text);
     counters_.frames_published.add();
     // One encoding, shared by every lane and client.
-    if (const std::size_t refused = backlog_.push({frame.subject_id, std::move(text)}); refused > 0) {
+    if (const std::size_t refused = backlog_.push({frame.subject_id, std::move(text), frame_time_s}); refused > 0) {
         counters_.backlog_dropped.add(refused);
     }
 }

@@ -1,10 +1,12 @@
 // bvh_server.hpp — live BVH text over TCP (default port 7002).
 //
-// Framing (docs/outputs.md): on connect a client receives, at once,
+// Framing (docs/outputs.md): a client receives
 //     the HIERARCHY block (BvhFrameEncoder::hierarchy(), ends with the root's "}\n")
 //     "MOTION\n"
 //     "Frame Time: <seconds>\n"
-// and then one '\n'-terminated MOTION line per frame of ONE subject, live. There is no
+// as soon as its subject's Frame Time is known (configured, or measured over at least
+// kMeasuredIntervals SYNC instants of that subject: serve/frame_interval.hpp; until then its
+// lines wait in its queue), and then one '\n'-terminated MOTION line per frame of ONE subject, live. There is no
 // "Frames:" line (the count is open); a reader that wants a file counts the lines it
 // received and writes "Frames: <count>" before "Frame Time:".
 // Subject: the configured `subject`, or with 0 the subject of the first frame published
@@ -30,13 +32,16 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "core/asio.hpp"
 #include "core/frame.hpp"
 #include "core/metrics_registry.hpp"
 #include "serve/bvh_frame_encoder.hpp"
+#include "serve/frame_interval.hpp"
 #include "serve/publish_backlog.hpp"
 #include "serve/serve_config.hpp"
 #include "serve/serve_thread.hpp"
@@ -44,6 +49,9 @@
 #include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
+
+/// SYNC intervals a subject's Frame Time is measured over before a client is greeted with it.
+inline constexpr std::uint64_t kMeasuredIntervals = 10;
 
 struct BvhServerConfig {
     std::string bind_address = "0.0.0.0";
@@ -110,10 +118,16 @@ private:
     void admit(std::size_t lane, asio::ip::tcp::socket socket, ServeThread::SlotPtr slot);
     void on_closed(std::size_t lane, std::uint64_t id);
     void deliver(std::size_t lane, const SubjectText& line);
+    /// HIERARCHY + MOTION + Frame Time (the configured one, else `measured_s`).
+    [[nodiscard]] std::shared_ptr<const std::string> greeting(double measured_s) const;
+    /// The subject's measured Frame Time after this frame, 0 while unknown.
+    double measure(const SubjectFrame& frame);
 
     BvhServerConfig config_;
     const BvhFrameEncoder& encoder_;
-    std::shared_ptr<const std::string> greeting_;  // HIERARCHY + MOTION + Frame Time
+    std::shared_ptr<const std::string> fixed_greeting_;           // when the Frame Time is configured
+    std::mutex intervals_mutex_;                                  // publish() may run on several threads
+    std::unordered_map<std::uint32_t, FrameInterval> intervals_;  // by subject
     BvhServerCounters counters_;
 
     ServeThread serve_;  // before the sessions and the backlog, which use its io_contexts

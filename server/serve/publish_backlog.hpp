@@ -102,6 +102,7 @@ private:
 struct SubjectText {
     std::uint32_t subject_id = 0;
     std::shared_ptr<const std::string> text;
+    double frame_time_s = 0.0;  ///< live BVH: the subject's measured interval (0 = not yet known)
 };
 
 using PublishBacklog = LaneBacklog<SubjectText>;

@@ -200,7 +200,7 @@ TEST(ConfigOutputs, ErrorsNameKeyAndLine) {
     EXPECT_EQ(err, "t.toml:2: outputs.raw_ring_capacity: must be a power of two");
     EXPECT_FALSE(parse_config("[outputs]\nraw_record = 1\n", "t.toml", &err));
     EXPECT_EQ(err, "t.toml:2: outputs.raw_record: expected true or false");
-    EXPECT_FALSE(parse_config("[outputs]\nbvh_frame_time_s = 0\n", "t.toml", &err));
+    EXPECT_FALSE(parse_config("[outputs]\nbvh_frame_time_s = -0.01\n", "t.toml", &err));
     EXPECT_NE(err.find("outputs.bvh_frame_time_s"), std::string::npos) << err;
 }
 

@@ -14,17 +14,26 @@
 
 namespace mocap::serve::test {
 
+/// Frame Time fixed at 0.01 s ([outputs] bvh_frame_time_s = 0.01).
 inline BvhFrameEncoder default_encoder() {
+    BvhOutputOptions o;
+    o.frame_time_s = 0.01;
+    return BvhFrameEncoder(skeleton::default_body_model(), o);
+}
+
+/// Frame Time measured from the frames (the default configuration).
+inline BvhFrameEncoder measured_encoder() {
     return BvhFrameEncoder(skeleton::default_body_model(), {});
 }
 
-/// Frame k of a subject: every segment turned k degrees about z, root 1 m up.
+/// Frame k of a subject: every segment turned k degrees about z, root 1 m up; sampled every
+/// `period_us` on the sink's clock.
 inline void make_pose(std::uint32_t subject, std::uint64_t k, std::uint16_t segments, SubjectFrame& f,
-                      skeleton::SkeletonPose& p) {
+                      skeleton::SkeletonPose& p, std::int64_t period_us = 10'000) {
     f = SubjectFrame{};
     f.subject_id = subject;
     f.sync = k;
-    f.sample_us = static_cast<std::int64_t>(k) * 10'000;
+    f.sample_us = static_cast<std::int64_t>(k) * period_us;
     f.segment_count = segments;
     p = skeleton::SkeletonPose{};
     p.segment_count = segments;

@@ -14,6 +14,7 @@
 #include "recorder_fixture.hpp"
 #include "serve/raw_recorder.hpp"
 #include "skeleton/bvh.hpp"
+#include "wait_until.hpp"
 
 namespace mocap::serve {
 namespace {
@@ -89,6 +90,41 @@ TEST(BvhRecorder, CountIsPatchedAtEveryFlushSoAKilledDaemonLeavesALoadableFile) 
     ASSERT_TRUE(clip) << clip.error;
     EXPECT_EQ(clip.clip->frame_count, 7u);
     ASSERT_TRUE(rec.stop(&err));
+}
+
+// The recorded subject's measured interval, patched in place with the count: a file read
+// after any flush parses; a configured Frame Time is written as configured.
+TEST(BvhRecorder, FrameTimeIsTheRecordedSubjectsIntervalUnlessConfigured) {
+    TempDir dir;
+    for (const bool fixed : {false, true}) {
+        const auto encoder = fixed ? test::default_encoder() : test::measured_encoder();
+        BvhRecorderConfig c;
+        c.directory = dir.path.string();
+        c.flush_interval_s = 0.01;
+        BvhRecorder rec(c, encoder);
+        std::string err, path;
+        ASSERT_TRUE(rec.start("", &err, &path)) << err;
+        const auto before = skeleton::parse_bvh(test::slurp(path));
+        ASSERT_TRUE(before) << before.error;
+        SubjectFrame f;
+        skeleton::SkeletonPose p;
+        for (std::uint64_t k = 0; k < 40; ++k) {
+            test::make_pose(2, 100 + k, static_cast<std::uint16_t>(encoder.model().size()), f, p, 8'333);
+            rec.publish(f, p);
+            if (k == 20) {
+                ASSERT_TRUE(wait_until([&] { return rec.counters().value("frames_recorded").value_or(0) >= 21; }));
+                const auto mid = skeleton::parse_bvh(test::slurp(path));
+                ASSERT_TRUE(mid) << mid.error;
+                EXPECT_NEAR(mid.clip->frame_time_s, fixed ? 0.01 : 0.008333, 1e-9);
+            }
+        }
+        ASSERT_TRUE(rec.stop(&err)) << err;
+        const std::string text = test::slurp(path);
+        EXPECT_NE(text.find(fixed ? "\nFrame Time: 0.010000\n" : "\nFrame Time: 0.008333\n"), std::string::npos);
+        const auto clip = skeleton::parse_bvh(text);
+        ASSERT_TRUE(clip) << clip.error;
+        EXPECT_EQ(clip.clip->frame_count, 40u);
+    }
 }
 
 TEST(BvhRepair, CountsCompleteLinesAndCutsAPartialLastLine) {

@@ -178,6 +178,39 @@ TEST(BvhServer, AClientThatHalfClosesAfterChoosingASubjectStillReceives) {
     EXPECT_EQ(text, encoder.hierarchy() + "MOTION\nFrame Time: 0.010000\n" + expect);
 }
 
+// Frame Time measured: a client that connects before the frames flow is greeted once its
+// subject's interval spans kMeasuredIntervals SYNCs; its lines wait in its queue meanwhile,
+// so it still gets every line. A client that connects later is greeted with its first line.
+TEST(BvhServer, FrameTimeIsTheSubjectsMeasuredIntervalAndNoLineIsLostWaitingForIt) {
+    const auto encoder = test::measured_encoder();
+    auto owned = started(encoder);
+    BvhServer& server = *owned;
+    Conn early(server.port());
+    ASSERT_TRUE(early.ok());
+    ASSERT_TRUE(wait_clients(server, 1));
+    const auto segments = static_cast<std::uint16_t>(encoder.model().size());
+    SubjectFrame f;
+    skeleton::SkeletonPose p;
+    const std::uint64_t frames = kMeasuredIntervals + 2;
+    for (std::uint64_t k = 0; k < frames; ++k) {
+        test::make_pose(3, k, segments, f, p, 4'000);  // 250 Hz
+        server.publish(f, p);
+    }
+    const std::size_t g = greeting_line_count(encoder);
+    const std::string text = early.read_until_lines(g, frames);
+    ASSERT_EQ(text.rfind(encoder.hierarchy() + "MOTION\nFrame Time: 0.004000\n", 0), 0u) << text.substr(0, 400);
+    EXPECT_EQ(motion_lines(text, g).size(), frames);
+
+    Conn late(server.port());
+    ASSERT_TRUE(late.ok());
+    ASSERT_TRUE(wait_clients(server, 2));
+    test::make_pose(3, frames, segments, f, p, 4'000);
+    server.publish(f, p);
+    const std::string late_text = late.read_until_lines(g, 1);
+    ASSERT_EQ(late_text.rfind(encoder.hierarchy() + "MOTION\nFrame Time: 0.004000\n", 0), 0u);
+    EXPECT_EQ(motion_lines(late_text, g).size(), 1u);
+}
+
 TEST(BvhServer, NoClientNoEncodingAndStopClosesClients) {
     const auto encoder = test::default_encoder();
     auto server = started(encoder);
