@@ -152,13 +152,14 @@ void read_ingest(TableReader& r, DaemonConfig& c) {
     r.read("sink_listen", c.sink_listen);
     r.read("max_sinks", c.max_sinks, 1, 4096);
     r.read("sink_idle_timeout_s", c.sink_idle_timeout_s, 0.1, 3600.0);
+    r.read("subject_id_base", c.subject_id_base, 0, kMaxSubjectIdBase);
     if (const auto* arr = r.array("socketcan")) {
         for (const auto& item : *arr) {
             if (!item.is_table()) r.fail("socketcan", &item, "expected [[ingest.socketcan]] tables");
             TableReader t(*item.as_table(), r.key_path("socketcan"));
             SocketCanConfig s;
             t.read("interface", s.interface);
-            t.read("subject", s.subject, 1, 65535);
+            t.read("subject", s.subject, 1, UINT32_MAX);
             if (s.interface.empty() || s.interface.size() >= 16) {
                 t.fail("interface", t.take("interface"), "must name a network interface (1..15 chars)");
             }
@@ -335,7 +336,7 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
     }
     r.read("bvh_max_clients", c.bvh_max_clients, 1, 10000);
     r.read("bvh_threads", c.bvh_threads, 1, 64);
-    r.read("bvh_subject", c.bvh_subject, 0, 65535);
+    r.read("bvh_subject", c.bvh_subject, 0, UINT32_MAX);
     if (const auto* n = r.take("bvh_unit")) {
         const auto unit = n->value<std::string>();
         if (unit == "cm")

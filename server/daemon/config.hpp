@@ -46,6 +46,9 @@ struct SegmentConfig {
 /// most, docs/security.md) 16 random characters cannot be guessed in any useful time.
 inline constexpr std::size_t kMinControlTokenLength = 16;
 
+/// Largest [ingest] subject_id_base: base + max_subjects (<= 4096) stays within 32 bits.
+inline constexpr std::uint32_t kMaxSubjectIdBase = 4'000'000'000;
+
 struct DaemonConfig {
     // [log]
     std::string log_level = "info";
@@ -54,6 +57,9 @@ struct DaemonConfig {
     Endpoint sink_listen{"0.0.0.0", 7000};
     std::uint32_t max_sinks = 64;
     double sink_idle_timeout_s = 10.0;
+    /// A sink's subject id is subject_id_base + its 8-bit sink id, so the hosts of different
+    /// zones of one site serve distinct ids (docs/cluster.md, "Subject ids across a site").
+    std::uint32_t subject_id_base = 0;
     std::vector<SocketCanConfig> socketcan;
     // [pipeline]
     std::uint32_t workers = 0;  ///< 0 = hardware cores

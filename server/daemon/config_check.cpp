@@ -134,6 +134,29 @@ bool check_cluster(const DaemonConfig& c, std::string* error) {
     return true;
 }
 
+// A SocketCAN bus keeps its own subject id: one inside the sinks' range (subject_id_base +
+// 1..max_subjects) or another bus's id would feed two buses into one subject.
+bool check_subject_ids(const DaemonConfig& c, std::string* error) {
+    const std::uint64_t first = std::uint64_t{c.subject_id_base} + 1;
+    const std::uint64_t last = std::uint64_t{c.subject_id_base} + c.max_subjects;
+    for (std::size_t i = 0; i < c.socketcan.size(); ++i) {
+        const std::uint32_t id = c.socketcan[i].subject;
+        const std::string key = "ingest.socketcan[" + std::to_string(i) + "].subject: " + std::to_string(id);
+        if (id >= first && id <= last) {
+            *error = key + " is a sink's subject id (ingest.subject_id_base + 1..pipeline.max_subjects = " +
+                     std::to_string(first) + ".." + std::to_string(last) + "); give the bus an id outside that range";
+            return false;
+        }
+        for (std::size_t j = 0; j < i; ++j) {
+            if (c.socketcan[j].subject == id) {
+                *error = key + " is also ingest.socketcan[" + std::to_string(j) + "]'s subject";
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
 bool check_config_impl(const DaemonConfig& c, std::string* error) {
     std::string err;
     if (!check_filter("filter.name", c.filter_name, c.filter_params, error)) return false;
@@ -147,12 +170,16 @@ bool check_config_impl(const DaemonConfig& c, std::string* error) {
         *error = err;
         return false;
     }
+    if (!check_subject_ids(c, error)) return false;
     if (c.bvh_subject != 0) {
         const auto ids = subject_ids_from_config(c);
         if (std::find(ids.begin(), ids.end(), c.bvh_subject) == ids.end()) {
             *error = "outputs.bvh_subject: " + std::to_string(c.bvh_subject) +
-                     " is not a configured subject (0 = the first subject with a frame, or 1..pipeline.max_subjects " +
-                     std::to_string(c.max_subjects) + ", or an ingest.socketcan subject)";
+                     " is not a configured subject (0 = the first subject with a frame, or ingest.subject_id_base + "
+                     "1..pipeline.max_subjects = " +
+                     std::to_string(std::uint64_t{c.subject_id_base} + 1) + ".." +
+                     std::to_string(std::uint64_t{c.subject_id_base} + c.max_subjects) +
+                     ", or an ingest.socketcan subject)";
             return false;
         }
     }

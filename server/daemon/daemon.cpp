@@ -82,6 +82,7 @@ bool Daemon::start(std::string* error) {
     lc.port = config_.sink_listen.port;
     lc.max_sinks = config_.max_sinks;
     lc.max_subjects = std::min<std::uint32_t>(config_.max_subjects, 255);
+    lc.subject_id_base = config_.subject_id_base;
     lc.idle_timeout_s = config_.sink_idle_timeout_s;
     lc.limits = peer_limits(config_, config_.sink_per_address);
     const auto sink = [this](const SegmentSample& s) { route(s); };

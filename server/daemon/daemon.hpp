@@ -10,7 +10,7 @@
 //   assembler Pipeline::run_assembler: drains the pool, joins segments per SYNC instant,
 //             solves the skeleton and publishes to the outputs; pings the watchdog
 //   serve     the network outputs' own threads (client sessions)
-// Subjects: subject id = sink id (1..pipeline.max_subjects) or the id configured for a
+// Subjects: subject id = ingest.subject_id_base + sink id (1..pipeline.max_subjects) or the id configured for a
 // SocketCAN interface. Every subject has the same body model; filters for all subjects are
 // created at start so nothing is allocated when a sink appears.
 #pragma once

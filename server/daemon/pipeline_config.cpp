@@ -1,5 +1,7 @@
 #include "daemon/pipeline_config.hpp"
 
+#include <algorithm>
+
 #include "daemon/calibration_files.hpp"
 
 namespace mocap::daemon {
@@ -35,11 +37,12 @@ std::optional<skeleton::BodyModel> body_model_from_config(const DaemonConfig& co
 
 std::vector<std::uint32_t> subject_ids_from_config(const DaemonConfig& config) {
     std::vector<std::uint32_t> ids;
-    for (std::uint32_t id = 1; id <= config.max_subjects; ++id)
-        ids.push_back(id);
+    for (std::uint32_t n = 1; n <= config.max_subjects; ++n)
+        ids.push_back(config.subject_id_base + n);
     for (const auto& can : config.socketcan) {
-        if (can.subject > config.max_subjects) ids.push_back(can.subject);
+        if (std::find(ids.begin(), ids.end(), can.subject) == ids.end()) ids.push_back(can.subject);
     }
+    std::sort(ids.begin(), ids.end());
     return ids;
 }
 

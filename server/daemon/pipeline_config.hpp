@@ -19,7 +19,8 @@ namespace mocap::daemon {
 /// Returns std::nullopt and sets *error if the model is invalid.
 std::optional<skeleton::BodyModel> body_model_from_config(const DaemonConfig& config, std::string* error);
 
-/// Subject ids: 1..[pipeline].max_subjects, then every SocketCAN subject above that.
+/// Subject ids, ascending: the sinks' subject_id_base + 1..subject_id_base + max_subjects
+/// and every SocketCAN subject (--check-config refuses one inside the sinks' range).
 std::vector<std::uint32_t> subject_ids_from_config(const DaemonConfig& config);
 
 /// BVH unit, rotation order and frame time from [outputs].

@@ -342,7 +342,8 @@ void SinkListener::on_packet(SinkConnection& from, const mw_packet& packet, std:
 
     auto& r = reassemblers_[sink_id];
     if (!r) {
-        r = std::make_unique<FrameReassembler>(sink_id, config_.reassembly, reassembly_, sink_);
+        r = std::make_unique<FrameReassembler>(config_.subject_id_base + sink_id, config_.reassembly, reassembly_,
+                                               sink_);
     }
     SinkConnection*& owner = owners_[sink_id];
     if (owner != &from) {

@@ -1,7 +1,8 @@
 // sink_listener.hpp — TCP listener for sink nodes (default port 7000).
 //
 // Every connection runs its own incremental mw_stream_decoder; every packet's CAN frames go
-// to the FrameReassembler of the packet's sink id, which is the subject id (1..max_subjects).
+// to the FrameReassembler of the packet's sink id (1..max_subjects); its samples carry the
+// subject id subject_id_base + sink id, so hosts of different zones of a site never share one.
 // A sink that reconnects (or whose packets arrive on a new connection) takes its subject
 // over: the old connection is closed and the reassembler starts a new counter stream, so
 // nothing restarts. Malformed bytes are counted; the decoder resynchronises by itself, and
@@ -49,6 +50,7 @@ struct SinkListenerConfig {
     std::uint16_t port = 7000;                ///< 0 = any free port (see port())
     std::uint32_t max_sinks = 64;             ///< connection slots (see above for who gets one)
     std::uint32_t max_subjects = 64;          ///< sink ids 1..max_subjects are accepted
+    std::uint32_t subject_id_base = 0;        ///< a sink's subject id = subject_id_base + sink id
     double idle_timeout_s = 10.0;             ///< no whole valid packet for this long closes the connection
     PeerLimits limits{};                      ///< [limits] sink_per_address, loopback, stall_evict_s
     std::size_t max_garbage_bytes = 1 << 20;  ///< discarded bytes without a valid packet -> close

@@ -26,13 +26,11 @@ Pipeline::~Pipeline() {
 bool Pipeline::build(std::string* error) {
     const auto& model = config_.model;
     node_to_segment_.fill(-1);
-    const std::uint32_t max_id =
-        config_.subjects.empty() ? 0 : *std::max_element(config_.subjects.begin(), config_.subjects.end());
-    subject_index_.assign(static_cast<std::size_t>(max_id) + 1, -1);
-    for (std::size_t i = 0; i < config_.subjects.size(); ++i) {
-        subject_index_[config_.subjects[i]] = static_cast<std::int32_t>(i);
+    // Ascending, so a subject's index is found by search (core/subject_ids.hpp): ids are
+    // sparse 32-bit numbers (subject_id_base + sink id), too wide for a table indexed by id.
+    std::sort(config_.subjects.begin(), config_.subjects.end());
+    for (std::size_t i = 0; i < config_.subjects.size(); ++i)
         ingest_latency_.push_back(std::make_unique<SingleWriterLatencyHistogram>());
-    }
     for (std::size_t i = 0; i < model.size(); ++i) {
         const int node = model.segments[i].node_id;
         if (node >= 0 && node < static_cast<int>(node_to_segment_.size())) {
@@ -62,8 +60,8 @@ bool Pipeline::build(std::string* error) {
     }
 
     skeleton::PoseSolverOptions so = config_.solver;
-    so.max_subjects =
-        config_.subjects.empty() ? 0 : *std::max_element(config_.subjects.begin(), config_.subjects.end());
+    so.subject_ids = config_.subjects;
+    so.max_subjects = 0;  // exactly the configured subjects, even none
     solver_ = std::make_unique<skeleton::PoseSolver>(
         model, so, [this](const SubjectFrame& f, const skeleton::SkeletonPose& p) { publish(f, p); },
         std::move(config_.calibration_store), config_.solver_log);
@@ -189,12 +187,12 @@ void Pipeline::run_assembler(const std::function<void()>& on_pass) {
 RouteResult Pipeline::process(const SegmentSample& in, std::int64_t now_us) {
     note_sample(in);
     const int seg = segment_of(in.node_id);
-    const auto subject = std::find(config_.subjects.begin(), config_.subjects.end(), in.subject_id);
-    if (seg < 0 || subject == config_.subjects.end()) {
+    const int subject = subject_index_of(in.subject_id);
+    if (seg < 0 || subject < 0) {
         unknown_nodes_.add();
         return RouteResult::kUnknownNode;
     }
-    const auto subject_index = static_cast<std::size_t>(subject - config_.subjects.begin());
+    const auto subject_index = static_cast<std::size_t>(subject);
     note_routed(in, subject_index);
     FilterProcessor& filter = *processors_[subject_index * config_.model.size() + static_cast<std::size_t>(seg)];
     PoseUpdate u;

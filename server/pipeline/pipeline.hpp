@@ -36,6 +36,7 @@
 #include "core/latency_histogram.hpp"
 #include "core/metrics_registry.hpp"
 #include "core/subject_assembler.hpp"
+#include "core/subject_ids.hpp"
 #include "core/worker_pool.hpp"
 #include "filter/filter_factory.hpp"
 #include "pipeline/filter_processor.hpp"
@@ -48,12 +49,12 @@ namespace mocap::pipeline {
 
 struct PipelineConfig {
     skeleton::BodyModel model;              ///< validated (skeleton::validate)
-    std::vector<std::uint32_t> subjects;    ///< subject ids, each once
+    std::vector<std::uint32_t> subjects;    ///< subject ids, each once (sorted by the pipeline)
     filter::FilterParamList filter_params;  ///< applied to every segment's filter
     std::uint32_t workers = 0;              ///< worker threads (live), 0 = hardware cores
     std::uint32_t ring_capacity = 4096;     ///< worker pool rings (live)
     AssemblerConfig assembler;
-    skeleton::PoseSolverOptions solver;  ///< max_subjects is set from `subjects`
+    skeleton::PoseSolverOptions solver;  ///< subject_ids is set from `subjects`
     /// Where calibrations are loaded from and saved to (nullptr = nowhere), and where the
     /// solver's log lines go (nullptr = nowhere): injected, the pipeline does no file I/O.
     std::unique_ptr<skeleton::CalibrationStore> calibration_store;
@@ -149,7 +150,7 @@ private:
     void note_routed(const SegmentSample& in, std::size_t subject_index);
     /// Index into config_.subjects, -1 = not configured.
     [[nodiscard]] int subject_index_of(std::uint32_t subject_id) const {
-        return subject_id < subject_index_.size() ? subject_index_[subject_id] : -1;
+        return subject_position(config_.subjects, subject_id);
     }
     void publish(const SubjectFrame& frame, const skeleton::SkeletonPose& pose);
 
@@ -169,8 +170,6 @@ private:
     std::atomic<std::int64_t> assembler_alive_us_{0};
     std::atomic<std::int64_t> first_sample_us_{0};  // routing thread
     std::atomic<std::int64_t> last_sample_us_{0};   // routing thread
-
-    std::vector<std::int32_t> subject_index_;  // subject id -> index into config_.subjects, -1 = none
 
     // Written by the routing thread only.
     // sink_send_us -> received_us, one per subject (index as config_.subjects), made at build.

@@ -2,6 +2,7 @@
 
 #include <charconv>
 
+#include "core/subject_ids.hpp"
 #include "skeleton/forward_kinematics.hpp"
 
 namespace mocap::skeleton {
@@ -13,6 +14,17 @@ std::string subject_text(std::uint32_t subject_id) {
 }
 
 /// Shortest text that reads back as the same double ("1", "0.5"), as the log always showed.
+std::vector<std::uint32_t> served_ids(const PoseSolverOptions& o) {
+    std::vector<std::uint32_t> ids = o.subject_ids;
+    if (ids.empty()) {
+        for (std::uint32_t id = 1; id <= o.max_subjects; ++id)
+            ids.push_back(id);
+    }
+    std::sort(ids.begin(), ids.end());
+    ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+    return ids;
+}
+
 std::string number_text(double v) {
     char buf[32];
     const auto r = std::to_chars(buf, buf + sizeof buf, v);
@@ -29,7 +41,8 @@ PoseSolver::PoseSolver(BodyModel model, PoseSolverOptions options, PublishFn pub
       store_(std::move(store)),
       log_(std::move(log)),
       joints_(default_joint_specs(model_)),
-      subjects_(options_.max_subjects + 1) {
+      ids_(served_ids(options_)),
+      subjects_(ids_.size()) {
     for (auto& s : subjects_)
         s.smoother = PoseSmoother(options_.smoothing);
     group_.add("frames_solved", frames_solved_);
@@ -46,11 +59,12 @@ PoseSolver::PoseSolver(BodyModel model, PoseSolverOptions options, PublishFn pub
 std::size_t PoseSolver::load_calibrations() {
     if (!store_) return 0;
     std::size_t loaded = 0;
-    for (std::uint32_t id = 1; id < subjects_.size(); ++id) {
+    for (std::size_t i = 0; i < ids_.size(); ++i) {
+        const std::uint32_t id = ids_[i];
         StoredCalibration stored = store_->load(model_, id);
         if (stored.calibration) {
-            subjects_[id].calibration = *stored.calibration;
-            subjects_[id].root.emplace(model_);
+            subjects_[i].calibration = *stored.calibration;
+            subjects_[i].root.emplace(model_);
             ++loaded;
             log(LogLevel::kInfo, subject_text(id) + "calibration loaded from " + stored.where);
         } else if (!stored.error.empty()) {
@@ -61,7 +75,7 @@ std::size_t PoseSolver::load_calibrations() {
 }
 
 std::string PoseSolver::request_calibration(std::uint32_t subject_id, CalibrationPose pose) {
-    if (subject_id == 0 || subject_id >= subjects_.size()) {
+    if (subject_position(ids_, subject_id) < 0) {
         return "unknown subject " + std::to_string(subject_id);
     }
     std::lock_guard lock(requests_mutex_);
@@ -72,10 +86,15 @@ std::string PoseSolver::request_calibration(std::uint32_t subject_id, Calibratio
 
 void PoseSolver::offer_calibration(std::uint32_t subject_id, const Calibration& calibration, const std::string& where,
                                    std::uint64_t saves_seen) {
-    if (subject_id == 0 || subject_id >= subjects_.size()) return;
+    if (subject_position(ids_, subject_id) < 0) return;
     std::lock_guard lock(requests_mutex_);
     offers_.push_back({subject_id, calibration, where, saves_seen});
     has_requests_.store(true, std::memory_order_release);
+}
+
+PoseSolver::Subject* PoseSolver::find(std::uint32_t subject_id) noexcept {
+    const int i = subject_position(ids_, subject_id);
+    return i < 0 ? nullptr : &subjects_[static_cast<std::size_t>(i)];
 }
 
 void PoseSolver::install(Subject& s, const Calibration& calibration) {
@@ -86,7 +105,7 @@ void PoseSolver::install(Subject& s, const Calibration& calibration) {
 }
 
 void PoseSolver::apply_offer(Offer& offer) {
-    Subject& s = subjects_[offer.subject_id];
+    Subject& s = *find(offer.subject_id);  // offer_calibration() took served ids only
     if (s.calibrated_here != offer.saves_seen) {
         // Calibrated here after the store chose this one: the local calibration is the newer
         // and the store publishes it; applying this one would undo it.
@@ -107,7 +126,7 @@ void PoseSolver::take_requests() {
         apply_offer(offer);
     offers_.clear();
     for (const auto& [id, pose] : requests_) {
-        Subject& s = subjects_[id];
+        Subject& s = *find(id);  // request_calibration() took served ids only
         s.collector.reset();
         s.collecting = true;
         s.auto_run = false;
@@ -160,8 +179,9 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
 
 void PoseSolver::on_frame(const SubjectFrame& frame) {
     if (has_requests_.load(std::memory_order_acquire)) take_requests();
-    if (frame.subject_id == 0 || frame.subject_id >= subjects_.size()) return;
-    Subject& s = subjects_[frame.subject_id];
+    Subject* const found = find(frame.subject_id);
+    if (found == nullptr) return;
+    Subject& s = *found;
     const std::size_t n = std::min<std::size_t>(frame.segment_count, model_.size());
 
     std::array<Quat, kMaxSegments> q_earth_sensor = identity_quats();

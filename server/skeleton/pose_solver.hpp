@@ -57,7 +57,10 @@
 namespace mocap::skeleton {
 
 struct PoseSolverOptions {
-    std::uint32_t max_subjects = 64;   ///< subject ids 1..max_subjects
+    /// Subject ids served, each once, any order (empty = 1..max_subjects). Ids are sparse
+    /// 32-bit numbers (subject_id_base + sink id), so subjects are found by search.
+    std::vector<std::uint32_t> subject_ids;
+    std::uint32_t max_subjects = 64;   ///< subject ids 1..max_subjects when subject_ids is empty
     double calibration_s = 1.0;        ///< still period collected per calibration
     CalibrationOptions calibration{};  ///< pose is set per request
     PoseSmootherParams smoothing{};
@@ -135,6 +138,8 @@ private:
     void install(Subject& s, const Calibration& calibration);
     void collect(Subject& s, std::uint32_t subject_id, const SubjectFrame& frame,
                  const std::array<Quat, kMaxSegments>& q_earth_sensor);
+    /// The subject with this id, nullptr if it is not served.
+    [[nodiscard]] Subject* find(std::uint32_t subject_id) noexcept;
     void log(LogLevel level, const std::string& line) const {
         if (log_) log_(level, line);
     }
@@ -145,7 +150,8 @@ private:
     std::unique_ptr<CalibrationStore> store_;
     LogFn log_;
     std::vector<JointSpec> joints_;
-    std::vector<Subject> subjects_;  // index = subject id
+    std::vector<std::uint32_t> ids_;  // served subject ids, ascending
+    std::vector<Subject> subjects_;   // subjects_[i] is subject ids_[i]
     SkeletonPose out_{};
 
     std::mutex requests_mutex_;

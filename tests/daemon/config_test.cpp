@@ -25,6 +25,8 @@ TEST(Config, EmbeddedDefaultIsValidAndMatchesStructDefaults) {
     EXPECT_EQ(c->heading_align, d.heading_align);
     EXPECT_EQ(c->log_level, d.log_level);
     EXPECT_EQ(c->ring_capacity, d.ring_capacity);
+    EXPECT_EQ(c->subject_id_base, d.subject_id_base);
+    EXPECT_EQ(d.subject_id_base, 0u);
     EXPECT_EQ(c->max_clients, d.max_clients);
     EXPECT_EQ(c->client_queue_frames, d.client_queue_frames);
     EXPECT_DOUBLE_EQ(c->assembly_deadline_ms, d.assembly_deadline_ms);
@@ -275,6 +277,7 @@ TEST(Config, HttpSectionDefaultsValuesAndErrors) {
 #include <fstream>
 
 #include "daemon/config_check.hpp"
+#include "daemon/pipeline_config.hpp"
 
 namespace mocap::daemon {
 namespace {
@@ -427,6 +430,44 @@ TEST_F(ConfigCheck, BvhSubjectMustBeAConfiguredSubject) {
                       "[outputs]\nbvh_subject = 200\n"),
               "")
         << "a SocketCAN subject above max_subjects is configured too";
+}
+
+TEST_F(ConfigCheck, SubjectIdBaseShiftsTheSinksSubjectsAndIsRangeChecked) {
+    std::string err;
+    const auto c = load_checked_config(write("b.toml",
+                                             "[ingest]\nsubject_id_base = 4000000000\n"
+                                             "[pipeline]\nmax_subjects = 3\n"
+                                             "[[ingest.socketcan]]\ninterface = \"vcan0\"\nsubject = 7\n"),
+                                       &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_EQ(c->subject_id_base, 4'000'000'000u);
+    EXPECT_EQ(subject_ids_from_config(*c), (std::vector<std::uint32_t>{7, 4'000'000'001, 4'000'000'002, 4'000'000'003}))
+        << "the sinks' ids follow the base; the bus keeps its own id; ascending";
+    EXPECT_REFUSED("[ingest]\nsubject_id_base = 4000000001\n",
+                   "c.toml:2: ingest.subject_id_base: must be between 0 and 4000000000");
+    EXPECT_REFUSED("[ingest]\nsubject_id_base = -1\n", "ingest.subject_id_base: must be between 0 and 4000000000");
+    EXPECT_REFUSED("[ingest]\nsubject_id_base = 1.5\n", "ingest.subject_id_base: expected an integer");
+    EXPECT_EQ(
+        refusal("[ingest]\nsubject_id_base = 1000\n[pipeline]\nmax_subjects = 4\n[outputs]\nbvh_subject = 1004\n"), "");
+    EXPECT_REFUSED("[ingest]\nsubject_id_base = 1000\n[pipeline]\nmax_subjects = 4\n[outputs]\nbvh_subject = 4\n",
+                   "outputs.bvh_subject: 4 is not a configured subject (0 = the first subject with a frame, or "
+                   "ingest.subject_id_base + 1..pipeline.max_subjects = 1001..1004");
+}
+
+TEST_F(ConfigCheck, SocketCanSubjectCollidingWithASinkOrAnotherBusIsRefused) {
+    const std::string base = "[ingest]\nsubject_id_base = 1000\n[pipeline]\nmax_subjects = 4\n";
+    const auto can = [](const char* iface, std::uint32_t subject) {
+        return "[[ingest.socketcan]]\ninterface = \"" + std::string(iface) +
+               "\"\nsubject = " + std::to_string(subject) + "\n";
+    };
+    EXPECT_REFUSED(base + can("vcan0", 1003),
+                   "ingest.socketcan[0].subject: 1003 is a sink's subject id (ingest.subject_id_base + "
+                   "1..pipeline.max_subjects = 1001..1004)");
+    EXPECT_REFUSED(can("vcan0", 1), "ingest.socketcan[0].subject: 1 is a sink's subject id");
+    EXPECT_REFUSED(base + can("vcan0", 3) + can("vcan1", 3),
+                   "ingest.socketcan[1].subject: 3 is also ingest.socketcan[0]'s subject");
+    EXPECT_EQ(refusal(base + can("vcan0", 1000) + can("vcan1", 1005) + can("vcan2", 4294967295u)), "")
+        << "just outside the sinks' range, and the widest id";
 }
 
 TEST_F(ConfigCheck, BlankOrPaddedTokenIsRefused) {

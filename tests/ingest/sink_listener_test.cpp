@@ -196,6 +196,23 @@ TEST_F(SinkListenerTest, SequenceGapsAndUnknownSinksCounted) {
     EXPECT_EQ(count(), 2u);
 }
 
+TEST_F(SinkListenerTest, SubjectIdIsTheBasePlusTheSinkId) {
+    SinkListenerConfig cfg;
+    cfg.max_subjects = 4;
+    cfg.subject_id_base = 4'000'000'000;
+    start(cfg);
+    auto s = connect();
+    asio::write(s, asio::buffer(make_packet(1, 0, 0, 1)));
+    asio::write(s, asio::buffer(make_packet(4, 0, 0, 1)));
+    asio::write(s, asio::buffer(make_packet(5, 1, 1, 1)));  // beyond max_subjects: still refused
+    ASSERT_TRUE(wait_until([&] { return counter("packets") == 3; }));
+    EXPECT_EQ(counter("unknown_sink_packets"), 1u);
+    ASSERT_TRUE(wait_until([&] { return count() == 2; }));
+    std::lock_guard lock(mu_);
+    EXPECT_EQ(samples_[0].subject_id, 4'000'000'001u);
+    EXPECT_EQ(samples_[1].subject_id, 4'000'000'004u);
+}
+
 TEST_F(SinkListenerTest, IdleAndGarbageOnlyConnectionsAreClosed) {
     SinkListenerConfig cfg;
     cfg.idle_timeout_s = 0.1;

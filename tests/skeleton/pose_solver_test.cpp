@@ -64,7 +64,7 @@ struct Rig {
 
     explicit Rig(PoseSolverOptions options = {}, bool with_store = true) {
         options.calibration_s = 0.5;
-        options.max_subjects = 4;
+        if (options.subject_ids.empty()) options.max_subjects = 4;
         solver = std::make_unique<PoseSolver>(
             model, options,
             [this](const SubjectFrame& f, const SkeletonPose& p) {
@@ -294,6 +294,34 @@ TEST(PoseSolver, AnOfferOlderThanALocalCalibrationIsNotApplied) {
     rig.run(0.02, kMounted);
     EXPECT_EQ(rig.counter("calibrations_shared"), 1u);
     EXPECT_FALSE(rig.in_calibrated_t_pose(1)) << "segment 0 now has the other calibration";
+}
+
+TEST(PoseSolver, SparseWideSubjectIdsAreServedCalibratedAndLoadedByTheirOwnId) {
+    // A zone's ids (subject_id_base 4'000'000'000 + sink ids) and a SocketCAN bus's id, in
+    // any order: an id-indexed table would need 4 G entries.
+    PoseSolverOptions options;
+    options.subject_ids = {4'000'000'002, 7, 4'000'000'001};
+    Rig first(options);
+    EXPECT_EQ(first.solver->request_calibration(4'000'000'001, CalibrationPose::kTPose), "");
+    first.run(0.7, kMounted, 0.0, 4'000'000'001);
+    EXPECT_TRUE(first.in_calibrated_t_pose(4'000'000'001));
+    ASSERT_EQ(first.shelf.saved.count(4'000'000'001), 1u);
+    first.run(0.05, kMounted, 0.0, 7);
+    EXPECT_EQ(first.last.at(7).extra_flags[0] & kSegmentCalibrated, 0) << "another subject, not calibrated";
+    const std::uint64_t published = first.published;
+    for (const std::uint32_t unknown : {0u, 1u, 4'000'000'000u, 4'000'000'003u}) {
+        EXPECT_EQ(first.solver->request_calibration(unknown, CalibrationPose::kTPose),
+                  "unknown subject " + std::to_string(unknown));
+        first.frame(unknown, kMounted);
+    }
+    EXPECT_EQ(first.published, published) << "frames of subjects not served are dropped";
+
+    Rig rig(options);
+    rig.shelf.saved[4'000'000'002] = first.shelf.saved.at(4'000'000'001);
+    EXPECT_EQ(rig.solver->load_calibrations(), 1u);
+    EXPECT_TRUE(rig.logged(LogLevel::kInfo, "subject 4000000002: calibration loaded from shelf 4000000002"));
+    rig.frame(4'000'000'002, kMounted);
+    EXPECT_TRUE(rig.in_calibrated_t_pose(4'000'000'002));
 }
 
 TEST(PoseSolver, CountsFramesAndRejectsUnknownSubjects) {
