@@ -11,6 +11,7 @@
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -349,6 +350,115 @@ TEST_F(Cluster, ALostClusterCostsThePoseServiceNothingAndPublishingResumes) {
     EXPECT_LE(gaps, sim_syncs_skipped(s->log()).value_or(0))
         << "the pose client gets every frame the sink sent while the cluster is down";
     EXPECT_EQ(pose.drops_announced(), 0u);
+}
+
+// Two zones of one site (docs/cluster.md, "Subject ids across a site"): hosts with
+// subject_id_base 0 and 1000, each fed by a sink with sink id 1, serve subjects 1 and 1001;
+// one subscriber to the site sees both, poses and raw samples, and the 1000 host's pose
+// service names, calibrates and shares subject 1001.
+TEST(ClusterZones, SinksWithOneSinkIdOnHostsOfTwoZonesAreTwoSubjectsOfTheSite) {
+    if (!have_nats_server()) GTEST_SKIP() << "no nats-server binary at " << nats_server_bin();
+    constexpr const char* kZoneSite = "zones";
+    constexpr const char* kToken = "zone-control-token-1";
+    TempDir dir;
+    const std::uint16_t nats_port = free_port();
+    auto nats = start_nats(nats_port, dir.file("nats.log"), {"-js", "-sd", dir.file("js")});
+    NatsSubscriber poses(nats_port, std::string("mocap.") + kZoneSite + ".*.pose");
+    NatsSubscriber raw(nats_port, std::string("mocap.") + kZoneSite + ".*.raw");
+    NatsSubscriber bucket(nats_port, "$KV.mocap_calibration.>");
+
+    struct Zone {
+        std::uint32_t base;
+        std::uint16_t sink_port = free_port(), pose_port = free_port();
+        std::unique_ptr<Process> daemon{}, sim{};
+    };
+    Zone zones[] = {{.base = 0}, {.base = 1000}};
+    for (Zone& z : zones) {
+        const std::string name = "zone" + std::to_string(z.base);
+        HostConfig h{.sink_port = z.sink_port, .pose_port = z.pose_port, .calibration_dir = dir.path().string()};
+        h.ingest = "subject_id_base = " + std::to_string(z.base) + "\n";
+        h.skeleton = "auto_calibrate = \"off\"\n";
+        h.serve = std::string("[control]\ntoken = \"") + kToken + "\"\n";
+        h.cluster = itest::cluster_section(nats_port, kZoneSite, name, cluster_credentials());
+        z.daemon = start_mocapd(MOCAPD_BIN, h, dir, name);
+        ASSERT_FALSE(HasFailure());
+        // Sink id 1 on both hosts; 4 s still (a T-pose) first, so a calibration succeeds.
+        z.sim = std::make_unique<Process>(
+            std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(z.sink_port),
+                                     "--rate", "100", "--subjects", "1", "--first-sink-id", "1", "--duration", "8",
+                                     "--calibrate-s", "4"},
+            dir.file(name + "-sim.log"));
+    }
+    const auto logs = [&] {
+        std::string out;
+        for (const Zone& z : zones)
+            out += "--- mocapd base " + std::to_string(z.base) + " ---\n" + z.daemon->log();
+        return out;
+    };
+
+    // The 1000 host's pose service: Hello names subject 1001 (and only the zone's ids), and
+    // subject 1001 is calibrated with the control token.
+    client::PoseClient pc;
+    std::string err;
+    ASSERT_TRUE(pc.connect("127.0.0.1", zones[1].pose_port, 5s, err)) << err;
+    std::vector<std::uint32_t> hello_ids;
+    for (const auto& s : pc.hello().subjects())
+        hello_ids.push_back(s.id());
+    EXPECT_EQ(hello_ids, (std::vector<std::uint32_t>{1001, 1002, 1003, 1004}));
+    client::SubscribeOptions o;
+    o.subject_ids = {1001};
+    ASSERT_TRUE(pc.subscribe(o, 5s, err)) << err;
+    // A second of frames first (the filters settle), as the calibration tests do.
+    v1::SkeletonFrame f;
+    for (int i = 0; i < 100; ++i) {
+        ASSERT_EQ(pc.next_frame(f, 10s), client::ReadStatus::kMessage) << logs();
+        ASSERT_EQ(f.subject_id(), 1001u);
+    }
+    v1::ControlRequest req;
+    req.set_token(kToken);
+    req.mutable_calibrate()->set_subject_id(1001);
+    req.mutable_calibrate()->set_pose(v1::POSE_T);
+    v1::ControlReply reply;
+    ASSERT_TRUE(pc.control(req, reply, 5s, err)) << err;
+    EXPECT_TRUE(reply.ok()) << reply.error();
+    req.mutable_calibrate()->set_subject_id(1);  // the other zone's subject: not served here
+    ASSERT_TRUE(pc.control(req, reply, 5s, err)) << err;
+    EXPECT_FALSE(reply.ok());
+    EXPECT_NE(reply.error().find("unknown subject 1"), std::string::npos) << reply.error();
+    EXPECT_EQ(wait_stats_counter(
+                  zones[1].pose_port, "skeleton.calibrations_ok", [](auto v) { return v >= 1; }, 15s),
+              1u)
+        << logs();
+
+    // One subscriber to the site: both zones' subjects, payloads carrying the same ids.
+    std::map<std::uint32_t, std::uint64_t> frames;
+    for (const auto end = Clock::now() + 20s; Clock::now() < end && (frames[1] < 100 || frames[1001] < 100);) {
+        auto m = poses.next(1000ms);
+        if (!m) continue;
+        const v1::SkeletonFrame pf = decode_pose_payload(m->second);
+        EXPECT_EQ(m->first, std::string("mocap.") + kZoneSite + "." + std::to_string(pf.subject_id()) + ".pose");
+        ++frames[pf.subject_id()];
+    }
+    EXPECT_GE(frames[1], 100u) << logs();
+    EXPECT_GE(frames[1001], 100u) << logs();
+    for (const auto& [id, n] : frames)
+        EXPECT_TRUE(id == 1 || id == 1001) << "subject " << id << ": " << n << " frames";
+    std::set<std::string> raw_subjects;
+    for (const auto end = Clock::now() + 10s; Clock::now() < end && raw_subjects.size() < 2;) {
+        if (auto m = raw.next(1000ms)) raw_subjects.insert(m->first);
+    }
+    EXPECT_EQ(raw_subjects, (std::set<std::string>{"mocap.zones.1.raw", "mocap.zones.1001.raw"}));
+    // The calibration is shared under the subject's site-wide id.
+    std::optional<std::pair<std::string, std::string>> put;
+    for (const auto end = Clock::now() + 10s; Clock::now() < end && !put;)
+        put = bucket.next(1000ms);
+    ASSERT_TRUE(put) << logs();
+    EXPECT_EQ(put->first, "$KV.mocap_calibration.zones.1001");
+
+    for (Zone& z : zones) {
+        z.sim->stop();
+        EXPECT_EQ(z.daemon->stop(10s), 0) << "base " << z.base << " must exit 0 on SIGTERM";
+    }
 }
 
 TEST(ClusterConfig, AnonymousIsRefusedAtCheckAndStartUnlessAllowed) {
