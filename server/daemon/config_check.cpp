@@ -177,8 +177,8 @@ bool check_config_impl(const DaemonConfig& c, std::string* error) {
             *error = "outputs.bvh_subject: " + std::to_string(c.bvh_subject) +
                      " is not a configured subject (0 = the first subject with a frame, or ingest.subject_id_base + "
                      "1..pipeline.max_subjects = " +
-                     std::to_string(std::uint64_t{c.subject_id_base} + 1) + ".." +
-                     std::to_string(std::uint64_t{c.subject_id_base} + c.max_subjects) +
+                     std::to_string(static_cast<std::uint64_t>(c.subject_id_base) + 1) + ".." +
+                     std::to_string(static_cast<std::uint64_t>(c.subject_id_base) + c.max_subjects) +
                      ", or an ingest.socketcan subject)";
             return false;
         }

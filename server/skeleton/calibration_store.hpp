@@ -40,6 +40,9 @@ public:
     /// Set-up, once, by the solver that owns the store: the model every stored calibration is
     /// checked against, and where calibrations made elsewhere go. A store that has no
     /// "elsewhere" ignores it.
+    /// `offer` is a sink parameter, by value: a store that keeps it moves it into a member
+    /// (the default ignores it, which the check below takes for a needless copy).
+    // NOLINTNEXTLINE(performance-unnecessary-value-param)
     virtual void bind(const BodyModel& /*model*/, OfferFn /*offer*/) {}
     /// The solver's thread, at a subject's first frame: a shared store looks for the newest
     /// calibration of the subject (and offers it when it is newer than the one in use).

@@ -269,11 +269,13 @@ TEST_F(Limits, WebSocketsThatNeverReadLeaveTheViewerAndMetricsWorking) {
 }
 
 // Live BVH connections that are gone (or never read) while no frame flows fill the port;
-// a new client still gets its greeting.
+// a new client still gets its greeting. A configured Frame Time, so that the greeting goes
+// out on connect: a measured one waits for the first frames (docs/outputs.md).
 TEST_F(Limits, DeadLiveBvhConnectionsDoNotFillThePort) {
     constexpr int kSlots = 4;
-    ASSERT_NO_FATAL_FAILURE(start_daemon(
-        {{"outputs", "bvh_max_clients = " + std::to_string(kSlots) + "\n"}, {"limits", "stall_evict_s = 1.0\n"}}));
+    ASSERT_NO_FATAL_FAILURE(
+        start_daemon({{"outputs", "bvh_max_clients = " + std::to_string(kSlots) + "\nbvh_frame_time_s = 0.01\n"},
+                      {"limits", "stall_evict_s = 1.0\n"}}));
     for (int i = 0; i < kSlots; ++i)
         ASSERT_GE(hold(tcp_connect(bvh_port_)), 0);
     EXPECT_TRUE(wait_until([&] { return counter("bvh_live.connections_accepted") >= kSlots; }, 10s));
