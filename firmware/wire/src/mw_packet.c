@@ -12,6 +12,7 @@
 
 #include "mocap_wire/mw_crc32.h"
 #include "mw_endian.h"
+#include "mw_stream_scan.h"
 
 static const uint8_t mw_magic[4] = {MW_PACKET_MAGIC0, MW_PACKET_MAGIC1, MW_PACKET_MAGIC2, MW_PACKET_MAGIC3};
 
@@ -107,35 +108,6 @@ size_t mw_stream_decoder_buffered(const mw_stream_decoder* decoder) {
     return decoder == NULL ? 0u : decoder->len;
 }
 
-/* First index where a magic, or a prefix of one cut by the end of the data, starts; n if none. */
-static size_t find_magic(const uint8_t* p, size_t n) {
-    for (size_t i = 0; i < n; ++i) {
-        if (p[i] != mw_magic[0]) continue;
-        const size_t m = n - i < sizeof mw_magic ? n - i : sizeof mw_magic;
-        if (memcmp(p + i, mw_magic, m) == 0) return i;
-    }
-    return n;
-}
-
-static void drop_front(mw_stream_decoder* d, size_t n) {
-    memmove(d->buf, d->buf + n, d->len - n);
-    d->len -= n;
-}
-
-static void discard_front(mw_stream_decoder* d, size_t n) {
-    drop_front(d, n);
-    d->counters.bytes_discarded += n;
-}
-
-/* Rejects the candidate at the front: drop its first byte so the rescan finds the next magic. */
-static mw_stream_result reject(mw_stream_decoder* d, int error) {
-    discard_front(d, 1u);
-    d->counters.malformed_packets++;
-    if (error == MW_ERR_CRC) d->counters.crc_failures++;
-    d->last_error = error;
-    return MW_STREAM_MALFORMED;
-}
-
 /* Checks the 22 header bytes at the front; on success stores the whole packet length. */
 static int check_header(const uint8_t* h, size_t* packet_len) {
     if (h[OFF_VERSION] != MW_PACKET_VERSION) return MW_ERR_VERSION;
@@ -181,61 +153,27 @@ static int parse_records(const uint8_t* pkt, size_t packet_len, mw_packet* out) 
     return MW_OK;
 }
 
+/* mw_scan_need_fn: a header is judged as soon as its bytes are in. */
+static int packet_need(const uint8_t* buf, size_t len, size_t* need) {
+    *need = MW_PACKET_HEADER_SIZE;
+    return len < MW_PACKET_HEADER_SIZE ? MW_OK : check_header(buf, need);
+}
+
+/* mw_scan_judge_fn: CRC, then every record, before `out` is touched. */
+static int packet_judge(const uint8_t* buf, size_t need, void* out) {
+    const uint32_t crc = mw_get_u32(buf + need - MW_PACKET_CRC_SIZE);
+    if (mw_crc32(buf, need - MW_PACKET_CRC_SIZE) != crc) return MW_ERR_CRC;
+    const int rc = parse_records(buf, need, NULL);
+    if (rc != MW_OK) return rc;
+    return parse_records(buf, need, (mw_packet*)out);
+}
+
 mw_stream_result mw_stream_decoder_feed(mw_stream_decoder* d, const uint8_t* data, size_t len, size_t* consumed,
                                         mw_packet* out) {
-    size_t used = 0;
-    mw_stream_result result = MW_STREAM_NEED_MORE;
     if (d == NULL || consumed == NULL || out == NULL || (data == NULL && len > 0u)) {
         if (consumed != NULL) *consumed = 0;
         return MW_STREAM_NEED_MORE;
     }
-    for (;;) {
-        /* The buffer always starts at a (possibly partial) magic, or is empty. */
-        const size_t skip = find_magic(d->buf, d->len);
-        if (skip > 0u) discard_front(d, skip);
-
-        size_t need = MW_PACKET_HEADER_SIZE;
-        if (d->len >= MW_PACKET_HEADER_SIZE) {
-            const int rc = check_header(d->buf, &need);
-            if (rc != MW_OK) {
-                result = reject(d, rc);
-                break;
-            }
-        }
-        if (d->len < need) {
-            if (used == len) break; /* NEED_MORE */
-            if (d->len == 0u) {
-                /* Fast path over garbage: skip input bytes that cannot start a magic. */
-                const size_t garbage = find_magic(data + used, len - used);
-                used += garbage;
-                d->counters.bytes_discarded += garbage;
-                if (used == len) break;
-            }
-            size_t n = need - d->len;
-            if (n > len - used) n = len - used;
-            memcpy(d->buf + d->len, data + used, n);
-            d->len += n;
-            used += n;
-            continue;
-        }
-        /* A whole candidate packet is buffered at the front (maybe followed by more bytes). */
-        const uint32_t crc = mw_get_u32(d->buf + need - MW_PACKET_CRC_SIZE);
-        if (mw_crc32(d->buf, need - MW_PACKET_CRC_SIZE) != crc) {
-            result = reject(d, MW_ERR_CRC);
-            break;
-        }
-        const int rc = parse_records(d->buf, need, NULL);
-        if (rc != MW_OK) {
-            result = reject(d, rc);
-            break;
-        }
-        (void)parse_records(d->buf, need, out);
-        drop_front(d, need);
-        d->counters.packets++;
-        result = MW_STREAM_PACKET;
-        break;
-    }
-    d->counters.bytes_in += used;
-    *consumed = used;
-    return result;
+    const mw_stream_scan scan = {mw_magic, d->buf, &d->len, &d->counters, &d->last_error, packet_need, packet_judge};
+    return mw_stream_scan_feed(&scan, data, len, consumed, out);
 }
