@@ -153,6 +153,7 @@ void read_ingest(TableReader& r, DaemonConfig& c) {
     r.read("max_sinks", c.max_sinks, 1, 4096);
     r.read("sink_idle_timeout_s", c.sink_idle_timeout_s, 0.1, 3600.0);
     r.read("subject_id_base", c.subject_id_base, 0, kMaxSubjectIdBase);
+    r.read_zero_or("keepalive_period_s", c.keepalive_period_s, 0.02, 60.0);
     if (const auto* arr = r.array("socketcan")) {
         for (const auto& item : *arr) {
             if (!item.is_table()) r.fail("socketcan", &item, "expected [[ingest.socketcan]] tables");

@@ -60,6 +60,8 @@ struct DaemonConfig {
     /// A sink's subject id is subject_id_base + its 8-bit sink id, so the hosts of different
     /// zones of one site serve distinct ids (docs/cluster.md, "Subject ids across a site").
     std::uint32_t subject_id_base = 0;
+    /// Host -> sink keepalive period (docs/protocol.md §3.5); 0 = send none (stream version 1).
+    double keepalive_period_s = 0.25;
     std::vector<SocketCanConfig> socketcan;
     // [pipeline]
     std::uint32_t workers = 0;  ///< 0 = hardware cores

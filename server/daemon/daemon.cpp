@@ -4,6 +4,7 @@
 #include <systemd/sd-daemon.h>
 
 #include <chrono>
+#include <cmath>
 
 #include "cluster/calibration_bucket.hpp"
 #include "daemon/config_check.hpp"
@@ -83,6 +84,7 @@ bool Daemon::start(std::string* error) {
     lc.max_sinks = config_.max_sinks;
     lc.max_subjects = std::min<std::uint32_t>(config_.max_subjects, 255);
     lc.subject_id_base = config_.subject_id_base;
+    lc.keepalive_period_ms = static_cast<std::uint16_t>(std::lround(config_.keepalive_period_s * 1000.0));
     lc.idle_timeout_s = config_.sink_idle_timeout_s;
     lc.limits = peer_limits(config_, config_.sink_per_address);
     const auto sink = [this](const SegmentSample& s) { route(s); };

@@ -27,6 +27,7 @@ TEST(Config, EmbeddedDefaultIsValidAndMatchesStructDefaults) {
     EXPECT_EQ(c->ring_capacity, d.ring_capacity);
     EXPECT_EQ(c->subject_id_base, d.subject_id_base);
     EXPECT_EQ(d.subject_id_base, 0u);
+    EXPECT_DOUBLE_EQ(c->keepalive_period_s, d.keepalive_period_s);
     EXPECT_EQ(c->max_clients, d.max_clients);
     EXPECT_EQ(c->client_queue_frames, d.client_queue_frames);
     EXPECT_DOUBLE_EQ(c->assembly_deadline_ms, d.assembly_deadline_ms);
@@ -452,6 +453,19 @@ TEST_F(ConfigCheck, SubjectIdBaseShiftsTheSinksSubjectsAndIsRangeChecked) {
     EXPECT_REFUSED("[ingest]\nsubject_id_base = 1000\n[pipeline]\nmax_subjects = 4\n[outputs]\nbvh_subject = 4\n",
                    "outputs.bvh_subject: 4 is not a configured subject (0 = the first subject with a frame, or "
                    "ingest.subject_id_base + 1..pipeline.max_subjects = 1001..1004");
+}
+
+TEST_F(ConfigCheck, KeepalivePeriodIsOffOrWithinItsRange) {
+    std::string err;
+    auto c = load_checked_config(write("k.toml", "[ingest]\nkeepalive_period_s = 1.5\n"), &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_DOUBLE_EQ(c->keepalive_period_s, 1.5);
+    c = load_checked_config(write("k0.toml", "[ingest]\nkeepalive_period_s = 0\n"), &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_DOUBLE_EQ(c->keepalive_period_s, 0.0) << "0 = stream version 1: no keepalive";
+    EXPECT_REFUSED("[ingest]\nkeepalive_period_s = 0.001\n",
+                   "ingest.keepalive_period_s: must be 0 (off) or between 0.02 and 60");
+    EXPECT_REFUSED("[ingest]\nkeepalive_period_s = 61\n", "ingest.keepalive_period_s: must be 0 (off) or between");
 }
 
 TEST_F(ConfigCheck, SocketCanSubjectCollidingWithASinkOrAnotherBusIsRefused) {

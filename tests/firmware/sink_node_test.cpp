@@ -35,10 +35,11 @@ struct fake_sink_hal {
     std::set<uint8_t> dead_hosts;                   // attempts to these fail at once
     std::vector<uint8_t> inbox;                     // host -> sink bytes not yet read
     uint32_t keepalive_sequence = 0;
+    uint16_t keepalive_period_ms = 250;  // what the host announces
 
     // The connected host sends one keepalive (docs/protocol.md §3.5).
     void host_keepalive() {
-        const mw_keepalive k{250, keepalive_sequence++};
+        const mw_keepalive k{keepalive_period_ms, keepalive_sequence++};
         uint8_t b[MW_KEEPALIVE_SIZE];
         ASSERT_EQ(mw_keepalive_encode(&k, b, sizeof b), static_cast<int32_t>(MW_KEEPALIVE_SIZE));
         inbox.insert(inbox.end(), b, b + sizeof b);
@@ -196,14 +197,14 @@ protected:
         }
     }
 
-    // The same, while the connected host sends a keepalive every 250 ms.
+    // The same, while the connected host sends a keepalive every period it announces.
     void run_with_keepalives(uint64_t duration_us) {
         const uint64_t end = fake.now_us + duration_us;
         uint64_t next = fake.now_us;
         while (fake.now_us < end) {
             if (fake.now_us >= next && fake.state == SINK_UPLINK_UP) {
                 fake.host_keepalive();
-                next = fake.now_us + 250'000;
+                next = fake.now_us + uint64_t{fake.keepalive_period_ms} * 1000u;
             }
             sink_node_poll(sink.get());
             fake.now_us += 1000;
@@ -513,6 +514,23 @@ TEST_F(SinkNodeTest, ASilentHostIsLeftWithinItsKeepaliveTimeout) {
     run_with_keepalives(2'000'000);
     EXPECT_EQ(sink->counters.keepalive_timeouts, 1u) << "host 1 is alive";
     EXPECT_FALSE(decode_all(fake.connections.back()).empty());
+}
+
+TEST_F(SinkNodeTest, AHostWithASlowerKeepaliveIsGivenThreeOfItsPeriods) {
+    // A host configured for a 1 s keepalive ([ingest] keepalive_period_ms) says so in every
+    // keepalive: the sink's 750 ms time-out stretches to three announced periods.
+    config.host_count = 2;
+    fake.keepalive_period_ms = 1000;
+    start();
+    run_with_keepalives(5'000'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 0u) << "1 s between keepalives is not silence";
+    ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0}));
+    const uint64_t last_keepalive = sink->last_keepalive_us;
+    run(4'000'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 1u);
+    ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0, 1}));
+    EXPECT_GT(fake.connect_times[1] - last_keepalive, 3'000'000u);
+    EXPECT_LE(fake.connect_times[1] - last_keepalive, 3'000'000u + 1'000u + 100'000u);
 }
 
 TEST_F(SinkNodeTest, AHostThatNeverSentAKeepaliveIsNeverTimedOut) {

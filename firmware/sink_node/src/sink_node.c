@@ -105,6 +105,13 @@ static void attempt_failed(sink_node* sink, uint64_t now) {
     schedule_retry(sink, now);
 }
 
+/* How long a connection may go without a keepalive: the configured time-out, stretched to
+ * three periods of a host that announces a slower keepalive than the time-out expects. */
+static uint64_t keepalive_timeout_us(const sink_node* sink) {
+    const uint64_t announced = 3u * (uint64_t)sink->keepalive_period_us;
+    return announced > sink->config.keepalive_timeout_us ? announced : sink->config.keepalive_timeout_us;
+}
+
 /* Reads what the host sent (bounded per poll) and judges its keepalives. Returns 0 when the
  * connection was closed here. */
 static int supervise_host(sink_node* sink, uint64_t now) {
@@ -137,11 +144,12 @@ static int supervise_host(sink_node* sink, uint64_t now) {
                 ++sink->counters.keepalives_in;
                 sink->keepalive_seen = 1;
                 sink->last_keepalive_us = now;
+                sink->keepalive_period_us = (uint32_t)keepalive.period_ms * 1000u;
             }
         }
     }
     if (sink->keepalive_seen && sink->config.keepalive_timeout_us != 0u &&
-        now - sink->last_keepalive_us > sink->config.keepalive_timeout_us) {
+        now - sink->last_keepalive_us > keepalive_timeout_us(sink)) {
         ++sink->counters.keepalive_timeouts;
         sink->hal.uplink_close(sink->hal.user);
         link_lost(sink, now);
@@ -400,6 +408,7 @@ int sink_node_init(sink_node* sink, const sink_node_hal* hal, const sink_node_co
         sink->host_attempt_us[i] = 0;
     }
     sink->last_keepalive_us = 0;
+    sink->keepalive_period_us = 0;
     mw_keepalive_decoder_init(&sink->keepalives);
     sink->batch_open = 0;
     sink->batch_timestamp_us = 0;
@@ -457,7 +466,7 @@ uint64_t sink_node_next_deadline_us(const sink_node* sink) {
         deadline = sink->next_connect_us;
     }
     if (sink->link == SINK_UPLINK_UP && sink->keepalive_seen && sink->config.keepalive_timeout_us != 0u) {
-        const uint64_t silent_at = sink->last_keepalive_us + sink->config.keepalive_timeout_us + 1u;
+        const uint64_t silent_at = sink->last_keepalive_us + keepalive_timeout_us(sink) + 1u;
         if (silent_at < deadline) {
             deadline = silent_at;
         }

@@ -42,7 +42,8 @@
  *   (1 s) after the previous attempt to that same host, so a dead list is never hammered.
  * - Keepalive (stream version 2, docs/protocol.md §3.5): with uplink_read, the core reads what
  *   the host sends and decodes keepalives. Once it has received one keepalive (from any
- *   host, since init), a connection without a keepalive for keepalive_timeout_us (750 ms)
+ *   host, since init), a connection without a keepalive for keepalive_timeout_us (750 ms),
+ *   or for three of the periods the host announces in its keepalives if that is longer,
  *   is taken for a dead host: closed, counted, and the next host is tried. A sink that never
  *   heard one (version-1 hosts send none) never times out.
  *
@@ -131,7 +132,8 @@ typedef struct sink_node_config {
     uint8_t early_close;           /* 1 = close an instant's packet once it is complete (above) */
     uint8_t host_count;            /* hosts in the ordered list, 1..SINK_NODE_MAX_HOSTS */
     uint32_t host_retry_us;        /* with several hosts: least time between attempts to one host */
-    uint32_t keepalive_timeout_us; /* no keepalive for this long = dead host (0 = never) */
+    uint32_t keepalive_timeout_us; /* no keepalive for this long (or for three announced periods,
+                                      if longer) = dead host (0 = never) */
 } sink_node_config;
 
 /* Counters only go up (wrap at 2^32). */
@@ -179,6 +181,7 @@ typedef struct sink_node {
     uint8_t host_tried[SINK_NODE_MAX_HOSTS];
     uint64_t host_attempt_us[SINK_NODE_MAX_HOSTS]; /* last attempt per host */
     uint64_t last_keepalive_us;                    /* on this connection (its start until the first) */
+    uint32_t keepalive_period_us;                  /* the period the last keepalive announced */
     mw_keepalive_decoder keepalives;
     /* batch */
     uint8_t batch_open;
