@@ -105,6 +105,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--bin", required=True, help="build tree (or directory) with mocapd, mocap-sim, mocap-client")
     ap.add_argument("--nice", type=int, default=0, help="as load_run.py --nice (e.g. -15 as root)")
+    ap.add_argument("--rt", type=int, default=0, help="as load_run.py --rt (SCHED_FIFO priority, root)")
     ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds; the table gives medians")
     ap.add_argument("--measure-s", type=float, default=10.0, help="measurement window per run")
     ap.add_argument("--only", default="", help="comma list of run names of the fanout group")
@@ -112,6 +113,7 @@ def main():
     a = ap.parse_args()
 
     load_run.NICE = a.nice
+    load_run.RT_PRIORITY = a.rt
     bins = {n: load_run.find_binary(a.bin, n) for n in ("mocapd", "mocap-sim", "mocap-client")}
     log_dir = tempfile.mkdtemp(prefix="fanout_run_logs_")
     specs = load_run.groups(a.measure_s)["fanout"]

@@ -76,6 +76,7 @@ def wait_for_port(port, limit_s):
 
 
 NICE = 0  # --nice: applied to every process of a run (negative needs root)
+RT_PRIORITY = 0  # --rt: SCHED_FIFO priority of every process of a run (0 = off; needs root)
 PERF_STAT = False  # --perf-stat: futex calls, context switches and task clock per thread
 PERF_EVENTS = "syscalls:sys_enter_futex,context-switches,task-clock"
 
@@ -99,6 +100,11 @@ def child_setup():
         except OSError:
             pass
         os.nice(NICE)
+    if RT_PRIORITY:
+        # Threads inherit the policy, so every thread of mocapd, of the generator and of the
+        # load client runs before any ordinary task of the host (the kernel's RT throttling
+        # still leaves other tasks 5 % of each core).
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
 
 
 def proc_cpu_s(pid):
@@ -297,7 +303,7 @@ def run_once(bins, spec, log_dir):
     log = open(os.path.join(log_dir, f"{spec['name']}.mocapd.log"), "w")
     daemon = subprocess.Popen([bins["mocapd"], "--config", cfg], stdout=log, stderr=subprocess.STDOUT,
                               preexec_fn=child_setup)
-    result = {"spec": spec, "nice": NICE, "loadavg_start": loadavg()}
+    result = {"spec": spec, "nice": NICE, "rt": RT_PRIORITY, "loadavg_start": loadavg()}
     sim = None
     try:
         if not wait_for_port(pose_port, 10):
@@ -561,13 +567,16 @@ def main():
     ap.add_argument("--logs", default="", help="directory for mocapd logs (default: a temp dir)")
     ap.add_argument("--nice", type=int, default=0, help="nice value of every process of a run and of its "
                     "autogroup (e.g. -15 as root: other work on the host does not preempt the run)")
+    ap.add_argument("--rt", type=int, default=0, help="SCHED_FIFO priority (1-99) of every process of a run, "
+                    "as `chrt -f` or systemd's CPUSchedulingPolicy=fifo would give mocapd (root)")
     ap.add_argument("--perf-stat", action="store_true", help="also count futex calls, context switches "
                     "and task clock per mocapd thread over the window (perf stat; needs perf)")
     ap.add_argument("--smoke", action="store_true", help="small run; exit 1 if the tool's checks fail")
     a = ap.parse_args()
 
-    global NICE, PERF_STAT
+    global NICE, PERF_STAT, RT_PRIORITY
     NICE = a.nice
+    RT_PRIORITY = a.rt
     PERF_STAT = a.perf_stat
     given = {"mocapd": a.mocapd, "mocap-sim": a.sim, "mocap-client": a.client}
     if not a.bin and not all(given.values()):
