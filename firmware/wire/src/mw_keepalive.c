@@ -70,7 +70,7 @@ mw_stream_result mw_keepalive_decoder_feed(mw_keepalive_decoder* d, const uint8_
         if (consumed != NULL) *consumed = 0;
         return MW_STREAM_NEED_MORE;
     }
-    const mw_stream_scan scan = {ka_magic, d->buf, &d->len, &d->counters, &d->last_error, keepalive_need,
-                                 keepalive_judge};
+    const mw_stream_scan scan = {ka_magic,       d->buf,         &d->len,        &d->counters,
+                                 &d->last_error, keepalive_need, keepalive_judge};
     return mw_stream_scan_feed(&scan, data, len, consumed, out);
 }
