@@ -28,6 +28,7 @@ export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$ROOT}"
 # Everything the build, the tests and the firmware cross-build need.
 PACKAGES=(
   build-essential cmake pkg-config git python3 systemd
+  help2man lintian debootstrap
   libeigen3-dev libboost-dev libspdlog-dev libprotobuf-dev protobuf-compiler
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
   nats-server libnats-dev
