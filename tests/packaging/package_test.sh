@@ -39,6 +39,8 @@ cleanup() {
 }
 trap cleanup EXIT
 
+prefix="$(sed -n 's/^CMAKE_INSTALL_PREFIX:PATH=//p' "$build/CMakeCache.txt")"
+[[ $prefix == /usr ]] || fail "$build installs into $prefix; the package needs /usr: reconfigure with -DCMAKE_INSTALL_PREFIX=/usr"
 arch="$(dpkg --print-architecture)"
 step "cmake --build --target package"
 rm -f "$build"/mocapd_*.deb
