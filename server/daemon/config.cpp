@@ -444,6 +444,33 @@ void read_cluster(TableReader& r, DaemonConfig& c) {
     r.read("raw_queue_samples", c.cluster_raw_queue_samples, 1, 1 << 24);
 }
 
+void read_vmc(TableReader& r, DaemonConfig& c) {
+    read_bool(r, "enabled", c.vmc_enabled);
+    if (const auto* arr = r.array("destinations")) {
+        c.vmc_destinations.clear();
+        for (const auto& item : *arr) {
+            const auto text = item.value<std::string>();
+            std::string err;
+            if (!text) r.fail("destinations", &item, "expected \"host:port\" strings");
+            if (!parse_destination(*text, &err)) r.fail("destinations", &item, "\"" + *text + "\": " + err);
+            c.vmc_destinations.push_back(*text);
+        }
+        if (c.vmc_destinations.empty() || c.vmc_destinations.size() > 16) {
+            r.fail("destinations", arr, "list 1..16 receivers as \"host:port\"");
+        }
+    }
+    r.read("subject", c.vmc_subject, 0, UINT32_MAX);
+    if (const auto* bones = r.sub_table("bones")) {
+        for (const auto& [k, v] : *bones) {
+            if (!v.is_string()) {
+                throw ConfigError{"vmc.bones." + std::string(k.str()), line_of(v),
+                                  "expected a Unity HumanBodyBones name such as \"Hips\""};
+            }
+            c.vmc_bones.emplace_back(std::string(k.str()), v.value<std::string>().value());
+        }
+    }
+}
+
 // An IPv4 or IPv6 literal, as make_address accepts it (an IPv6 link-local address may carry
 // "%interface", which must name an interface of this host).
 bool is_address_literal(const std::string& host) {
@@ -485,7 +512,7 @@ std::string cluster_host_id(const DaemonConfig& config) {
     return id;
 }
 
-std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error) {
+std::optional<Endpoint> parse_destination(std::string_view text, std::string* error) {
     Endpoint ep;
     std::string_view port_part;
     if (!text.empty() && text.front() == '[') {
@@ -511,13 +538,18 @@ std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error
         *error = "port must be 1..65535";
         return std::nullopt;
     }
+    ep.port = static_cast<std::uint16_t>(port);
+    return ep;
+}
+
+std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error) {
+    auto ep = parse_destination(text, error);
     // The listeners bind with asio::ip::make_address, which takes address literals only: a
     // host name would pass here and fail at start-up, so it is refused here.
-    if (!is_address_literal(ep.host)) {
-        *error = "host \"" + ep.host + "\" must be an IPv4 or IPv6 address (names are not resolved)";
+    if (ep && !is_address_literal(ep->host)) {
+        *error = "host \"" + ep->host + "\" must be an IPv4 or IPv6 address (names are not resolved)";
         return std::nullopt;
     }
-    ep.port = static_cast<std::uint16_t>(port);
     return ep;
 }
 
@@ -531,7 +563,7 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
             {"log", read_log},         {"ingest", read_ingest},     {"pipeline", read_pipeline},
             {"filter", read_filter},   {"skeleton", read_skeleton}, {"serve", read_serve},
             {"control", read_control}, {"outputs", read_outputs},   {"http", read_http},
-            {"limits", read_limits},   {"cluster", read_cluster},
+            {"limits", read_limits},   {"cluster", read_cluster},   {"vmc", read_vmc},
         };
         for (const auto& [name, fn] : sections) {
             if (const auto* t = top.sub_table(name)) {

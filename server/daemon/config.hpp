@@ -141,6 +141,11 @@ struct DaemonConfig {
     std::uint32_t cluster_raw_replicas = 1;
     std::uint32_t cluster_queue_frames = 1024;        ///< frames between the pipeline and the publisher
     std::uint32_t cluster_raw_queue_samples = 65536;  ///< raw samples between ingest and the publisher
+    // [vmc] (docs/outputs.md, "VMC"): one subject as the VMC protocol (OSC over UDP)
+    bool vmc_enabled = false;
+    std::vector<std::string> vmc_destinations{"127.0.0.1:39539"};  ///< "host:port"; names resolved at check/start
+    std::uint32_t vmc_subject = 0;                                 ///< 0 = first subject with a frame
+    std::vector<std::pair<std::string, std::string>> vmc_bones;    ///< segment -> HumanBodyBones; empty = default
 
     bool operator==(const DaemonConfig&) const = default;
 };
@@ -162,7 +167,9 @@ std::optional<DaemonConfig> load_config_file(const std::string& path, std::strin
 /// subject token cannot hold ('*', '>', whitespace) replaced by '_'; "" if there is no host name.
 std::string cluster_host_id(const DaemonConfig& config);
 
-/// Parses "host:port" or "[v6]:port".
+/// Parses "host:port" or "[v6]:port" (host an address literal).
 std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error);
+/// The same split for a destination whose host may be a name (not resolved here).
+std::optional<Endpoint> parse_destination(std::string_view text, std::string* error);
 
 }  // namespace mocap::daemon

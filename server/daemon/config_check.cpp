@@ -10,6 +10,8 @@
 
 #include "daemon/pipeline_config.hpp"
 #include "filter/filter_factory.hpp"
+#include "serve/vmc_rig.hpp"
+#include "serve/vmc_sender.hpp"
 
 namespace mocap::daemon {
 namespace {
@@ -157,6 +159,51 @@ bool check_subject_ids(const DaemonConfig& c, std::string* error) {
     return true;
 }
 
+// A subject key (0 = the first subject with a frame) must name a subject this config serves.
+bool check_subject(const DaemonConfig& c, const char* key, std::uint32_t id, std::string* error) {
+    if (id == 0) return true;
+    const auto ids = subject_ids_from_config(c);
+    if (std::find(ids.begin(), ids.end(), id) != ids.end()) return true;
+    *error = std::string(key) + ": " + std::to_string(id) +
+             " is not a configured subject (0 = the first subject with a frame, or ingest.subject_id_base + "
+             "1..pipeline.max_subjects = " +
+             std::to_string(static_cast<std::uint64_t>(c.subject_id_base) + 1) + ".." +
+             std::to_string(static_cast<std::uint64_t>(c.subject_id_base) + c.max_subjects) +
+             ", or an ingest.socketcan subject)";
+    return false;
+}
+
+// [vmc]: the segment -> humanoid bone mapping against the body model (also while the output
+// is off, when a mapping is written), and with the output on every destination must resolve:
+// a typo in a host name is refused here rather than retried forever at run time.
+bool check_vmc(const DaemonConfig& c, std::string* error) {
+    if (!c.vmc_enabled && c.vmc_bones.empty()) return true;
+    std::string err;
+    const auto model = body_model_from_config(c, &err);
+    if (!model) {
+        *error = err;
+        return false;
+    }
+    if (!serve::VmcRig::build(*model, c.vmc_bones, &err)) {
+        *error = err;
+        return false;
+    }
+    if (!c.vmc_enabled) return true;
+    for (std::size_t i = 0; i < c.vmc_destinations.size(); ++i) {
+        const std::string key = "vmc.destinations[" + std::to_string(i) + "]";
+        const auto ep = parse_destination(c.vmc_destinations[i], &err);
+        if (!ep) {
+            *error = key + ": \"" + c.vmc_destinations[i] + "\": " + err;
+            return false;
+        }
+        if (!serve::resolve_udp({ep->host, ep->port}, &err)) {
+            *error = key + ": " + err;
+            return false;
+        }
+    }
+    return true;
+}
+
 bool check_config_impl(const DaemonConfig& c, std::string* error) {
     std::string err;
     if (!check_filter("filter.name", c.filter_name, c.filter_params, error)) return false;
@@ -171,18 +218,9 @@ bool check_config_impl(const DaemonConfig& c, std::string* error) {
         return false;
     }
     if (!check_subject_ids(c, error)) return false;
-    if (c.bvh_subject != 0) {
-        const auto ids = subject_ids_from_config(c);
-        if (std::find(ids.begin(), ids.end(), c.bvh_subject) == ids.end()) {
-            *error = "outputs.bvh_subject: " + std::to_string(c.bvh_subject) +
-                     " is not a configured subject (0 = the first subject with a frame, or ingest.subject_id_base + "
-                     "1..pipeline.max_subjects = " +
-                     std::to_string(static_cast<std::uint64_t>(c.subject_id_base) + 1) + ".." +
-                     std::to_string(static_cast<std::uint64_t>(c.subject_id_base) + c.max_subjects) +
-                     ", or an ingest.socketcan subject)";
-            return false;
-        }
-    }
+    if (!check_subject(c, "outputs.bvh_subject", c.bvh_subject, error)) return false;
+    if (!check_subject(c, "vmc.subject", c.vmc_subject, error)) return false;
+    if (!check_vmc(c, error)) return false;
     if (!check_listeners(c, error)) return false;
     if (!check_serve_threads(c, error)) return false;
     if (!check_cluster(c, error)) return false;

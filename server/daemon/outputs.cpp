@@ -11,6 +11,7 @@
 #include "serve/angles_csv.hpp"
 #include "serve/bvh_server.hpp"
 #include "serve/raw_recorder.hpp"
+#include "serve/vmc_sender.hpp"
 
 namespace mocap::daemon {
 
@@ -82,6 +83,47 @@ public:
 
 private:
     serve::RawRecorder recorder_;
+};
+
+/// An output whose configuration turned out unusable when it was built: start() refuses with
+/// the reason, so the daemon does not start.
+class RefusedOutput final : public pipeline::Output {
+public:
+    RefusedOutput(std::string name, std::string reason) : name_(std::move(name)), reason_(std::move(reason)) {}
+    [[nodiscard]] std::string_view name() const override { return name_; }
+    bool start(std::string* error) override {
+        *error = name_ + ": " + reason_;
+        return false;
+    }
+    bool stop(std::string* /*error*/) override { return true; }
+    void on_frame(const SubjectFrame& /*frame*/, const skeleton::SkeletonPose& /*pose*/) override {}
+
+private:
+    std::string name_;
+    std::string reason_;
+};
+
+/// One subject as the VMC protocol over UDP (serve/vmc_sender.hpp), [vmc].
+class VmcOutput final : public pipeline::Output {
+public:
+    VmcOutput(serve::VmcSenderConfig config, serve::VmcRig rig, const Clock& clock)
+        : sender_(std::move(config), std::move(rig), clock) {}
+    [[nodiscard]] std::string_view name() const override { return "vmc"; }
+    bool start(std::string* /*error*/) override {
+        sender_.start();
+        return true;
+    }
+    bool stop(std::string* /*error*/) override {
+        sender_.stop();
+        return true;
+    }
+    void on_frame(const SubjectFrame& frame, const skeleton::SkeletonPose& pose) override {
+        sender_.publish(frame, pose);
+    }
+    void register_metrics(MetricsRegistry& registry) const override { sender_.register_metrics(registry); }
+
+private:
+    serve::VmcSender sender_;
 };
 
 /// Viewer page, WebSocket poses, /metrics, /healthz, control over HTTP (serve/http_server.hpp),
@@ -283,6 +325,22 @@ std::unique_ptr<pipeline::Output> make_cluster(const OutputContext& ctx) {
     return std::make_unique<cluster::ClusterPublisher>(std::move(cc));
 }
 
+std::unique_ptr<pipeline::Output> make_vmc(const OutputContext& ctx) {
+    const DaemonConfig& c = ctx.config;
+    if (ctx.replay || !c.vmc_enabled) return nullptr;
+    serve::VmcSenderConfig vc;
+    vc.subject = c.vmc_subject;
+    for (const auto& text : c.vmc_destinations) {
+        std::string err;
+        const auto ep = parse_destination(text, &err);  // checked by check_config
+        if (ep) vc.destinations.push_back({ep->host, ep->port});
+    }
+    std::string err;
+    auto rig = serve::VmcRig::build(ctx.pipeline.model(), c.vmc_bones, &err);
+    if (!rig) return std::make_unique<RefusedOutput>("vmc", err);  // check_config refuses such a config first
+    return std::make_unique<VmcOutput>(std::move(vc), std::move(*rig), ctx.clock);
+}
+
 // The registry: one line per output, in the order they receive frames.
 constexpr OutputEntry kOutputs[] = {
     {"pose", &make_pose_service},        // [pose] protobuf pose service (always on live)
@@ -292,6 +350,7 @@ constexpr OutputEntry kOutputs[] = {
     {"angles_csv", &make_angles_csv},    // --angles-out (replay)
     {"http", &make_http},                // [http].enabled
     {"cluster", &make_cluster},          // [cluster].nats_url
+    {"vmc", &make_vmc},                  // [vmc].enabled
 };
 
 }  // namespace
