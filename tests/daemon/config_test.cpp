@@ -433,6 +433,18 @@ TEST_F(ConfigCheck, BvhSubjectMustBeAConfiguredSubject) {
         << "a SocketCAN subject above max_subjects is configured too";
 }
 
+TEST_F(ConfigCheck, VmcDestinationsSubjectAndBonesAreChecked) {
+    EXPECT_EQ(refusal("[vmc]\nenabled = true\ndestinations = [\"localhost:39539\", \"127.0.0.1:39540\"]\n"), "");
+    EXPECT_REFUSED("[vmc]\nenabled = true\ndestinations = [\"127.0.0.1:1\", \"no-such-host.invalid:39539\"]\n",
+                   "vmc.destinations[1]: cannot resolve host \"no-such-host.invalid\"");
+    EXPECT_REFUSED("[vmc]\nenabled = true\nsubject = 65\n", "vmc.subject: 65 is not a configured subject");
+    EXPECT_REFUSED("[vmc]\nenabled = true\n[vmc.bones]\npelvis = \"Hips\"\nhead = \"Hed\"\n",
+                   "vmc.bones.head: \"Hed\" is not a Unity HumanBodyBones name");
+    // A mapping is checked while the output is off too; a destination is resolved only when on.
+    EXPECT_REFUSED("[vmc.bones]\ntrunk = \"Spine\"\n", "vmc.bones: the root segment \"pelvis\" must carry Hips");
+    EXPECT_EQ(refusal("[vmc]\ndestinations = [\"no-such-host.invalid:39539\"]\n"), "");
+}
+
 TEST_F(ConfigCheck, SubjectIdBaseShiftsTheSinksSubjectsAndIsRangeChecked) {
     std::string err;
     const auto c = load_checked_config(write("b.toml",
@@ -562,6 +574,43 @@ TEST_F(ConfigCheck, ClusterSiteAndHostIdMustBeSubjectTokens) {
     EXPECT_FALSE(cluster_host_id(c).empty());
     c.cluster_host_id = "rack_7";
     EXPECT_EQ(cluster_host_id(c), "rack_7");
+}
+
+}  // namespace
+}  // namespace mocap::daemon
+
+namespace mocap::daemon {
+namespace {
+
+TEST(ConfigVmc, DefaultsAndValues) {
+    std::string err;
+    const auto d = parse_config("", "t.toml", &err);
+    ASSERT_TRUE(d) << err;
+    EXPECT_FALSE(d->vmc_enabled);
+    EXPECT_EQ(d->vmc_destinations, std::vector<std::string>{"127.0.0.1:39539"});
+    EXPECT_EQ(d->vmc_subject, 0u);
+    EXPECT_TRUE(d->vmc_bones.empty());
+    const auto c = parse_config(
+        "[vmc]\nenabled = true\ndestinations = [\"studio-pc:39540\", \"[::1]:39539\"]\nsubject = 2\n"
+        "[vmc.bones]\npelvis = \"Hips\"\n",
+        "t.toml", &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_TRUE(c->vmc_enabled);
+    EXPECT_EQ(c->vmc_destinations, (std::vector<std::string>{"studio-pc:39540", "[::1]:39539"}));
+    EXPECT_EQ(c->vmc_subject, 2u);
+    EXPECT_EQ(c->vmc_bones, (std::vector<std::pair<std::string, std::string>>{{"pelvis", "Hips"}}));
+}
+
+TEST(ConfigVmc, ErrorsNameKeyAndLine) {
+    std::string err;
+    EXPECT_FALSE(parse_config("[vmc]\ndestinations = [\"127.0.0.1\"]\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:2: vmc.destinations: \"127.0.0.1\": expected \"host:port\"");
+    EXPECT_FALSE(parse_config("[vmc]\ndestinations = [\"h:70000\"]\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:2: vmc.destinations: \"h:70000\": port must be 1..65535");
+    EXPECT_FALSE(parse_config("[vmc]\ndestinations = []\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:2: vmc.destinations: list 1..16 receivers as \"host:port\"");
+    EXPECT_FALSE(parse_config("[vmc.bones]\npelvis = 1\n", "t.toml", &err));
+    EXPECT_EQ(err, "t.toml:2: vmc.bones.pelvis: expected a Unity HumanBodyBones name such as \"Hips\"");
 }
 
 }  // namespace
