@@ -190,16 +190,12 @@ bool check_vmc(const DaemonConfig& c, std::string* error) {
     }
     if (!c.vmc_enabled) return true;
     for (std::size_t i = 0; i < c.vmc_destinations.size(); ++i) {
-        const std::string key = "vmc.destinations[" + std::to_string(i) + "]";
         const auto ep = parse_destination(c.vmc_destinations[i], &err);
-        if (!ep) {
-            *error = key + ": \"" + c.vmc_destinations[i] + "\": " + err;
-            return false;
-        }
-        if (!serve::resolve_udp({ep->host, ep->port}, &err)) {
-            *error = key + ": " + err;
-            return false;
-        }
+        if (ep && serve::resolve_udp({ep->host, ep->port}, &err)) continue;
+        *error = "vmc.destinations[" + std::to_string(i) + "]: ";
+        if (!ep) *error += "\"" + c.vmc_destinations[i] + "\": ";
+        *error += err;
+        return false;
     }
     return true;
 }

@@ -4,9 +4,12 @@
 // parse_config (daemon/config.hpp) checks what the text alone shows: types, ranges, choices,
 // with file and line. check_config adds what needs the rest of the daemon or the host: the
 // body model, every filter in use built with [filter.params] (unknown names, unknown or
-// ill-typed parameters), bvh_subject against the configured subjects, two listeners on one
-// port, and raw_record's directory. Its errors read "<file>: <key>: <what is wrong>".
-// Thread-safety: pure apart from stat() of record_dir; no sockets are opened.
+// ill-typed parameters), bvh_subject and vmc.subject against the configured subjects, the
+// [vmc.bones] mapping against the body model, [vmc] destinations that do not resolve (a DNS
+// look-up: it may take as long as the resolver does), two listeners on one port, and
+// raw_record's directory. Its errors read "<file>: <key>: <what is wrong>".
+// Thread-safety: pure apart from stat() of record_dir and the look-up of [vmc] destinations;
+// no sockets are opened.
 #pragma once
 
 #include <optional>
