@@ -52,6 +52,10 @@ TEST(OutputRegistry, ConfigSectionsTurnLiveOutputsOnAndOff) {
     c.cluster_nats_url = "nats://127.0.0.1:4222";
     c.cluster_allow_anonymous = true;
     EXPECT_EQ(registered(c, nullptr), (Names{"pose", "bvh_live", "bvh_record", "raw_record", "http", "cluster"}));
+    // [vmc].enabled: the sender exists only when asked for (creating it sends nothing).
+    c.vmc_enabled = true;
+    EXPECT_EQ(registered(c, nullptr),
+              (Names{"pose", "bvh_live", "bvh_record", "raw_record", "http", "cluster", "vmc"}));
 }
 
 TEST(OutputRegistry, ReplayRegistersOnlyTheFilesItsCommandLineAsksFor) {
@@ -76,7 +80,7 @@ TEST(OutputRegistry, EveryEntryHasAUniqueName) {
             EXPECT_NE(n, e.name);
         names.emplace_back(e.name);
     }
-    EXPECT_EQ(names.size(), 7u);
+    EXPECT_EQ(names.size(), 8u);
 }
 
 }  // namespace
