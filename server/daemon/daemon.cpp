@@ -77,30 +77,35 @@ bool Daemon::start(std::string* error) {
         if (auto* r = dynamic_cast<BvhRecorderOutput*>(o.get())) bvh_recorder_ = r;
     }
 
-    // Ingest.
-    ingest::SinkListenerConfig lc;
-    lc.host = config_.sink_listen.host;
-    lc.port = config_.sink_listen.port;
-    lc.max_sinks = config_.max_sinks;
-    lc.max_subjects = std::min<std::uint32_t>(config_.max_subjects, 255);
-    lc.subject_id_base = config_.subject_id_base;
-    lc.keepalive_period_ms = static_cast<std::uint16_t>(std::lround(config_.keepalive_period_s * 1000.0));
-    lc.idle_timeout_s = config_.sink_idle_timeout_s;
-    lc.limits = peer_limits(config_, config_.sink_per_address);
+    // Ingest: the sinks and the CAN buses, or a recorded take played as if live.
     const auto sink = [this](const SegmentSample& s) { route(s); };
-    sink_listener_ = std::make_unique<ingest::SinkListener>(ingest_io_, lc, clock_, sink);
-    for (const auto& can : config_.socketcan) {
-        ingest::SocketCanConfig cc;
-        cc.interface = can.interface;
-        cc.subject = can.subject;
-        can_readers_.push_back(std::make_unique<ingest::SocketCanReader>(ingest_io_, cc, clock_, sink));
+    if (!play_.files.empty()) {
+        player_ = std::make_unique<TakePlayer>(ingest_io_, play_, clock_, sink);
+    } else {
+        ingest::SinkListenerConfig lc;
+        lc.host = config_.sink_listen.host;
+        lc.port = config_.sink_listen.port;
+        lc.max_sinks = config_.max_sinks;
+        lc.max_subjects = std::min<std::uint32_t>(config_.max_subjects, 255);
+        lc.subject_id_base = config_.subject_id_base;
+        lc.keepalive_period_ms = static_cast<std::uint16_t>(std::lround(config_.keepalive_period_s * 1000.0));
+        lc.idle_timeout_s = config_.sink_idle_timeout_s;
+        lc.limits = peer_limits(config_, config_.sink_per_address);
+        sink_listener_ = std::make_unique<ingest::SinkListener>(ingest_io_, lc, clock_, sink);
+        for (const auto& can : config_.socketcan) {
+            ingest::SocketCanConfig cc;
+            cc.interface = can.interface;
+            cc.subject = can.subject;
+            can_readers_.push_back(std::make_unique<ingest::SocketCanReader>(ingest_io_, cc, clock_, sink));
+        }
     }
 
     // Every metric, registered once before any thread that reads them starts (docs/performance.md,
     // "Metrics registry").
-    sink_listener_->register_metrics(metrics_);
+    if (sink_listener_) sink_listener_->register_metrics(metrics_);
     for (const auto& r : can_readers_)
         r->register_metrics(metrics_);
+    if (player_) player_->register_metrics(metrics_);
     pipeline_->register_metrics(metrics_);
     const double start_s = static_cast<double>(clock_.now_us()) * 1e-6;
     metrics_.add_gauge("start_time_seconds", "Start of mocapd, Unix time in seconds", [start_s] { return start_s; });
@@ -108,7 +113,8 @@ bool Daemon::start(std::string* error) {
     // Bind everything before announcing readiness: a failure here exits non-zero.
     if (!pipeline_->start_outputs(error)) return false;
     pipeline_->start_workers();
-    if (!sink_listener_->start(error)) return false;
+    if (sink_listener_ && !sink_listener_->start(error)) return false;
+    if (player_ && !player_->start(error)) return false;
     for (auto& r : can_readers_) {
         if (!r->start(error)) return false;
     }
@@ -129,9 +135,12 @@ bool Daemon::start(std::string* error) {
         });
     });
 
-    spdlog::info("mocapd ready: sinks on {}, poses on {}, {} segments x {} subjects, {} workers",
-                 config_.sink_listen.str(), config_.pose_listen.str(), pipeline_->model().size(),
-                 pipeline_->subjects().size(), pipeline_->pool().worker_count());
+    spdlog::info("mocapd ready: {}, poses on {}, {} segments x {} subjects, {} workers",
+                 player_ ? "playing " + std::to_string(play_.files.size()) + " raw recording(s)" +
+                               (play_.loop ? " in a loop" : "")
+                         : "sinks on " + config_.sink_listen.str(),
+                 config_.pose_listen.str(), pipeline_->model().size(), pipeline_->subjects().size(),
+                 pipeline_->pool().worker_count());
     sd_notify(0, "READY=1\nSTATUS=serving");
     return true;
 }
@@ -230,7 +239,7 @@ void Daemon::shutdown() {
     // assembler emits what is open, then the outputs send the last frames and close.
     if (ingest_thread_.joinable()) {
         asio::post(ingest_io_, [this] {
-            sink_listener_->stop();
+            if (sink_listener_) sink_listener_->stop();
             for (auto& r : can_readers_)
                 r->stop();
             ingest_io_.stop();

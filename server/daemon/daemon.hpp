@@ -4,8 +4,8 @@
 //
 // Threads:
 //   main      run(): signals (SIGTERM/SIGINT stop, SIGHUP reload), periodic stats log
-//   ingest    one io_context: sink TCP listener + SocketCAN readers -> Pipeline::route ->
-//             worker pool (the pool's single producer)
+//   ingest    one io_context: sink TCP listener + SocketCAN readers (or, with --play, the
+//             take player) -> Pipeline::route -> worker pool (the pool's single producer)
 //   workers   WorkerPool: one FilterProcessor per (subject, segment), pinned to a worker
 //   assembler Pipeline::run_assembler: drains the pool, joins segments per SYNC instant,
 //             solves the skeleton and publishes to the outputs; pings the watchdog
@@ -25,6 +25,7 @@
 #include "daemon/config.hpp"
 #include "daemon/outputs.hpp"
 #include "daemon/pipeline_config.hpp"
+#include "daemon/take_player.hpp"
 #include "daemon/wall_clock.hpp"
 #include "ingest/sink_listener.hpp"
 #include "ingest/socketcan_reader.hpp"
@@ -38,6 +39,10 @@ public:
     /// config_path: where SIGHUP re-reads the config ("" = embedded default, nothing to reload).
     Daemon(DaemonConfig config, std::string config_path);
     ~Daemon();
+
+    /// Before start(): serve a recorded take (take_player.hpp) instead of opening the sink
+    /// listener and the SocketCAN readers.
+    void play(PlayOptions options) { play_ = std::move(options); }
 
     /// Creates every component and binds every socket. Returns false with a message on the
     /// first failure (bad filter name, port in use, missing CAN interface...).
@@ -82,6 +87,8 @@ private:
     asio::io_context ingest_io_;
     std::unique_ptr<ingest::SinkListener> sink_listener_;
     std::vector<std::unique_ptr<ingest::SocketCanReader>> can_readers_;
+    PlayOptions play_;
+    std::unique_ptr<TakePlayer> player_;  // instead of the sink listener and CAN readers
     std::thread ingest_thread_;
     std::thread assembler_thread_;
 

@@ -47,6 +47,13 @@ static int run(int argc, char** argv) {
                                          "replay a take from JetStream at this NATS URL (needs --subject; credentials "
                                          "from [cluster]) and exit")
                               ->excludes(replay_opt);
+    // A take served as if live (take_player.hpp): every socket as configured, no sinks.
+    PlayOptions play;
+    auto* play_opt = app.add_option("--play", play.files,
+                                    "serve raw recording(s) as if live (pose, BVH, viewer, VMC; no sink listener)")
+                         ->excludes(replay_opt)
+                         ->excludes(jetstream_opt);
+    app.add_flag("--loop", play.loop, "with --play: start the take again after its end, forever")->needs(play_opt);
     // Replay options: with --replay FILE... or with --jetstream URL.
     std::vector<CLI::Option*> replay_only;
     replay_only.push_back(app.add_option("--site", replay.site, "replay --jetstream: site (default: [cluster].site)"));
@@ -127,6 +134,7 @@ static int run(int argc, char** argv) {
         return 0;
     }
     Daemon daemon(*config, config_path);
+    if (!play.files.empty()) daemon.play(play);
     if (!daemon.start(&error)) {
         spdlog::critical("cannot start: {}", error);
         return 1;

@@ -196,4 +196,17 @@ bool closed_by_peer(int fd, std::chrono::milliseconds limit) {
     return false;
 }
 
+std::vector<std::uint64_t> csv_syncs(const std::string& text) {
+    std::vector<std::uint64_t> syncs;
+    std::istringstream lines(text);
+    std::string line;
+    std::getline(lines, line);  // header
+    while (std::getline(lines, line)) {
+        const auto a = line.find(',');
+        const auto b = line.find(',', a + 1);
+        syncs.push_back(std::stoull(line.substr(a + 1, b - a - 1)));
+    }
+    return syncs;
+}
+
 }  // namespace mocap::itest

@@ -53,6 +53,9 @@ private:
 };
 
 std::uint16_t free_port();
+/// The SYNC column (second) of a joint-angle CSV (`mocapd --replay ... --angles-out`), in
+/// row order.
+std::vector<std::uint64_t> csv_syncs(const std::string& text);
 /// Polls `done` every 20 ms until it holds or `limit` passes: the integration tests' one
 /// bounded wait on an event (never a bare sleep).
 template <typename Done>

@@ -170,19 +170,6 @@ std::optional<std::uint64_t> replayed_samples(const std::string& log) {
     return std::stoull(m[1]);
 }
 
-std::vector<std::uint64_t> csv_syncs(const std::string& text) {
-    std::vector<std::uint64_t> syncs;
-    std::istringstream lines(text);
-    std::string line;
-    std::getline(lines, line);  // header
-    while (std::getline(lines, line)) {
-        const auto a = line.find(',');
-        const auto b = line.find(',', a + 1);
-        syncs.push_back(std::stoull(line.substr(a + 1, b - a - 1)));
-    }
-    return syncs;
-}
-
 std::vector<std::string> jetstream_replay_args(std::uint16_t nats_port, std::uint32_t subject) {
     return {"--jetstream", "nats://127.0.0.1:" + std::to_string(nats_port), "--subject", std::to_string(subject)};
 }

@@ -118,9 +118,6 @@ std::uint64_t wait_stats_counter(std::uint16_t pose_port, const std::string& nam
 
 /// "replayed N samples ..." of `mocapd --replay`/`--jetstream`.
 std::optional<std::uint64_t> replayed_samples(const std::string& log);
-/// The SYNC column (second) of a joint-angle CSV (`mocapd --replay ... --angles-out`), in
-/// row order.
-std::vector<std::uint64_t> csv_syncs(const std::string& text);
 /// `mocapd --jetstream nats://127.0.0.1:PORT --subject N`: the arguments that replay one
 /// subject's take from the stream (credentials and site from the config given with them).
 std::vector<std::string> jetstream_replay_args(std::uint16_t nats_port, std::uint32_t subject);

@@ -1,0 +1,137 @@
+// `mocapd --play FILE --loop` (daemon/take_player.hpp): a recorded take served by the real
+// daemon as if it were live, read by a pose client, against `mocapd --replay` of the same file.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <set>
+#include <iostream>
+#include <sstream>
+
+#include "pose_client.hpp"
+#include "harness.hpp"
+
+namespace mocap::itest {
+namespace {
+
+using namespace std::chrono_literals;
+
+const std::string kTake = std::string(MOCAP_SOURCE_DIR) + "/tests/regression/data/walk.mocapraw";
+
+class Play : public ::testing::Test {
+protected:
+    void SetUp() override {
+        pose_port_ = free_port();
+        sink_port_ = free_port();
+        config_ = dir_.file("play.toml");
+        std::ostringstream c;
+        c << "[log]\nstats_interval_s = 0\n"
+          << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\n"
+          << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\n"
+          << "[skeleton]\nauto_calibrate = \"off\"\n"
+          << "[outputs]\nbvh_live = false\n[http]\nenabled = false\n";
+        write_file(config_, c.str());
+    }
+
+    /// SYNCs of the frames `mocapd --replay` solves from the take: what one pass must serve.
+    std::vector<std::uint64_t> replayed_syncs() {
+        Process p({MOCAPD_BIN, "--config", config_, "--replay", kTake, "--angles-out", dir_.file("ref.csv")},
+                  dir_.file("replay.log"));
+        EXPECT_EQ(p.wait(120s).value_or(-1), 0) << p.log();
+        return csv_syncs(read_file(dir_.file("ref.csv")));
+    }
+
+    TempDir dir_;
+    std::uint16_t pose_port_ = 0;
+    std::uint16_t sink_port_ = 0;
+    std::string config_;
+};
+
+TEST_F(Play, ServesATakeAtItsPaceAndLoopsItWithSyncsThatKeepIncreasing) {
+    const std::vector<std::uint64_t> ref = replayed_syncs();
+    ASSERT_GT(ref.size(), 50u);
+    const std::set<std::uint64_t> ref_set(ref.begin(), ref.end());
+    const std::uint64_t first = *ref_set.begin();
+    const std::uint64_t last = *ref_set.rbegin();
+
+    Process daemon({MOCAPD_BIN, "--config", config_, "--play", kTake, "--loop"}, dir_.file("play.log"));
+    ASSERT_TRUE(wait_for_port(pose_port_, 20s)) << daemon.log();
+    const int sink = tcp_connect(sink_port_);
+    EXPECT_LT(sink, 0) << "--play opens no sink listener";
+    if (sink >= 0) ::close(sink);
+
+    client::PoseClient c;
+    std::string err;
+    ASSERT_TRUE(c.connect("127.0.0.1", pose_port_, 10s, err)) << err;
+    client::SubscribeOptions o;
+    o.subject_ids = {1};
+    ASSERT_TRUE(c.subscribe(o, 10s, err)) << err;
+
+    // Read until the third pass is under way (or a generous limit): the second pass is then
+    // whole, however late the client joined the first.
+    struct Got {
+        std::uint64_t sync;
+        std::int64_t sample_us;
+        std::int64_t receive_us;
+    };
+    std::vector<Got> got;
+    const std::uint64_t span = last - first + 1;
+    const std::uint64_t until = last + span + span / 4;
+    const auto end = std::chrono::steady_clock::now() + 120s;
+    v1::SkeletonFrame f;
+    while (std::chrono::steady_clock::now() < end && (got.empty() || got.back().sync < until)) {
+        const auto st = c.next_frame(f, 500ms);
+        if (st == client::ReadStatus::kMessage) {
+            got.push_back({f.sync(), f.sample_us(), c.last_receive_us()});
+        } else if (st != client::ReadStatus::kTimeout) {
+            break;
+        }
+    }
+    ASSERT_FALSE(got.empty()) << daemon.log();
+    ASSERT_GE(got.back().sync, until) << "the take starts again after its end, and again";
+
+    // Every SYNC once, in order, across the loops.
+    for (std::size_t i = 1; i < got.size(); ++i)
+        ASSERT_GT(got[i].sync, got[i - 1].sync) << "frame " << i;
+
+    // Pass k serves the SYNCs the replay solves, shifted by k-1 times the take's length.
+    std::vector<Got> pass2;
+    std::size_t unknown = 0;
+    for (const auto& g : got) {
+        const std::uint64_t pass = (g.sync - first) / span;
+        unknown += ref_set.count(g.sync - pass * span) == 0 ? 1 : 0;
+        if (pass == 1) pass2.push_back(g);
+    }
+    EXPECT_EQ(unknown, 0u) << "every SYNC served is one the replay solves, shifted by a whole number of takes";
+    EXPECT_GE(pass2.size() * 100, ref_set.size() * 98)
+        << "a whole pass serves (nearly) every frame: " << pass2.size() << " of " << ref_set.size();
+
+    // At the recorded pace, not as fast as possible: the pass's frames arrive over (about)
+    // the time the take spans. The bound is loose (a loaded host delivers late, never early).
+    ASSERT_GT(pass2.size(), 2u);
+    const std::int64_t sampled = pass2.back().sample_us - pass2.front().sample_us;
+    const std::int64_t received = pass2.back().receive_us - pass2.front().receive_us;
+    ASSERT_GT(sampled, 500'000);
+    EXPECT_GT(received, sampled / 2) << "sampled over " << sampled << " us, served in " << received << " us";
+    std::cout << "[ metrics  ] play: " << pass2.size() << " of " << ref_set.size() << " frames of pass 2 served over "
+              << received / 1000 << " ms for " << sampled / 1000 << " ms of take; loop shift " << span << " SYNCs\n";
+
+    v1::Stats stats;
+    ASSERT_TRUE(c.request_stats(stats, 10s, err)) << err;
+    std::uint64_t passes = 0;
+    for (const auto& kv : stats.counters())
+        if (kv.name() == "play.passes") passes = kv.value();
+    EXPECT_GE(passes, 2u);
+    EXPECT_EQ(daemon.stop(10s), 0) << daemon.log();
+}
+
+TEST_F(Play, RefusesATakeItCannotReadBeforeServingAnything) {
+    Process p({MOCAPD_BIN, "--config", config_, "--play", dir_.file("missing.mocapraw")}, dir_.file("missing.log"));
+    EXPECT_EQ(p.wait(60s).value_or(-1), 1);
+    EXPECT_NE(p.log().find("play:"), std::string::npos) << p.log();
+    Process q({MOCAPD_BIN, "--config", config_, "--loop"}, dir_.file("loop.log"));
+    EXPECT_NE(q.wait(60s).value_or(0), 0) << "--loop needs --play";
+}
+
+}  // namespace
+}  // namespace mocap::itest
