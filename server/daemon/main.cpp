@@ -127,10 +127,13 @@ static int run(int argc, char** argv) {
             std::cerr << "mocapd: replay: " << error << "\n";
             return 1;
         }
-        std::printf("replayed %llu samples (%llu unknown node, %llu rejected) -> %llu frames, %llu BVH frames%s\n",
-                    static_cast<unsigned long long>(r.samples), static_cast<unsigned long long>(r.samples_unknown_node),
-                    static_cast<unsigned long long>(r.samples_rejected), static_cast<unsigned long long>(r.frames),
-                    static_cast<unsigned long long>(r.bvh_frames), r.truncated ? " (last record truncated)" : "");
+        std::printf(
+            "replayed %llu samples (%llu unknown node, %llu rejected, %llu reordered, %llu too late) -> %llu "
+            "frames, %llu BVH frames%s\n",
+            static_cast<unsigned long long>(r.samples), static_cast<unsigned long long>(r.samples_unknown_node),
+            static_cast<unsigned long long>(r.samples_rejected), static_cast<unsigned long long>(r.samples_reordered),
+            static_cast<unsigned long long>(r.samples_too_late), static_cast<unsigned long long>(r.frames),
+            static_cast<unsigned long long>(r.bvh_frames), r.truncated ? " (last record truncated)" : "");
         return 0;
     }
     Daemon daemon(*config, config_path);

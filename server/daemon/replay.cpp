@@ -14,6 +14,7 @@
 #include "daemon/calibration_files.hpp"
 #include "daemon/outputs.hpp"
 #include "daemon/pipeline_config.hpp"
+#include "daemon/sync_order.hpp"
 #include "daemon/wall_clock.hpp"
 #include "pipeline/pipeline.hpp"
 #include "serve/raw_recorder.hpp"
@@ -164,10 +165,7 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     std::int64_t first_received_us = 0;
     std::int64_t now_us = 0;
     const auto wall_start = std::chrono::steady_clock::now();
-    const auto feed = [&](const SegmentSample& s) {
-        if ((options.subject != 0 && s.subject_id != options.subject) || s.times.received_us < options.from_us ||
-            s.times.received_us > options.to_us)
-            return;
+    const auto play = [&](const SegmentSample& s) {
         ++result->samples;
         if (first_t_us == std::numeric_limits<std::int64_t>::min()) {
             first_t_us = s.imu.t_us;
@@ -198,6 +196,14 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
                 break;
         }
     };
+    // Selected samples go through SyncOrder (sync_order.hpp) on their way to the pipeline.
+    SyncOrder order(play);
+    const auto feed = [&](const SegmentSample& s) {
+        if ((options.subject != 0 && s.subject_id != options.subject) || s.times.received_us < options.from_us ||
+            s.times.received_us > options.to_us)
+            return;
+        order.push(s);
+    };
     if (!options.jetstream_url.empty() && !replay_jetstream(config, options, feed, error)) return false;
     SegmentSample s;
     for (const std::string& path : options.files) {
@@ -218,6 +224,12 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
             result->truncated = true;
         }
     }
+    order.flush();
+    result->samples_reordered = order.reordered();
+    result->samples_too_late = order.too_late();
+    if (order.reordered() + order.too_late() > 0)
+        spdlog::info("replay: {} samples put back in SYNC order, {} dropped as too late (sync_order.hpp)",
+                     order.reordered(), order.too_late());
     pipeline->flush(now_us);
     result->frames = pipeline->solver().counters().value("frames_solved").value_or(0);
     if (!pipeline->stop_outputs(error)) return false;

@@ -6,6 +6,9 @@
 // angles) — and writes its outputs through the same registry (daemon/outputs.hpp): a BVH
 // file through the same recorder and encoder as the live recorder, and the joint-angle CSV.
 //
+// Order: samples are replayed in the order they were stored, but for a segment's sample stored
+// behind a later SYNC of that segment (a take across a frozen host's failover), which is put
+// back where its SYNC belongs (daemon/sync_order.hpp).
 // Determinism: one thread, samples in file order, and the assembler's clock is the
 // recorded received_us of each sample (the daemon's wall clock when it was decoded), so
 // deadlines fall as they fell live and the same input + the same config give
@@ -69,6 +72,8 @@ struct ReplayResult {
     std::uint64_t samples = 0;               ///< selected and replayed
     std::uint64_t samples_unknown_node = 0;  ///< node not in the model, or subject not configured
     std::uint64_t samples_rejected = 0;      ///< the filter refused them (non-finite input)
+    std::uint64_t samples_reordered = 0;     ///< put back in SYNC order (sync_order.hpp)
+    std::uint64_t samples_too_late = 0;      ///< out of SYNC order beyond repair: not replayed
     std::uint64_t frames = 0;                ///< subject frames solved
     std::uint64_t bvh_frames = 0;
     bool truncated = false;  ///< a file ended in a partial record

@@ -21,6 +21,7 @@
 #include <cstdio>
 #include <iostream>
 #include <mutex>
+#include <regex>
 #include <sstream>
 #include <thread>
 #include <vector>
@@ -230,6 +231,8 @@ protected:
     struct Replayed {
         std::uint64_t samples = 0;
         std::vector<std::uint64_t> syncs;
+        std::uint64_t reordered = 0;  // put back in SYNC order (daemon/sync_order.hpp)
+        std::uint64_t too_late = 0;
     };
     Replayed replay_take(const std::string& name, const std::vector<std::string>& range) {
         std::vector<std::string> argv{MOCAPD_BIN, "--config", dir_.file("host-b.toml")};
@@ -243,7 +246,12 @@ protected:
         const auto samples = replayed_samples(p.log());
         EXPECT_TRUE(samples) << p.log();
         if (rc != 0 || !samples) return {};
-        return {*samples, csv_syncs(read_file(dir_.file(name + ".csv")))};
+        std::smatch m;
+        const std::string log = p.log();
+        static const std::regex order_re("([0-9]+) reordered, ([0-9]+) too late");
+        EXPECT_TRUE(std::regex_search(log, m, order_re)) << log;
+        return {*samples, csv_syncs(read_file(dir_.file(name + ".csv"))), m.size() == 3 ? std::stoull(m[1]) : 0,
+                m.size() == 3 ? std::stoull(m[2]) : 0};
     }
 
     /// Epoch seconds with six decimals, as --from/--to take them.
@@ -325,10 +333,41 @@ TEST_F(Failover, KilledHostTheSinkMovesToTheNextWithinTheBound) {
 
 TEST_F(Failover, FrozenHostIsNoticedByItsSilenceAndTheSinkMovesOn) {
     const auto [gap, frames] = fail_over(SIGSTOP);
-    a_.daemon->signal(SIGCONT);  // so that TearDown can stop it
+    a_.daemon->signal(SIGCONT);
     std::cout << "[ metrics  ] SIGSTOP host A: largest pose gap " << gap.count() << " ms, " << frames
               << " SYNCs skipped in one step, at " << kRateHz << " Hz\n";
     EXPECT_LE(gap, kGapBound) << "the subscriber's largest gap when the sink's host freezes";
+
+    // The take. A wakes, reads what the sink wrote to it before moving on (its socket kept
+    // it), sees the connection closed, and publishes those samples after B's first ones.
+    EXPECT_GE(wait_stats_counter(
+                  a_.pose_port, "ingest_tcp.connections_closed", [](auto v) { return v >= 1; }, 60s),
+              1u)
+        << "A, awake, finds the sink gone";
+    const std::uint64_t a_queued = stats_counter(a_.pose_port, "cluster.raw_samples_queued");
+    EXPECT_GE(wait_stats_counter(
+                  a_.pose_port, "cluster.raw_samples_acked", [&](auto v) { return v >= a_queued; }, 60s),
+              a_queued)
+        << "A stores what it received, late";
+    sim_->stop();
+    const std::uint64_t b_queued = stats_counter(b_.pose_port, "cluster.raw_samples_queued");
+    EXPECT_GE(wait_stats_counter(
+                  b_.pose_port, "cluster.raw_samples_acked", [&](auto v) { return v >= b_queued; }, 60s),
+              b_queued);
+
+    // Replayed by subject alone, the take has every SYNC once and in order: A's late samples
+    // go back into the hole at the switch instead of handing the filters a time that runs
+    // backwards.
+    const Replayed whole = replay_take("whole", {});
+    ASSERT_FALSE(whole.syncs.empty());
+    const std::uint64_t sim_skipped = sim_syncs_skipped(sim_->log()).value_or(0);
+    const std::uint64_t missing = missing_syncs(whole.syncs);  // fails on a SYNC out of order
+    EXPECT_GT(whole.reordered, 0u) << "A's late samples were stored after B's: the case this test is for";
+    EXPECT_EQ(whole.too_late, 0u);
+    EXPECT_LE(missing * 1000 / kRateHz, static_cast<std::uint64_t>(kGapBound.count()) + sim_skipped * 1000 / kRateHz)
+        << "the take's holes stay within the subscriber's bound";
+    std::cout << "[ metrics  ] SIGSTOP host A: take: " << whole.samples << " samples, " << whole.reordered
+              << " of A's stored after B's put back in SYNC order, " << missing << " SYNCs missing\n";
 }
 
 }  // namespace

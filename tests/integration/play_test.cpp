@@ -4,12 +4,12 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <set>
 #include <iostream>
+#include <set>
 #include <sstream>
 
-#include "pose_client.hpp"
 #include "harness.hpp"
+#include "pose_client.hpp"
 
 namespace mocap::itest {
 namespace {
