@@ -5,7 +5,8 @@
 
 namespace mocap::daemon {
 
-SyncOrder::SyncOrder(Emit emit, std::size_t window) : emit_(std::move(emit)), window_(std::max<std::size_t>(window, 1)) {}
+SyncOrder::SyncOrder(Emit emit, std::size_t window)
+    : emit_(std::move(emit)), window_(std::max<std::size_t>(window, 1)) {}
 
 void SyncOrder::push(const SegmentSample& s) {
     const std::uint64_t k = key(s);

@@ -41,9 +41,7 @@ public:
     [[nodiscard]] std::uint64_t too_late() const { return too_late_; }
 
 private:
-    static std::uint64_t key(const SegmentSample& s) {
-        return (std::uint64_t{s.subject_id} << 16) | s.segment_index;
-    }
+    static std::uint64_t key(const SegmentSample& s) { return (std::uint64_t{s.subject_id} << 16) | s.segment_index; }
     void emit_front();
 
     Emit emit_;

@@ -47,7 +47,8 @@ TEST(SyncOrder, AFrozenHostsLateSamplesGoBackIntoTheHole) {
     }
     r.order.push(sample(2, 0, 5));  // another subject is not held back by this one's hole
     r.order.flush();
-    const Seen want{{0, 1}, {1, 1}, {0, 2}, {1, 2}, {0, 3}, {1, 3}, {0, 4}, {1, 4}, {0, 6}, {1, 6}, {0, 7}, {1, 7}, {0, 5}};
+    const Seen want{{0, 1}, {1, 1}, {0, 2}, {1, 2}, {0, 3}, {1, 3}, {0, 4},
+                    {1, 4}, {0, 6}, {1, 6}, {0, 7}, {1, 7}, {0, 5}};
     EXPECT_EQ(r.seen, want);
     EXPECT_EQ(r.order.reordered(), 4u);
     EXPECT_EQ(r.order.too_late(), 0u);
