@@ -216,39 +216,31 @@ const Entry<ParticleFilterParams, ParticleFilter>& pf_entry() {
     static const Entry<P, ParticleFilter> e{
         {{"particles", &P::particles},
          {"seed", &P::seed},
-         {"gyro_noise", &P::gyro_noise_rad_s},
-         {"bias_walk", &P::bias_walk_rad_s2},
+         {"gyro_noise", &P::gyro_noise},
+         {"bias_walk", &P::bias_walk},
          {"bias_init", &P::bias_init_rad_s},
-         {"meas_tilt", &P::meas_tilt_rad},
-         {"meas_heading", &P::meas_heading_rad},
+         {"meas_tilt", &P::meas_tilt},
+         {"meas_heading", &P::meas_heading},
          {"resample_frac", &P::resample_frac},
          {"reg_h", &P::reg_h},
-         {"min_jitter", &P::min_jitter_rad},
-         {"min_bias_jitter", &P::min_bias_jitter_rad_s},
-         {"bias_shrink", &P::bias_shrink},
          {"init_tilt", &P::init_tilt_rad},
          {"init_heading", &P::init_heading_rad},
-         {"accel_gate", &P::accel_gate},
          {"gravity", &P::gravity_m_s2},
-         {"dip_deg", &P::dip_deg},
-         {"lm_iterations", &P::lm_iterations},
+         {"detect", &P::detect},
          {"max_step_s", &P::max_step_s}},
         // ParticleFilterParams has no check of its own: the documented ranges (the
         // constructor would silently clamp the particle count).
         [](const P& p) -> std::string {
             if (p.particles < 1 || p.particles > 65536) return "particles must be in 1..65536";
-            for (const double sigma : {p.gyro_noise_rad_s, p.bias_walk_rad_s2, p.bias_init_rad_s, p.min_jitter_rad,
-                                       p.min_bias_jitter_rad_s, p.init_tilt_rad, p.init_heading_rad, p.reg_h}) {
-                if (!(sigma >= 0.0)) return "noise, jitter, init and reg_h values must be >= 0";
+            if (!(p.gyro_noise > 0.0)) return "gyro_noise must be > 0";
+            for (const double sigma : {p.bias_walk, p.bias_init_rad_s, p.init_tilt_rad, p.init_heading_rad}) {
+                if (!(sigma >= 0.0)) return "noise and init values must be >= 0";
             }
-            if (!(p.meas_tilt_rad > 0.0)) return "meas_tilt must be > 0";
-            if (!(p.meas_heading_rad > 0.0)) return "meas_heading must be > 0";
+            if (!(p.meas_tilt > 0.0)) return "meas_tilt must be > 0";
+            if (!(p.meas_heading > 0.0)) return "meas_heading must be > 0";
+            if (!(p.reg_h >= 0.0 && p.reg_h < 1.0)) return "reg_h must be in [0, 1)";
             if (!(p.resample_frac >= 0.0 && p.resample_frac <= 1.0)) return "resample_frac must be in [0, 1]";
-            if (!(p.bias_shrink > 0.0 && p.bias_shrink <= 1.0)) return "bias_shrink must be in (0, 1]";
-            if (!(p.accel_gate > 0.0)) return "accel_gate must be > 0";
             if (!(p.gravity_m_s2 > 0.0)) return "gravity must be > 0";
-            if (!std::isnan(p.dip_deg) && !(std::abs(p.dip_deg) < 90.0)) return "dip_deg must be NaN or in (-90, 90)";
-            if (p.lm_iterations < 1) return "lm_iterations must be >= 1";
             if (!(p.max_step_s > 0.0)) return "max_step_s must be > 0";
             return {};
         }};

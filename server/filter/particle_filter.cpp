@@ -6,13 +6,14 @@
 #include <cmath>
 #include <numbers>
 
+#include <Eigen/Cholesky>
+
 #include "math/markley_average.hpp"
 
 namespace mocap::filter {
 
 namespace {
 
-constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr int kTableBits = 12;
 constexpr int kTableSize = 1 << kTableBits;
 constexpr std::uint64_t kTableMask = kTableSize - 1;
@@ -133,8 +134,6 @@ void ParticleFilter::fill_noise() {
 
 ParticleFilter::ParticleFilter(const ParticleFilterParams& params)
     : params_(params), n_(std::clamp(params.particles, 1, 65536)), clock_(params.max_step_s) {
-    lma_.max_iterations = std::max(1, params.lm_iterations);
-    lma_.tolerance_rad = 1e-6;
     for (auto* v : {&qw_, &qx_, &qy_, &qz_, &bx_, &by_, &bz_, &w_, &cost_, &qw_tmp_, &qx_tmp_, &qy_tmp_, &qz_tmp_,
                     &bx_tmp_, &by_tmp_, &bz_tmp_})
         v->assign(static_cast<std::size_t>(n_), 0.0);
@@ -145,6 +144,7 @@ ParticleFilter::ParticleFilter(const ParticleFilterParams& params)
 void ParticleFilter::reset() {
     state_ = ParticleFilterState{};
     clock_.reset();
+    detector_.reset();
     rng_.seed(params_.seed);
     std::fill(qw_.begin(), qw_.end(), 1.0);
     std::fill(qx_.begin(), qx_.end(), 0.0);
@@ -166,21 +166,8 @@ double ParticleFilter::weight(int i) const {
     return w_[i];
 }
 
-bool ParticleFilter::measure(const ImuSample& sample, math::Quat& q_m) const {
-    if (!sample.has_mag()) return false;
-    const math::Vec3 a = math::to_vec3(sample.accel_m_s2), m = math::to_vec3(sample.mag_ut);
-    if (!(std::abs(a.norm() / params_.gravity_m_s2 - 1.0) <= params_.accel_gate)) return false;
-    AttitudeSolution s;
-    if (std::isfinite(params_.dip_deg)) {
-        s = solve_lma(a, m, field_direction_enu(params_.dip_deg * kDegToRad),
-                      state_.initialised ? state_.q_earth_sensor : math::Quat::Identity(), lma_);
-    } else {
-        // Only the horizontal direction of the reference matters to TRIAD.
-        s = solve_triad(a, m, field_direction_enu(0.0), lma_);
-    }
-    if (!s.ok()) return false;
-    q_m = s.q_earth_sensor;
-    return true;
+FilterDiagnostics ParticleFilter::diagnostics() const {
+    return params_.detect ? detector_.diagnostics() : FilterDiagnostics{};
 }
 
 void ParticleFilter::initialise(const math::Quat& q_m) {
@@ -202,7 +189,6 @@ void ParticleFilter::initialise(const math::Quat& q_m) {
         w_[i] = 1.0 / n_;
     }
     state_.initialised = true;
-    state_.q_measured = q_m;
     state_.q_earth_sensor = math::canonical(q_m);
     estimate();
     state_.n_eff = n_;
@@ -210,8 +196,10 @@ void ParticleFilter::initialise(const math::Quat& q_m) {
 
 void ParticleFilter::predict(const math::Vec3& gyro, double dt) {
     const double h = 0.5 * dt;
-    const double gs = params_.gyro_noise_rad_s * h;
-    const double bs = params_.bias_walk_rad_s2 * std::sqrt(dt);
+    // Densities: the angle noise of one step has σ = gyro_noise·√dt, the bias step
+    // bias_walk·√dt, so a second of propagation spreads the cloud equally at any rate.
+    const double gs = 0.5 * params_.gyro_noise * std::sqrt(dt);
+    const double bs = params_.bias_walk * std::sqrt(dt);
     fill_noise();
     const double* z = noise_.data();
     const int n = n_;
@@ -267,26 +255,42 @@ void ParticleFilter::predict(const math::Vec3& gyro, double dt) {
     }
 }
 
-bool ParticleFilter::weigh(const math::Quat& q_m) {
-    // e = q_i ⊗ q_m*: its vector part is sin(θ/2)·axis in the earth frame; z is heading.
-    const double pw = q_m.w(), px = -q_m.x(), py = -q_m.y(), pz = -q_m.z();
-    // ½ (2v)² / σ² = 2 v² / σ²
-    const double kt = 2.0 / (params_.meas_tilt_rad * params_.meas_tilt_rad);
-    const double kh = 2.0 / (params_.meas_heading_rad * params_.meas_heading_rad);
+bool ParticleFilter::weigh(const Measurement& z, bool replace) {
+    // Tilt: the specific force over g against each particle's up direction in the sensor
+    // frame, u_i = R_iᵀ e_z; the residual is linear in the linear acceleration, so zero-mean
+    // accelerations average out over the filter's memory. One sample's σ is meas / √dt.
+    const double dt = state_.dt_s;
+    const double kt = 0.5 * dt / (params_.meas_tilt * params_.meas_tilt);
+    const double ax = z.up_g.x(), ay = z.up_g.y(), az = z.up_g.z();
+    // Heading: e = q_i ⊗ q_h*, whose z component is sin(θ/2) of the heading difference in the
+    // earth frame; ½ (2 e_z)² / σ² = 2 e_z² dt / meas².
+    const math::Quat& h = z.q_heading;
+    const double pw = h.w(), px = -h.x(), py = -h.y(), pz = -h.z();
+    const double kh = z.use_heading ? 2.0 * dt / (params_.meas_heading * params_.meas_heading) : 0.0;
     double cmin = std::numeric_limits<double>::infinity();
     for (int i = 0; i < n_; ++i) {
         const double qw = qw_[i], qx = qx_[i], qy = qy_[i], qz = qz_[i];
-        const double ex = qw * px + qx * pw + qy * pz - qz * py;
-        const double ey = qw * py - qx * pz + qy * pw + qz * px;
+        const double ux = 2.0 * (qx * qz - qw * qy) - ax;
+        const double uy = 2.0 * (qy * qz + qw * qx) - ay;
+        const double uz = qw * qw - qx * qx - qy * qy + qz * qz - az;
         const double ez = qw * pz + qx * py - qy * px + qz * pw;
-        const double c = kt * (ex * ex + ey * ey) + kh * ez * ez;
-        cost_[i] = c;
-        cmin = std::min(cmin, c);
+        cost_[i] = kt * (ux * ux + uy * uy + uz * uz) + kh * ez * ez;
     }
+    if (z.rest_gyro) {
+        // At rest the gyro reads the bias plus white noise of density gyro_noise.
+        const double kb = 0.5 * dt / (params_.gyro_noise * params_.gyro_noise);
+        const double gx = z.rest_gyro->x(), gy = z.rest_gyro->y(), gz = z.rest_gyro->z();
+        for (int i = 0; i < n_; ++i) {
+            const double dx = bx_[i] - gx, dy = by_[i] - gy, dz = bz_[i] - gz;
+            cost_[i] += kb * (dx * dx + dy * dy + dz * dz);
+        }
+    }
+    for (int i = 0; i < n_; ++i)
+        cmin = std::min(cmin, cost_[i]);
     // Subtracting the best cost keeps the largest likelihood at 1: no underflow of them all.
     double sum = 0.0;
     for (int i = 0; i < n_; ++i) {
-        w_[i] *= exp_nonpositive(cmin - cost_[i]);
+        w_[i] = (replace ? 1.0 : w_[i]) * exp_nonpositive(cmin - cost_[i]);
         sum += w_[i];
     }
     if (!(sum > 1e-300) || !std::isfinite(sum)) return false;
@@ -343,84 +347,136 @@ void ParticleFilter::resample() {
 }
 
 void ParticleFilter::regularise() {
-    // Spread of the resampled cloud around the estimate (sensor-frame small angles), and
-    // of the bias particles around their mean.
+    // Chart around the estimate m: x_i = (v_i, b_i) with v_i = vec(q_i ⊗ m*) taken with
+    // w >= 0 (earth-frame half-angle vector), and q_i = [√(1 − |v_i|²), v_i] ⊗ m back.
+    using Vec6 = Eigen::Matrix<double, 6, 1>;
+    using Mat6 = Eigen::Matrix<double, 6, 6>;
     const math::Quat& m = state_.q_earth_sensor;
     const double mw = m.w(), mx = -m.x(), my = -m.y(), mz = -m.z();  // m*
-    double e2 = 0.0;
-    math::Vec3 bsum = math::Vec3::Zero(), b2 = math::Vec3::Zero();
+    double* __restrict vx = qx_tmp_.data();                          // the chart coordinates, in the spare arrays
+    double* __restrict vy = qy_tmp_.data();
+    double* __restrict vz = qz_tmp_.data();
+    Vec6 sum = Vec6::Zero();
+    Mat6 sq = Mat6::Zero();
     for (int i = 0; i < n_; ++i) {
         const double qw = qw_[i], qx = qx_[i], qy = qy_[i], qz = qz_[i];
-        // vec(m* ⊗ q_i)
-        const double ex = mw * qx + mx * qw + my * qz - mz * qy;
-        const double ey = mw * qy - mx * qz + my * qw + mz * qx;
-        const double ez = mw * qz + mx * qy - my * qx + mz * qw;
-        e2 += ex * ex + ey * ey + ez * ez;
-        const math::Vec3 b(bx_[i], by_[i], bz_[i]);
-        bsum += b;
-        b2 += b.cwiseAbs2();
+        const double ew = qw * mw - qx * mx - qy * my - qz * mz;
+        const double sgn = ew < 0.0 ? -1.0 : 1.0;
+        vx[i] = sgn * (qw * mx + qx * mw + qy * mz - qz * my);
+        vy[i] = sgn * (qw * my - qx * mz + qy * mw + qz * mx);
+        vz[i] = sgn * (qw * mz + qx * my - qy * mx + qz * mw);
+        const Vec6 x(vx[i], vy[i], vz[i], bx_[i], by_[i], bz_[i]);
+        sum += x;
+        sq.selfadjointView<Eigen::Lower>().rankUpdate(x);
     }
     const double inv_n = 1.0 / n_;
-    // Per-axis σ of the angle: (2 sin(θ/2))² ≈ θ², averaged over 3 axes.
-    const double spread = std::sqrt(4.0 * e2 * inv_n / 3.0);
-    const double sq = 0.5 * std::max(params_.min_jitter_rad, params_.reg_h * spread);
-    const math::Vec3 bmean = bsum * inv_n;
-    const math::Vec3 bstd = (b2 * inv_n - bmean.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
-    const double a = std::clamp(params_.bias_shrink, 0.0, 1.0);
-    const double kj = std::sqrt(std::max(0.0, 1.0 - a * a));
-    const math::Vec3 sb = (kj * bstd).cwiseMax(params_.min_bias_jitter_rad_s);
-    const math::Vec3 pull = (1.0 - a) * bmean;
+    const Vec6 mean = sum * inv_n;
+    Mat6 cov = sq.selfadjointView<Eigen::Lower>();
+    cov = cov * inv_n - mean * mean.transpose();
+    // A cloud resampled from very few particles has a (near) singular covariance; a tiny
+    // diagonal keeps the factor defined and moves nothing measurably.
+    cov.diagonal().array() += 1e-18;
+    const double h = std::clamp(params_.reg_h, 0.0, 0.999);
+    const double a = std::sqrt(1.0 - h * h);
+    const Mat6 l = h * Eigen::LLT<Mat6>(cov).matrixL().toDenseMatrix();
+    const Vec6 pull = (1.0 - a) * mean;
     fill_noise();
     const double* z = noise_.data();
     for (int i = 0; i < n_; ++i) {
-        const double dx = sq * z[i], dy = sq * z[n_ + i], dz = sq * z[2 * n_ + i];
-        double dw, s;
-        small_exp(dx, dy, dz, dw, s);
-        // δq ⊗ q_i: the jitter is a small rotation in the earth frame.
-        const Q4 q = mul_unit({dw, s * dx, s * dy, s * dz}, {qw_[i], qx_[i], qy_[i], qz_[i]});
+        const Vec6 zi(z[i], z[n_ + i], z[2 * n_ + i], z[3 * n_ + i], z[4 * n_ + i], z[5 * n_ + i]);
+        const Vec6 x =
+            a * Vec6(vx[i], vy[i], vz[i], bx_[i], by_[i], bz_[i]) + pull + l.triangularView<Eigen::Lower>() * zi;
+        double v2 = x.head<3>().squaredNorm();
+        const double shrink = v2 > 1.0 ? 1.0 / std::sqrt(v2) : 1.0;
+        v2 = std::min(v2, 1.0);
+        const Q4 q =
+            mul_unit({std::sqrt(1.0 - v2), shrink * x[0], shrink * x[1], shrink * x[2]}, {m.w(), m.x(), m.y(), m.z()});
         qw_[i] = q.w;
         qx_[i] = q.x;
         qy_[i] = q.y;
         qz_[i] = q.z;
-        bx_[i] = a * bx_[i] + pull.x() + sb.x() * z[3 * n_ + i];
-        by_[i] = a * by_[i] + pull.y() + sb.y() * z[4 * n_ + i];
-        bz_[i] = a * bz_[i] + pull.z() + sb.z() * z[5 * n_ + i];
+        bx_[i] = x[3];
+        by_[i] = x[4];
+        bz_[i] = x[5];
     }
 }
 
 void ParticleFilter::update(const ImuSample& sample) {
     const double dt = clock_.step_s(sample.t_us);
+    if (dt > 0.0) state_.dt_s = dt;
     const math::Vec3 gyro = math::to_vec3(sample.gyro_rad_s);
     if (!gyro.allFinite()) {
         ++state_.rejected_measurements;
         return;
     }
-    math::Quat q_m;
-    const bool have_m = measure(sample, q_m);
+    if (params_.detect) detector_.update(sample);
+    MargReading r = read_marg(sample);
+    if (params_.detect && r.mag_ok) {
+        // A field offset fixed to the sensor (a magnet it carries), as far as the detector
+        // has learned it; what it cannot explain, it flags.
+        const FilterDiagnostics d = detector_.diagnostics();
+        r.mag_ut -= d.mag_offset_weight * d.mag_offset_ut;
+    }
+    // Only the horizontal direction of the reference matters to TRIAD.
+    const auto triad = [&r](AttitudeSolution& s) {
+        if (!r.accel_ok || !r.mag_ok) return false;
+        s = solve_triad(r.accel_m_s2, r.mag_ut, field_direction_enu(0.0), LmaParams{});
+        return s.ok();
+    };
+    AttitudeSolution s;
     if (!state_.initialised) {
-        if (have_m)
-            initialise(q_m);
+        if (triad(s))
+            initialise(s.q_earth_sensor);
         else
             ++state_.rejected_measurements;
         return;
     }
     if (dt > 0.0) predict(gyro, dt);
-    if (!have_m) {
+    if (!r.accel_ok || state_.dt_s == 0.0) {
         ++state_.rejected_measurements;
         estimate();
         return;
     }
-    state_.q_measured = q_m;
-    if (!weigh(q_m)) {
+    // Heading: the horizontal field seen through the estimate's tilt, not through the
+    // sample's own (TRIAD's), which has every linear acceleration of the sample in it; while
+    // the detector rejects the field, no heading term.
+    Measurement z;
+    z.up_g = r.accel_m_s2 / params_.gravity_m_s2;
+    z.use_heading = r.mag_ok && !(params_.detect && detector_.mag_rejected());
+    z.rest_gyro = params_.detect && detector_.state().rest_detected ? &gyro : nullptr;
+    z.q_heading = state_.q_earth_sensor;
+    if (z.use_heading) {
+        // The angle of the horizontal field, or, when the detector finds the field noise too
+        // large to see a disturbance (noise near the field's size: the angle of each reading
+        // wraps and is pulled towards 0), its cross product with north over the detector's
+        // vector mean of the horizontal field, which stays unbiased. (That form everywhere
+        // cost 0.6° on the stationary-magnet recording.)
+        const math::Vec3 m_e = math::rotate(state_.q_earth_sensor, r.mag_ut);
+        const double h_ref = detector_.state().mag_horizontal_lp.norm();
+        const bool noisy = params_.detect && detector_.state().mag_guard_blind && m_e.y() > 0.0 && h_ref > 0.0;
+        const double half_pi = 0.5 * std::numbers::pi;
+        const double hd = 0.5 * (noisy ? std::clamp(m_e.x() / h_ref, -half_pi, half_pi) : std::atan2(m_e.x(), m_e.y()));
+        z.q_heading = math::Quat(std::cos(hd), 0.0, 0.0, std::sin(hd)) * z.q_heading;
+    } else if (r.mag_ok) {
+        ++state_.heading_gated;
+    }
+    if (!weigh(z, false)) {
+        // Every particle is far off (the likelihood underflowed): start again around this
+        // sample's attitude, or the estimate, with the initial spreads.
         ++state_.reinitialisations;
-        initialise(q_m);
+        initialise(triad(s) ? s.q_earth_sensor : state_.q_earth_sensor);
         return;
     }
     estimate();
     if (state_.n_eff < params_.resample_frac * n_) {
         resample();
         regularise();
-        state_.n_eff = n_;
+        // Step 6 of the method: the moved particles are weighted by this measurement.
+        if (!weigh(z, true)) {
+            std::fill(w_.begin(), w_.end(), 1.0 / n_);
+            state_.n_eff = n_;
+        }
+        estimate();
     }
 }
 

@@ -56,29 +56,37 @@ inline Rmse run(OrientationFilter& f, const std::vector<sim::ScenarioRow>& rows,
     return r;
 }
 
-/// Noiseless constant body rate from q0 at rate_hz for duration_s; dip 60°.
-inline std::vector<sim::ScenarioRow> constant_rate(const math::Quat& q0, const math::Vec3& w_rad_s, double rate_hz,
-                                                   double duration_s) {
+/// Noiseless rotation from q0 at rate_hz for duration_s with body rate w_rad_s(t); dip 60°.
+template <class Rate>
+std::vector<sim::ScenarioRow> rotating(const math::Quat& q0, Rate w_rad_s, double rate_hz, double duration_s) {
     std::vector<sim::ScenarioRow> rows;
     const double dt = 1.0 / rate_hz;
     const math::Vec3 g(0, 0, 9.81), h = 48.0 * field_direction_enu(60.0 * std::numbers::pi / 180.0);
     math::Quat q = q0;
     const int n = static_cast<int>(duration_s * rate_hz);
     for (int k = 0; k <= n; ++k) {
-        if (k > 0) q = (q * math::quat_from_rotvec(w_rad_s * dt)).normalized();
+        const math::Vec3 w = w_rad_s(k * dt);
+        if (k > 0) q = (q * math::quat_from_rotvec(w * dt)).normalized();
         sim::ScenarioRow r;
         r.sample.t_us = static_cast<std::int64_t>(std::llround(k * dt * 1e6));
-        r.sample.gyro_rad_s = math::to_array(w_rad_s);
+        r.sample.gyro_rad_s = math::to_array(w);
         r.sample.accel_m_s2 = math::to_array(math::rotate(q.conjugate(), g));
         r.sample.mag_ut = math::to_array(math::rotate(q.conjugate(), h));
         r.q_earth_sensor = q;
         r.moving = true;
-        r.gyro_true_rad_s = w_rad_s;
+        r.gyro_true_rad_s = w;
         r.lin_acc_earth_m_s2 = math::Vec3::Zero();
         r.mag_earth_ut = h;
         rows.push_back(r);
     }
     return rows;
+}
+
+/// Noiseless constant body rate from q0 at rate_hz for duration_s; dip 60°.
+inline std::vector<sim::ScenarioRow> constant_rate(const math::Quat& q0, const math::Vec3& w_rad_s, double rate_hz,
+                                                   double duration_s) {
+    return rotating(
+        q0, [&w_rad_s](double) { return w_rad_s; }, rate_hz, duration_s);
 }
 
 /// The fourati scenario's truth starts at the paper's q(0) = identity in NED, which is
