@@ -34,8 +34,6 @@ void operator delete(void* p, std::size_t) noexcept {
 namespace mocap::filter {
 namespace {
 
-using testing::kRadToDeg;
-
 double mean_total(const ParticleFilterParams& p, sim::ScenarioKind kind, std::initializer_list<std::uint64_t> seeds) {
     double s = 0.0;
     for (const std::uint64_t seed : seeds) {
