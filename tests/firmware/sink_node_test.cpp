@@ -517,7 +517,7 @@ TEST_F(SinkNodeTest, ASilentHostIsLeftWithinItsKeepaliveTimeout) {
 }
 
 TEST_F(SinkNodeTest, AHostWithASlowerKeepaliveIsGivenThreeOfItsPeriods) {
-    // A host configured for a 1 s keepalive ([ingest] keepalive_period_ms) says so in every
+    // A host configured for a 1 s keepalive ([ingest] keepalive_period_s) says so in every
     // keepalive: the sink's 750 ms time-out stretches to three announced periods.
     config.host_count = 2;
     fake.keepalive_period_ms = 1000;
@@ -526,11 +526,32 @@ TEST_F(SinkNodeTest, AHostWithASlowerKeepaliveIsGivenThreeOfItsPeriods) {
     EXPECT_EQ(sink->counters.keepalive_timeouts, 0u) << "1 s between keepalives is not silence";
     ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0}));
     const uint64_t last_keepalive = sink->last_keepalive_us;
-    run(4'000'000);
+    for (int ms = 0; ms < 5000 && fake.connect_hosts.size() < 2; ++ms)
+        run(1'000);
     EXPECT_EQ(sink->counters.keepalive_timeouts, 1u);
     ASSERT_EQ(fake.connect_hosts, (std::vector<uint8_t>{0, 1}));
     EXPECT_GT(fake.connect_times[1] - last_keepalive, 3'000'000u);
     EXPECT_LE(fake.connect_times[1] - last_keepalive, 3'000'000u + 1'000u + 100'000u);
+    // Host 1 accepts and stays silent: its connection gets the sink's own 750 ms, not host
+    // 0's three seconds.
+    for (int ms = 0; ms < 5000 && fake.connect_hosts.size() < 3; ++ms)
+        run(1'000);
+    EXPECT_EQ(sink->counters.keepalive_timeouts, 2u);
+    ASSERT_EQ(fake.connect_hosts.size(), 3u);
+    EXPECT_LE(fake.connect_times[2] - fake.connect_times[1], 750'000u + 2'000u + 100'000u);
+}
+
+TEST_F(SinkNodeTest, AnAnnouncedPeriodStretchesTheTimeoutToOneMinuteAtMost) {
+    config.host_count = 2;
+    fake.keepalive_period_ms = 65535;  // the most the field holds: 196 s if taken as is
+    start();
+    run_with_keepalives(1'000'000);
+    const uint64_t last_keepalive = sink->last_keepalive_us;
+    run(181'000'000);
+    ASSERT_GE(sink->counters.keepalive_timeouts, 1u);
+    ASSERT_GE(fake.connect_times.size(), 2u);
+    EXPECT_GT(fake.connect_times[1] - last_keepalive, 180'000'000u) << "three periods of 60 s";
+    EXPECT_LE(fake.connect_times[1] - last_keepalive, 180'000'000u + 1'000u + 100'000u);
 }
 
 TEST_F(SinkNodeTest, AHostThatNeverSentAKeepaliveIsNeverTimedOut) {

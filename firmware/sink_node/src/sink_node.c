@@ -105,6 +105,8 @@ static void attempt_failed(sink_node* sink, uint64_t now) {
     schedule_retry(sink, now);
 }
 
+enum { SINK_KEEPALIVE_PERIOD_MAX_MS = 60000 };
+
 /* How long a connection may go without a keepalive: the configured time-out, stretched to
  * three periods of a host that announces a slower keepalive than the time-out expects. */
 static uint64_t keepalive_timeout_us(const sink_node* sink) {
@@ -144,7 +146,12 @@ static int supervise_host(sink_node* sink, uint64_t now) {
                 ++sink->counters.keepalives_in;
                 sink->keepalive_seen = 1;
                 sink->last_keepalive_us = now;
-                sink->keepalive_period_us = (uint32_t)keepalive.period_ms * 1000u;
+                /* A host may not stretch the time-out without bound: 60 s at most, as mocapd's
+                 * [ingest] keepalive_period_s. */
+                sink->keepalive_period_us =
+                    (uint32_t)(keepalive.period_ms < SINK_KEEPALIVE_PERIOD_MAX_MS ? keepalive.period_ms
+                                                                                  : SINK_KEEPALIVE_PERIOD_MAX_MS) *
+                    1000u;
             }
         }
     }
@@ -170,6 +177,7 @@ static void manage_uplink(sink_node* sink, uint64_t now) {
         sink->backoff_us = sink->config.backoff_min_us;
         sink->round_failures = 0;
         sink->last_keepalive_us = now;
+        sink->keepalive_period_us = 0; /* this host's own announcement counts, not the last one's */
         mw_keepalive_decoder_init(&sink->keepalives);
         return;
     }

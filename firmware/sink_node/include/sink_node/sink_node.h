@@ -43,7 +43,8 @@
  * - Keepalive (stream version 2, docs/protocol.md §3.5): with uplink_read, the core reads what
  *   the host sends and decodes keepalives. Once it has received one keepalive (from any
  *   host, since init), a connection without a keepalive for keepalive_timeout_us (750 ms),
- *   or for three of the periods the host announces in its keepalives if that is longer,
+ *   or for three of the periods the connected host announces in its keepalives if that is
+ *   longer (a period counts up to 60 s),
  *   is taken for a dead host: closed, counted, and the next host is tried. A sink that never
  *   heard one (version-1 hosts send none) never times out.
  *
@@ -181,7 +182,7 @@ typedef struct sink_node {
     uint8_t host_tried[SINK_NODE_MAX_HOSTS];
     uint64_t host_attempt_us[SINK_NODE_MAX_HOSTS]; /* last attempt per host */
     uint64_t last_keepalive_us;                    /* on this connection (its start until the first) */
-    uint32_t keepalive_period_us;                  /* the period the last keepalive announced */
+    uint32_t keepalive_period_us;                  /* announced on this connection (0 before the first) */
     mw_keepalive_decoder keepalives;
     /* batch */
     uint8_t batch_open;
