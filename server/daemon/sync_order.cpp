@@ -20,7 +20,12 @@ void SyncOrder::push(const SegmentSample& s) {
         const auto at = std::find_if(held_.begin(), held_.end(), [&](const SegmentSample& h) {
             return h.subject_id == s.subject_id && h.sync > s.sync;
         });
-        held_.insert(at, s);
+        SegmentSample moved = s;
+        // Its received time was late too (the host woke up): in its new place it takes the
+        // time of the sample it now precedes, so the replay's clock does not jump ahead and
+        // hold every deadline until the late host's wake-up comes round again.
+        if (at != held_.end()) moved.times.received_us = std::min(moved.times.received_us, at->times.received_us);
+        held_.insert(at, moved);
         ++reordered_;
     } else {
         read->second = s.sync;

@@ -8,9 +8,10 @@
 // SyncOrder holds the last `window` samples in the order they were read and passes them on
 // unchanged, except a sample whose SYNC is behind a SYNC already read for the same segment
 // (subject, segment): that one is put in front of the first held sample of its subject with a
-// later SYNC, where it belongs. A recording without such a sample passes through unchanged
-// (the same order, so the same frames). A sample too late for that (its segment has passed
-// its SYNC already) is dropped and counted: a filter cannot go back in time.
+// later SYNC, where it belongs, and takes that sample's received time if its own is later
+// (the replay's assembler clock is the received time, which must not jump ahead). A recording without such a sample
+// passes through unchanged (the same order, so the same frames). A sample too late for that (its segment has passed its
+// SYNC already) is dropped and counted: a filter cannot go back in time.
 //
 // Threads: one (the replay's). Memory: at most `window` samples (~180 B each).
 #pragma once

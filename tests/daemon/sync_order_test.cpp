@@ -54,6 +54,22 @@ TEST(SyncOrder, AFrozenHostsLateSamplesGoBackIntoTheHole) {
     EXPECT_EQ(r.order.too_late(), 0u);
 }
 
+TEST(SyncOrder, AMovedSampleTakesTheReceivedTimeOfItsNewPlace) {
+    std::vector<std::int64_t> received;
+    SyncOrder order([&](const SegmentSample& s) { received.push_back(s.times.received_us); });
+    for (std::uint64_t sync : {1, 2, 6, 7}) {
+        SegmentSample s = sample(1, 0, sync);
+        s.times.received_us = static_cast<std::int64_t>(sync) * 10'000;
+        order.push(s);
+    }
+    SegmentSample late = sample(1, 0, 3);
+    late.times.received_us = 5'000'000;  // stamped when the frozen host woke up
+    order.push(late);
+    order.flush();
+    EXPECT_EQ(received, (std::vector<std::int64_t>{10'000, 20'000, 60'000, 60'000, 70'000}))
+        << "the replay's clock keeps to the take's time";
+}
+
 TEST(SyncOrder, ASampleLaterThanTheWindowIsDroppedAndCounted) {
     Recorder r(2);
     r.order.push(sample(1, 0, 10));
