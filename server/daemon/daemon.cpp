@@ -52,6 +52,12 @@ bool Daemon::start(std::string* error) {
     signals_.add(SIGTERM);
     signals_.add(SIGINT);
     signals_.add(SIGHUP);
+    if (!play_.files.empty() && !config_.cluster_nats_url.empty()) {
+        // A played take is not the venue's: publishing it would put old samples with fresh
+        // times into the site's durable takes and its calibrations into the shared bucket.
+        spdlog::warn("play: the cluster ([cluster] nats_url) is off while a take is played");
+        config_.cluster_nats_url.clear();
+    }
     auto pc = pipeline_config_from_config(config_, error);
     if (!pc) return false;
     if (!config_.cluster_nats_url.empty()) {

@@ -56,16 +56,18 @@ bool TakePlayer::begin_pass(std::string* error) {
     if (!have_first_) {
         have_first_ = true;
         first_received_us_ = last_received_us_ = next_.times.received_us;
-        first_sync_ = last_sync_ = next_.sync;
         time_shift_us_ = clock_.now_us() - first_received_us_;
-        sync_shift_ = 0;
     } else {
-        // One SYNC period after the last sample of the previous pass.
-        const std::uint64_t syncs = last_sync_ - first_sync_ + 1;
+        // One SYNC period (of the subject with the most SYNCs) after the last sample of the
+        // previous pass; each subject's SYNCs move on by its own count.
+        std::uint64_t most = 1;
+        for (const auto& [subject, e] : syncs_) {
+            most = std::max(most, e.last - e.first + 1);
+            sync_shift_[subject] += e.last - e.first + 1;
+        }
         const std::int64_t span = last_received_us_ - first_received_us_;
-        const std::int64_t period = syncs > 1 ? span / static_cast<std::int64_t>(syncs - 1) : 10'000;
-        time_shift_us_ += span + period;
-        sync_shift_ += syncs;
+        const std::int64_t period = most > 1 ? span / static_cast<std::int64_t>(most - 1) : 10'000;
+        time_shift_us_ += span + std::max<std::int64_t>(period, 1);
     }
     return true;
 }
@@ -134,12 +136,16 @@ void TakePlayer::play_due() {
         SegmentSample s = next_;
         if (passes_.value() == 1) {
             last_received_us_ = std::max(last_received_us_, s.times.received_us);
-            last_sync_ = std::max(last_sync_, s.sync);
+            const auto [e, fresh] = syncs_.try_emplace(s.subject_id, SyncExtent{s.sync, s.sync});
+            if (!fresh) {
+                e->second.first = std::min(e->second.first, s.sync);
+                e->second.last = std::max(e->second.last, s.sync);
+            }
         }
         s.imu.t_us += time_shift_us_;
         if (s.times.sink_send_us != 0) s.times.sink_send_us += time_shift_us_;
         s.times.received_us = clock_.now_us();
-        s.sync += sync_shift_;
+        if (const auto shift = sync_shift_.find(s.subject_id); shift != sync_shift_.end()) s.sync += shift->second;
         route_(s);
         samples_.add();
         (void)read_next();

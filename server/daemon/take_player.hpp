@@ -3,14 +3,14 @@
 // The player stands in for the ingest sources (the sink listener and the SocketCAN readers
 // are not opened): it reads raw recordings (serve/raw_recorder.hpp) in order and hands each
 // sample to the daemon's router at the pace it was received when recorded, so the pose
-// service, live BVH, the viewer, VMC and the cluster publisher serve it exactly as they serve
-// sinks. A client developer can work without a suit on.
+// service, live BVH, the viewer and VMC serve it exactly as they serve sinks. The cluster is
+// off while a take is played (daemon.cpp): the take is not the venue's. A client developer can work without a suit on.
 //
-// Times: every sample keeps its spacing but is moved to now. The sample instant (t_us), the
-// sink's send time and the SYNC counter are shifted by one offset per pass, so each segment's
-// times and SYNCs keep increasing; received_us is the real time the player handed the sample
-// on, as an ingest source stamps it. With `loop`, the take starts again after its last sample
-// (one SYNC period later), shifted by the length of the take, forever.
+// Times: every sample keeps its spacing but is moved to now. The sample instant (t_us) and the
+// sink's send time are shifted by one offset per pass, and each subject's SYNC counter by its
+// own span, so each segment's times and SYNCs keep increasing; received_us is the real time the player handed the
+// sample on, as an ingest source stamps it. With `loop`, the take starts again after its last sample (one SYNC period
+// later), shifted by the length of the take, forever.
 //
 // Errors: a file that cannot be opened is refused at start; a corrupt record later ends the
 // pass with a logged error and a counted `errors` (a loop then starts again from the first
@@ -24,6 +24,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "core/asio.hpp"
@@ -79,16 +80,20 @@ private:
     bool have_next_ = false;
     bool ended_ = false;  // the take ended without `loop` (or a pass could not start)
 
-    // The take's extent, learnt during the first pass.
+    // The take's extent, learnt during the first pass. Every sink counts its own SYNCs, so
+    // they are kept (and shifted) per subject.
+    struct SyncExtent {
+        std::uint64_t first = 0;
+        std::uint64_t last = 0;
+    };
     bool have_first_ = false;
     std::int64_t first_received_us_ = 0;
     std::int64_t last_received_us_ = 0;
-    std::uint64_t first_sync_ = 0;
-    std::uint64_t last_sync_ = 0;
+    std::unordered_map<std::uint32_t, SyncExtent> syncs_;
 
     // This pass: the shifts it applies (a sample is due at its received_us + time_shift_us_).
     std::int64_t time_shift_us_ = 0;
-    std::uint64_t sync_shift_ = 0;
+    std::unordered_map<std::uint32_t, std::uint64_t> sync_shift_;
 
     Counter samples_, passes_, errors_;
     CounterGroup group_{"play"};
