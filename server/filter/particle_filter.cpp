@@ -378,7 +378,16 @@ void ParticleFilter::regularise() {
     cov.diagonal().array() += 1e-18;
     const double h = std::clamp(params_.reg_h, 0.0, 0.999);
     const double a = std::sqrt(1.0 - h * h);
-    const Mat6 l = h * Eigen::LLT<Mat6>(cov).matrixL().toDenseMatrix();
+    // The one-pass covariance can lose its positive definiteness to rounding (a collapsed
+    // cloud around a large bias): then the kernel falls back to the diagonal, never to a
+    // half-factored matrix.
+    const Eigen::LLT<Mat6> llt(cov);
+    Mat6 l;
+    if (llt.info() == Eigen::Success) {
+        l = h * llt.matrixL().toDenseMatrix();
+    } else {
+        l = (h * cov.diagonal().cwiseMax(0.0).cwiseSqrt()).asDiagonal();
+    }
     const Vec6 pull = (1.0 - a) * mean;
     fill_noise();
     const double* z = noise_.data();

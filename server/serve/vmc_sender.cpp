@@ -29,9 +29,18 @@ std::optional<UdpAddress> resolve_udp(const VmcDestination& destination, std::st
         *error = "cannot resolve host \"" + destination.host + "\": " + ::gai_strerror(rc);
         return std::nullopt;
     }
+    // An IPv4 address when the name has one: VMC receivers listen on IPv4, and "localhost"
+    // lists ::1 first on a stock Debian /etc/hosts.
+    const addrinfo* pick = found;
+    for (const addrinfo* a = found; a != nullptr; a = a->ai_next) {
+        if (a->ai_family == AF_INET) {
+            pick = a;
+            break;
+        }
+    }
     UdpAddress out;
-    std::memcpy(&out.address, found->ai_addr, found->ai_addrlen);
-    out.length = found->ai_addrlen;
+    std::memcpy(&out.address, pick->ai_addr, pick->ai_addrlen);
+    out.length = pick->ai_addrlen;
     ::freeaddrinfo(found);
     return out;
 }
