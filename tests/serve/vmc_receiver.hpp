@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -54,10 +55,21 @@ private:
         OscMessage m;
         m.path = path;
         m.types = types;
+        // liblo hands each argument as an lo_arg* into the packet, 4-byte aligned only: read
+        // the bytes, never the 8-byte-aligned union's members (UBSan: misaligned access).
         for (int i = 0; i < argc; ++i) {
-            if (types[i] == LO_STRING && i == 0) m.name = &argv[i]->s;
-            if (types[i] == LO_FLOAT) m.floats.push_back(argv[i]->f);
-            if (types[i] == LO_INT32) m.ints.push_back(argv[i]->i);
+            const char* at = reinterpret_cast<const char*>(argv[i]);
+            if (types[i] == LO_STRING && i == 0) m.name = at;
+            if (types[i] == LO_FLOAT) {
+                float v = 0.0F;
+                std::memcpy(&v, at, sizeof v);
+                m.floats.push_back(v);
+            }
+            if (types[i] == LO_INT32) {
+                std::int32_t v = 0;
+                std::memcpy(&v, at, sizeof v);
+                m.ints.push_back(v);
+            }
         }
         static_cast<VmcReceiver*>(self)->messages.push_back(std::move(m));
         return 0;
