@@ -8,9 +8,9 @@
 #         replayed under ASan/UBSan built by g++ as well.
 #   tsan  -DMOCAP_SANITIZE=thread; the threaded code's tests: core (rings, worker pool,
 #         assembler), ingest (sink listener), serve (pose server, broadcaster, clients, live
-#         BVH, HTTP/WebSocket, recorders) and the integration tests, which run the TSan-built
+#         BVH, HTTP/WebSocket, recorders, the VMC sender) and the integration tests, which run the TSan-built
 #         mocapd itself (the wired pipeline: ingest, workers, assembler, servers, recorder
-#         writers on a full disk, signals).
+#         writers on a full disk, signals, a played take).
 #         ctest -R selects their test suites by name.
 #   all   both (default).
 #
@@ -28,9 +28,9 @@ export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 export TSAN_OPTIONS="${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}"
 
-tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_http_tests
+tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_http_tests serve_vmc_tests
                   daemon_integration_tests faults_integration_tests http_integration_tests
-                  disk_integration_tests limits_integration_tests)
+                  disk_integration_tests limits_integration_tests play_integration_tests)
 
 status=0
 phase() {  # phase NAME COMMAND... — runs, times and reports one step
