@@ -253,12 +253,11 @@ TEST_F(Limits, WebSocketsThatNeverReadLeaveTheViewerAndMetricsWorking) {
     }
     // They stall: their queues drop the oldest frames.
     EXPECT_TRUE(wait_until([&] { return counter("http.ws_frames_dropped") >= 10; }, 20s));
-    // /metrics answers once a stalled WebSocket has gone stall_evict_s without progress. A
-    // stalled socket makes progress until the kernel's buffers toward it are full, which takes
-    // a slow (sanitized, loaded) server tens of seconds at 100 frames/s: generous deadlines.
-    EXPECT_TRUE(wait_until([&] { return http_request(http_port_, "/metrics").status == 200; }, 90s));
+    // /metrics answers once a stalled WebSocket has gone stall_evict_s without progress; the
+    // viewer may be refused a few times first (each attempt is a fresh connection).
+    EXPECT_TRUE(wait_until([&] { return http_request(http_port_, "/metrics").status == 200; }, 60s));
     mocap::testing::WsTestClient viewer;
-    ASSERT_TRUE(wait_until([&] { return viewer.connect(http_port_, "/ws?subject=1"); }, 90s));
+    ASSERT_TRUE(wait_until([&] { return viewer.connect(http_port_, "/ws?subject=1"); }, 60s));
     ASSERT_TRUE(viewer.read()) << "hello";
     int frames = 0;
     for (int i = 0; i < 200 && frames < 20; ++i) {

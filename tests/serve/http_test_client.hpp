@@ -69,11 +69,14 @@ inline HttpReply http_request(std::uint16_t port, const std::string& target,
 /// A WebSocket client on /ws (blocking reads with a deadline).
 class WsTestClient {
 public:
+    /// A fresh connection each call, so a refused attempt can be retried (a stream that
+    /// failed its handshake stays failed).
     bool connect(std::uint16_t port, const std::string& target) {
+        ws_.emplace(io_);
         try {
-            ws_.next_layer().connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-            socket_deadline(ws_.next_layer().socket(), std::chrono::seconds(10));
-            ws_.handshake("127.0.0.1", target);
+            ws_->next_layer().connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+            socket_deadline(ws_->next_layer().socket(), std::chrono::seconds(10));
+            ws_->handshake("127.0.0.1", target);
             return true;
         } catch (const std::exception&) {
             return false;
@@ -81,10 +84,11 @@ public:
     }
     /// The next text message, or nullopt on error/close/deadline.
     std::optional<std::string> read(std::chrono::milliseconds limit = std::chrono::seconds(5)) {
+        if (!ws_) return std::nullopt;
         try {
-            socket_deadline(ws_.next_layer().socket(), limit);
+            socket_deadline(ws_->next_layer().socket(), limit);
             boost::beast::flat_buffer buffer;
-            ws_.read(buffer);
+            ws_->read(buffer);
             return boost::beast::buffers_to_string(buffer.data());
         } catch (const std::exception&) {
             return std::nullopt;
@@ -93,7 +97,7 @@ public:
 
 private:
     asio::io_context io_;
-    boost::beast::websocket::stream<boost::beast::tcp_stream> ws_{io_};
+    std::optional<boost::beast::websocket::stream<boost::beast::tcp_stream>> ws_;
 };
 
 }  // namespace mocap::testing
