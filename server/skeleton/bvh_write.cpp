@@ -177,7 +177,14 @@ std::string bvh_hierarchy_text(const BodyModel& model, const BvhWriteOptions& op
 
 std::string bvh_motion_header(std::size_t frames, double frame_time_s) {
     std::string out = "MOTION\nFrames: " + std::to_string(frames) + "\nFrame Time: ";
-    append_number(out, frame_time_s, 6);
+    if (frame_time_s > 0.0 && frame_time_s < 5e-7) {
+        // Six decimals would write 0, which no reader takes: the shortest text that reads back.
+        char buf[32];
+        const auto r = std::to_chars(buf, buf + sizeof buf, frame_time_s);
+        out.append(buf, r.ptr);
+    } else {
+        append_number(out, frame_time_s, 6);
+    }
     out += '\n';
     return out;
 }
