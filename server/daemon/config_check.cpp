@@ -174,9 +174,9 @@ bool check_subject(const DaemonConfig& c, const char* key, std::uint32_t id, std
 }
 
 // [vmc]: the segment -> humanoid bone mapping against the body model (also while the output
-// is off, when a mapping is written), and with the output on every destination must resolve:
-// a typo in a host name is refused here rather than retried forever at run time.
-bool check_vmc(const DaemonConfig& c, std::string* error) {
+// is off, when a mapping is written); with the output on every destination must parse, and
+// with kResolve (--check-config) resolve: a typo in a host name is named there.
+bool check_vmc(const DaemonConfig& c, HostLookups lookups, std::string* error) {
     if (!c.vmc_enabled && c.vmc_bones.empty()) return true;
     std::string err;
     const auto model = body_model_from_config(c, &err);
@@ -191,7 +191,7 @@ bool check_vmc(const DaemonConfig& c, std::string* error) {
     if (!c.vmc_enabled) return true;
     for (std::size_t i = 0; i < c.vmc_destinations.size(); ++i) {
         const auto ep = parse_destination(c.vmc_destinations[i], &err);
-        if (ep && serve::resolve_udp({ep->host, ep->port}, &err)) continue;
+        if (ep && (lookups == HostLookups::kSkip || serve::resolve_udp({ep->host, ep->port}, &err))) continue;
         *error = "vmc.destinations[" + std::to_string(i) + "]: ";
         if (!ep) *error += "\"" + c.vmc_destinations[i] + "\": ";
         *error += err;
@@ -200,7 +200,7 @@ bool check_vmc(const DaemonConfig& c, std::string* error) {
     return true;
 }
 
-bool check_config_impl(const DaemonConfig& c, std::string* error) {
+bool check_config_impl(const DaemonConfig& c, HostLookups lookups, std::string* error) {
     std::string err;
     if (!check_filter("filter.name", c.filter_name, c.filter_params, error)) return false;
     for (std::size_t i = 0; i < c.segments.size(); ++i) {
@@ -216,7 +216,7 @@ bool check_config_impl(const DaemonConfig& c, std::string* error) {
     if (!check_subject_ids(c, error)) return false;
     if (!check_subject(c, "outputs.bvh_subject", c.bvh_subject, error)) return false;
     if (!check_subject(c, "vmc.subject", c.vmc_subject, error)) return false;
-    if (!check_vmc(c, error)) return false;
+    if (!check_vmc(c, lookups, error)) return false;
     if (!check_listeners(c, error)) return false;
     if (!check_serve_threads(c, error)) return false;
     if (!check_cluster(c, error)) return false;
@@ -237,17 +237,17 @@ bool check_config_impl(const DaemonConfig& c, std::string* error) {
 
 }  // namespace
 
-bool check_config(const DaemonConfig& config, std::string_view source_name, std::string* error) {
+bool check_config(const DaemonConfig& config, std::string_view source_name, std::string* error, HostLookups lookups) {
     std::string err;
-    if (check_config_impl(config, &err)) return true;
+    if (check_config_impl(config, lookups, &err)) return true;
     *error = std::string(source_name) + ": " + err;
     return false;
 }
 
-std::optional<DaemonConfig> load_checked_config(const std::string& path, std::string* error) {
+std::optional<DaemonConfig> load_checked_config(const std::string& path, std::string* error, HostLookups lookups) {
     constexpr std::string_view kEmbedded = "<embedded mocapd.toml>";
     auto c = path.empty() ? parse_config(embedded_default_config(), kEmbedded, error) : load_config_file(path, error);
-    if (c && !check_config(*c, path.empty() ? kEmbedded : std::string_view(path), error)) c.reset();
+    if (c && !check_config(*c, path.empty() ? kEmbedded : std::string_view(path), error, lookups)) c.reset();
     return c;
 }
 

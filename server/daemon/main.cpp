@@ -90,7 +90,7 @@ static int run(int argc, char** argv) {
     std::string error;
     // --check-config, start-up and reload (Daemon::reload) share one validation path.
     if (!check_path.empty()) {
-        const auto c = load_checked_config(check_path, &error);
+        const auto c = load_checked_config(check_path, &error, HostLookups::kResolve);
         if (!c) {
             std::cerr << "mocapd: invalid config: " << error << "\n";
             return 1;

@@ -238,3 +238,29 @@ def test_the_daemon_logs_where_it_sends(session):
     _, _, _, log = session
     assert "vmc: sending 15 bones of subject 1 to 127.0.0.1:" in log
     assert "segments without a humanoid bone" not in log
+
+
+def test_a_destination_that_does_not_resolve_yet_is_retried_not_refused(tmp_path):
+    # --check-config names the typo; start-up does not look names up (DNS may not be up at
+    # boot): the daemon runs, serves, and its sender logs and retries the look-up.
+    sink_port, pose_port = free_port(), free_port()
+    config = tmp_path / "mocapd.toml"
+    config.write_text(daemon_config(tmp_path, sink_port, pose_port) +
+                      '[vmc]\nenabled = true\ndestinations = ["no-such-host.invalid:39539"]\n')
+    check = subprocess.run([binary("MOCAPD_BIN"), "--check-config", str(config)], capture_output=True, text=True)
+    assert check.returncode != 0
+    assert 'vmc.destinations[0]: cannot resolve host "no-such-host.invalid"' in check.stderr, check.stderr
+    log_path = tmp_path / "mocapd.log"
+    with open(log_path, "wb") as log:
+        daemon = subprocess.Popen([binary("MOCAPD_BIN"), "--config", str(config)], cwd=tmp_path, stdout=log,
+                                  stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        try:
+            assert wait_for_port(pose_port, 20, daemon), log_path.read_text()
+            deadline = time.monotonic() + 30
+            while "vmc: destination no-such-host.invalid:39539:" not in log_path.read_text():
+                assert daemon.poll() is None and time.monotonic() < deadline, log_path.read_text()
+                time.sleep(0.1)
+            assert "retrying every" in log_path.read_text()
+        finally:
+            rc = stop(daemon)
+    assert rc == 0, log_path.read_text()
