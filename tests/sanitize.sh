@@ -32,6 +32,15 @@ tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_
                   daemon_integration_tests faults_integration_tests http_integration_tests
                   disk_integration_tests limits_integration_tests play_integration_tests)
 
+# ctest in DIR with ARGS; after a failure the digest of why (tests/ctest_digest.sh) comes last.
+run_ctest() {
+    local dir="$1"; shift
+    local rc=0
+    (cd "$dir" && ctest --output-on-failure -j "$jobs" --timeout 900 "$@") || rc=$?
+    [[ $rc -eq 0 ]] || "$root/tests/ctest_digest.sh" "$dir"
+    return "$rc"
+}
+
 status=0
 phase() {  # phase NAME COMMAND... — runs, times and reports one step
     local name="$1"; shift
@@ -79,7 +88,7 @@ run_asan() {
     # memory through a pipe, so with every descriptor in use (the point of that test) it calls
     # a valid protobuf message a bad one. No UBSan option avoids it (its suppression file is
     # opened at that same moment).
-    phase "asan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -E 'socketcan_vm|_arm_|static_analysis|AcceptBacksOffWhenDescriptorsRunOut'"
+    phase "asan ctest" run_ctest "$b" -E 'socketcan_vm|_arm_|static_analysis|AcceptBacksOffWhenDescriptorsRunOut'
 }
 
 run_tsan() {
@@ -92,7 +101,7 @@ run_tsan() {
     local regex
     regex=$(suite_regex "$b" "${tsan_executables[@]}") || { status=1; return 0; }
     echo "sanitize: tsan ctest -R '$regex'"
-    phase "tsan ctest" bash -c "cd '$b' && ctest --output-on-failure -j '$jobs' --timeout 900 -R '$regex'"
+    phase "tsan ctest" run_ctest "$b" -R "$regex"
 }
 
 case "$what" in
