@@ -9,7 +9,7 @@
 #                     a bounded time, the whole suite again under ASan+UBSan, and the
 #                     threaded code's tests under ThreadSanitizer; a failed ctest
 #                     phase ends with a digest of why each test failed
-#                     (tests/ctest_digest.sh), so the tail of the log says it
+#                     (tests/ctest_digest.py), so the tail of the log says it
 #   ./setup.sh sanitize [tsan|asan|all]   only the sanitizer phases (tests/sanitize.sh,
 #                     docs/reliability.md)
 #   ./setup.sh deps   only install missing Debian packages
@@ -94,9 +94,9 @@ run() {
 }
 
 test_all() {
-  (cd "$BUILD" && ctest --output-on-failure -j "$JOBS" --timeout 900) || {
+  (cd "$BUILD" && ctest --output-on-failure -j "$JOBS" --timeout 900 --output-junit ctest-junit.xml) || {
     local rc=$?
-    "$ROOT/tests/ctest_digest.sh" "$BUILD"  # the reasons, last: a log's tail shows them
+    python3 "$ROOT/tests/ctest_digest.py" "$BUILD/ctest-junit.xml"  # the reasons, last: a log's tail shows them
     return "$rc"
   }
 }

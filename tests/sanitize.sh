@@ -32,12 +32,12 @@ tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_
                   daemon_integration_tests faults_integration_tests http_integration_tests
                   disk_integration_tests limits_integration_tests play_integration_tests)
 
-# ctest in DIR with ARGS; after a failure the digest of why (tests/ctest_digest.sh) comes last.
+# ctest in DIR with ARGS; after a failure the digest of why (tests/ctest_digest.py) comes last.
 run_ctest() {
     local dir="$1"; shift
     local rc=0
-    (cd "$dir" && ctest --output-on-failure -j "$jobs" --timeout 900 "$@") || rc=$?
-    [[ $rc -eq 0 ]] || "$root/tests/ctest_digest.sh" "$dir"
+    (cd "$dir" && ctest --output-on-failure -j "$jobs" --timeout 900 --output-junit ctest-junit.xml "$@") || rc=$?
+    [[ $rc -eq 0 ]] || python3 "$root/tests/ctest_digest.py" "$dir/ctest-junit.xml"
     return "$rc"
 }
 

@@ -25,6 +25,7 @@
 #include <thread>
 #include <vector>
 
+#include "harness.hpp"
 #include "mocap_wire/mw_can.h"
 #include "mocap_wire/mw_packet.h"
 
@@ -32,23 +33,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A port the OS just handed out (bound to 0, then released). The daemon's config cannot take
-// port 0, so a race with another process is possible but unlikely; SetUp retries once.
-int free_port() {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    a.sin_port = 0;
-    socklen_t len = sizeof a;
-    if (fd < 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 ||
-        ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) != 0) {
-        if (fd >= 0) ::close(fd);
-        return -1;
-    }
-    ::close(fd);
-    return ntohs(a.sin_port);
-}
+using mocap::itest::free_port;  // never the same port twice in one process
 
 bool accepts(int port) {
     const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
@@ -112,10 +97,6 @@ protected:
         sink_port_ = free_port();
         pose_port_ = free_port();
         const int bvh_port = free_port();
-        if (sink_port_ <= 0 || pose_port_ <= 0 || bvh_port <= 0 || sink_port_ == pose_port_ || bvh_port == sink_port_ ||
-            bvh_port == pose_port_) {
-            return;
-        }
         std::ofstream(dir_ / "mocapd.toml") << "[log]\nlevel = \"warn\"\n"
                                             << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\n"
                                             << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\n"

@@ -40,7 +40,8 @@ protected:
             << "[pipeline]\nworkers = 2\nmax_subjects = 4\nassembly_deadline_ms = 20.0\n"
             << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\nheading = \"earth\"\n"
             << "facing = \"given\"\nfacing_heading_deg = 0.0\n"
-            << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\nclient_queue_frames = 16\n"
+            << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_
+            << "\"\nclient_queue_frames = " << client_queue_frames_ << "\n"
             << "[control]\ntoken = \"" << kToken
             << "\"\n"
             // Every listening port is a free one: ctest runs daemons in parallel.
@@ -59,6 +60,9 @@ protected:
         const int rc = daemon_->stop(10s);
         EXPECT_EQ(rc, 0) << "mocapd must drain and exit 0 on SIGTERM";
     }
+
+    // Small: a client that stops reading drops frames within a fraction of a second.
+    int client_queue_frames_ = 16;
 
     std::unique_ptr<Process> sim(std::vector<std::string> extra, const std::string& log = "sim.log") {
         std::vector<std::string> argv{MOCAP_SIM_BIN, "stream",
@@ -282,7 +286,15 @@ TEST_F(Daemon, SinkReconnectResumesTheSubject) {
     EXPECT_EQ(stat(c, "ingest_tcp.connections_accepted"), 5u);
 }
 
-TEST_F(Daemon, SlowClientDoesNotSlowTheOthers) {
+// A queue of 512 frames (1.7 s of three subjects at 100 Hz): a reader starved that long by a
+// loaded machine (a sanitizer build at load 6 starved one for more than 16 frames, 53 ms)
+// loses nothing, while the client that never reads still overflows it within the 8 s run.
+class DaemonSlowClient : public Daemon {
+protected:
+    DaemonSlowClient() { client_queue_frames_ = 512; }
+};
+
+TEST_F(DaemonSlowClient, SlowClientDoesNotSlowTheOthers) {
     auto fast = connect_client({}, v1::FIELD_ORIENTATIONS | v1::FIELD_POSITIONS | v1::FIELD_JOINT_ANGLES);
     auto slow = connect_client({}, v1::FIELD_ORIENTATIONS | v1::FIELD_POSITIONS | v1::FIELD_JOINT_ANGLES);
     auto s = sim({"--subjects", "3", "--nodes", "15", "--duration", "8", "--seed", "3", "--sink-rate-stats"});

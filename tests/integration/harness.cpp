@@ -13,7 +13,9 @@
 #include <array>
 #include <cerrno>
 #include <fstream>
+#include <mutex>
 #include <random>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -92,19 +94,23 @@ std::string Process::log() const {
 }
 
 std::uint16_t free_port() {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    a.sin_port = 0;
-    socklen_t len = sizeof a;
-    if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 ||
-        ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) != 0) {
+    static std::mutex mutex;
+    static std::set<std::uint16_t> handed_out;
+    const std::lock_guard lock(mutex);
+    for (int attempt = 0; attempt < 1000; ++attempt) {
+        const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+        sockaddr_in a{};
+        a.sin_family = AF_INET;
+        a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+        a.sin_port = 0;
+        socklen_t len = sizeof a;
+        const bool bound = ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+                           ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0;
         ::close(fd);
-        throw std::runtime_error("no free port");
+        if (!bound) break;
+        if (handed_out.insert(ntohs(a.sin_port)).second) return ntohs(a.sin_port);
     }
-    ::close(fd);
-    return ntohs(a.sin_port);
+    throw std::runtime_error("no free port");
 }
 
 bool wait_for_port(std::uint16_t port, std::chrono::milliseconds limit) {

@@ -2,7 +2,9 @@
 //
 // Process: posix_spawn with stdout/stderr to a log file; stop() sends SIGTERM and waits
 // (bounded), then SIGKILL. free_port(): a port the kernel just handed out (bound to 0 and
-// released), so parallel test runs do not collide. TempDir: removed on destruction.
+// released), so parallel test runs do not collide, and never one it already returned in this
+// process (the kernel may hand the same free port out twice in a row, and a daemon given one
+// port for two listeners refuses its config). TempDir: removed on destruction.
 #pragma once
 
 #include <sys/types.h>
