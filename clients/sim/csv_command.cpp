@@ -9,9 +9,9 @@ namespace mocap::sim {
 
 CLI::App* add_csv_command(CLI::App& app, CsvCommandOptions& options) {
     CLI::App* cmd = app.add_subcommand("csv", "Write one sensor's benchmark recording with its reference orientation");
-    cmd->add_option("--scenario", options.scenario, "fourati | realistic | magnetic")
+    cmd->add_option("--scenario", options.scenario, "fourati | realistic | magnetic | continuous")
         ->required()
-        ->check(CLI::IsMember({"fourati", "realistic", "magnetic"}));
+        ->check(CLI::IsMember({"fourati", "realistic", "magnetic", "continuous"}));
     cmd->add_option("--seed", options.seed, "Random seed (same seed, same file)")->capture_default_str();
     cmd->add_option("--frame", options.frame, "Earth frame of the reference columns: enu | ned")
         ->check(CLI::IsMember({"enu", "ned"}))

@@ -1,6 +1,6 @@
 // csv_command.hpp — `mocap-sim csv`: writes one sensor's benchmark recording with its truth.
 //
-//   mocap-sim csv --scenario fourati|realistic|magnetic [--seed N] [--frame enu|ned]
+//   mocap-sim csv --scenario fourati|realistic|magnetic|continuous [--seed N] [--frame enu|ned]
 //                 [--noise-scale X] [--mag-noise-scale X] --out FILE.csv
 //
 // Columns t,gx,gy,gz,ax,ay,az,mx,my,mz,qw,qx,qy,qz,movement (recording_csv.hpp); the

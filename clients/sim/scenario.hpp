@@ -1,14 +1,18 @@
 // scenario.hpp — benchmark recordings of one sensor with their true orientation.
 //
-// Three scenarios (docs/accuracy.md describes them and how the paper's NED model maps here):
-//   fourati    Fourati et al.'s CSMO simulation: 60 s at 100 Hz, smooth rotation about all
-//              three axes from the paper's q(0) = identity (NED), white noise σ = 0.4 on gyro
-//              (rad/s), accelerometer (m/s²) and magnetometer (G, i.e. 40 µT here) on a 0.5 G
-//              field at 60° inclination, no linear acceleration, no gyro bias.
+// Four scenarios (docs/accuracy.md describes them and how the paper's NED model maps here):
+//   fourati    Fourati et al.'s CSMO simulation: 60 s at 100 Hz, the body rate of the paper's
+//              Table I (fourati_table_rate_rad_s) from the paper's q(0) = identity (NED), white
+//              noise σ = 0.4 on gyro (rad/s), accelerometer (m/s²) and magnetometer (G, i.e.
+//              40 µT here) on a 0.5 G field at 60° inclination, no linear acceleration, no
+//              gyro bias.
 //   realistic  MEMS-grade (MPU9250-like) noise, a constant gyro bias, human-like motion with
 //              rest periods and bursts of linear acceleration; 90 s at 100 Hz.
 //   magnetic   realistic plus a bounded magnetic disturbance near the middle (a steel object:
 //              the horizontal field turns by 39° and its norm and dip change a little).
+//   continuous fourati's motion (up to 2.5 rad/s, never at rest) with realistic's sensor noise
+//              and field and a constant gyro bias of 0.02 rad/s (1.15 °/s) on every axis
+//              (signs from the seed): bias that can only be learned in motion.
 //
 // Conventions (docs/design.md, "Quaternions and frames"): earth frame ENU, q_earth_sensor
 // rotates sensor vectors into the earth frame, (w, x, y, z) Hamilton. The accelerometer reads
@@ -18,7 +22,9 @@
 // Discretisation: row k's gyro reading (without bias and noise) is the constant body rate
 // that carries truth k-1 to truth k over dt: q_k = q_{k-1} ⊗ exp(ω_k dt / 2). A filter that
 // propagates with the current sample's rate therefore reproduces the truth exactly on
-// noiseless data. Row 0 is at t = 0.
+// noiseless data. Row 0 is at t = 0. Table I's truth is the integral of its continuous rate
+// (RK4, 8 steps per sample, piece by piece), so the readings are that rate averaged over
+// each interval.
 //
 // Deterministic: the same (kind, seed, options) gives bit-identical rows with any standard
 // library (SimRng shapes its own distributions). Thread-safety: pure functions.
@@ -38,9 +44,9 @@ namespace mocap::sim {
 using math::Quat;
 using math::Vec3;
 
-enum class ScenarioKind { fourati, realistic, magnetic };
+enum class ScenarioKind { fourati, realistic, magnetic, continuous };
 
-/// "fourati" | "realistic" | "magnetic" -> kind; nullopt for anything else.
+/// "fourati" | "realistic" | "magnetic" | "continuous" -> kind; nullopt for anything else.
 std::optional<ScenarioKind> parse_scenario_kind(std::string_view name);
 std::string_view scenario_name(ScenarioKind kind);
 
@@ -51,12 +57,20 @@ struct ScenarioSpec {
     double gyro_noise_rad_s = 0.0;         ///< σ of white gyro noise per sample
     double accel_noise_m_s2 = 0.0;         ///< σ of white accelerometer noise per sample
     double mag_noise_ut = 0.0;             ///< σ of white magnetometer noise per sample
-    double gyro_bias_max_rad_s = 0.0;      ///< per-axis bias magnitude is drawn in [max/4, max]
+    double gyro_bias_max_rad_s = 0.0;      ///< largest per-axis bias magnitude
+    double gyro_bias_min_fraction = 0.25;  ///< per-axis magnitude drawn in [fraction·max, max],
+                                           ///< random sign
     Vec3 gravity_up_m_s2{0.0, 0.0, 9.81};  ///< specific force at rest, earth frame (ENU)
     Vec3 mag_field_ut = Vec3::Zero();      ///< undisturbed earth field, ENU, µT
 };
 
 ScenarioSpec scenario_spec(ScenarioKind kind);
+
+/// Fourati et al.'s Table I: body rate (rad/s, sensor frame) of piece 1..4 (0–15, 15–30,
+/// 30–45, 45–60 s) at the absolute time t_s. Pieces 1 and 3 are the same; piece 4 is written
+/// as printed, −1.5 sin(−1.5 t) on x. Defined for any t, so a piece can be evaluated on its
+/// boundary.
+Vec3 fourati_table_rate_rad_s(int piece, double t_s);
 
 /// Knobs for tests and studies; the defaults are the benchmark.
 struct ScenarioOptions {

@@ -13,7 +13,8 @@ using math::Quat;
 using math::Vec3;
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
-constexpr ScenarioKind kAllKinds[] = {ScenarioKind::fourati, ScenarioKind::realistic, ScenarioKind::magnetic};
+constexpr ScenarioKind kAllKinds[] = {ScenarioKind::fourati, ScenarioKind::realistic, ScenarioKind::magnetic,
+                                      ScenarioKind::continuous};
 
 bool same_rows(const Scenario& a, const Scenario& b) {
     if (a.rows.size() != b.rows.size()) return false;
@@ -63,17 +64,84 @@ TEST(Scenario, FouratiStartsAlignedWithNed) {
     const Scenario f = make_scenario(ScenarioKind::fourati, 3);
     const Quat q_ned_sensor = math::q_enu_ned() * f.rows.front().q_earth_sensor;
     EXPECT_LT(math::angle_rad(q_ned_sensor), 1e-12);
-    // Bounded Euler trajectory in NED: roll ±40°, pitch ±30°, yaw ±90° (within 1°).
-    double max_roll = 0, max_pitch = 0, max_yaw = 0;
-    for (const ScenarioRow& row : f.rows) {
-        const auto e = math::to_euler_zyx(math::q_enu_ned() * row.q_earth_sensor);
-        max_roll = std::max(max_roll, std::abs(e.roll_rad) * kRadToDeg);
-        max_pitch = std::max(max_pitch, std::abs(e.pitch_rad) * kRadToDeg);
-        max_yaw = std::max(max_yaw, std::abs(e.yaw_rad) * kRadToDeg);
+}
+
+// Table I as printed, piece by piece (absolute time in every formula).
+TEST(Scenario, TableOneRates) {
+    const double t = 7.3;
+    const Vec3 a = fourati_table_rate_rad_s(1, t);
+    EXPECT_DOUBLE_EQ(a.x(), -2.5 * std::sin(1.5 * t));
+    EXPECT_DOUBLE_EQ(a.y(), 1.5 * std::cos(0.9 * t));
+    EXPECT_DOUBLE_EQ(a.z(), -1.5 * std::sin(1.2 * t));
+    EXPECT_EQ(fourati_table_rate_rad_s(3, t), a);
+    const Vec3 b = fourati_table_rate_rad_s(2, t);
+    EXPECT_DOUBLE_EQ(b.x(), -1.5 * std::sin(1.5 * t));
+    EXPECT_DOUBLE_EQ(b.y(), 1.3 * std::cos(1.3 * t));
+    EXPECT_DOUBLE_EQ(b.z(), -2.0 * std::sin(2.0 * t));
+    const Vec3 d = fourati_table_rate_rad_s(4, t);
+    EXPECT_DOUBLE_EQ(d.x(), -1.5 * std::sin(-1.5 * t));  // as printed: the sign of piece 2 flipped
+    EXPECT_EQ(d.tail<2>(), b.tail<2>());
+}
+
+// The noiseless readings are Table I's rate averaged over each 10 ms interval, from the piece
+// the interval lies in; the rate jumps at 15, 30 and 45 s.
+TEST(Scenario, FouratiReadsTableOne) {
+    const Scenario f = make_scenario(ScenarioKind::fourati, 1, {.noise_scale = 0.0});
+    ASSERT_EQ(f.gyro_bias_rad_s, Vec3::Zero());
+    double worst = 0.0, peak = 0.0;
+    for (std::size_t k = 1; k < f.rows.size(); ++k) {
+        const double t_mid = 1e-6 * static_cast<double>(f.rows[k].sample.t_us) - 0.005;
+        const int piece = std::min(static_cast<int>(t_mid / 15.0), 3) + 1;
+        const Vec3 w = math::to_vec3(f.rows[k].sample.gyro_rad_s);
+        worst = std::max(worst, (w - fourati_table_rate_rad_s(piece, t_mid)).norm());
+        peak = std::max(peak, w.cwiseAbs().maxCoeff());
     }
-    EXPECT_NEAR(max_roll, 40.0, 1.0);
-    EXPECT_NEAR(max_pitch, 30.0, 1.0);
-    EXPECT_NEAR(max_yaw, 90.0, 1.0);
+    EXPECT_LT(worst, 1e-4);  // the interval mean differs from the midpoint value by O(dt²)
+    EXPECT_NEAR(peak, 2.5, 0.01);
+    EXPECT_NEAR(math::to_vec3(f.rows[1500].sample.gyro_rad_s).z(), -1.5 * std::sin(1.2 * 14.995), 1e-4);
+    EXPECT_NEAR(math::to_vec3(f.rows[1501].sample.gyro_rad_s).z(), -2.0 * std::sin(2.0 * 15.005), 1e-4);
+    EXPECT_NEAR(math::to_vec3(f.rows[4501].sample.gyro_rad_s).x(), 1.5 * std::sin(1.5 * 45.005), 1e-4);
+}
+
+// The truth is the integral of the continuous rate: a 100 times finer integration of Table I
+// lands on the same attitude (one midpoint step per sample ends 1.6e-4 rad off by 60 s).
+TEST(Scenario, FouratiTruthIsTheIntegralOfTableOne) {
+    const Scenario f = make_scenario(ScenarioKind::fourati, 1, {.noise_scale = 0.0});
+    Quat q = f.rows.front().q_earth_sensor;
+    const int steps_per_sample = 100;
+    const double h = 0.01 / steps_per_sample;
+    double worst = 0.0;
+    for (std::size_t k = 1; k < f.rows.size(); ++k) {
+        const double t0 = 0.01 * static_cast<double>(k - 1);
+        const int piece = std::min(static_cast<int>((t0 + 0.005) / 15.0), 3) + 1;
+        for (int i = 0; i < steps_per_sample; ++i) {
+            const double tm = t0 + (i + 0.5) * h;
+            q = (q * math::quat_from_rotvec(fourati_table_rate_rad_s(piece, tm) * h)).normalized();
+        }
+        worst = std::max(worst, math::angle_rad(q * math::conj(f.rows[k].q_earth_sensor)));
+    }
+    EXPECT_LT(worst, 1e-5);
+}
+
+// continuous: fourati's truth with MEMS-grade noise and 0.02 rad/s of bias on every axis, moving
+// throughout.
+TEST(Scenario, ContinuousIsTableOneWithBiasAndMemsNoise) {
+    const Scenario f = make_scenario(ScenarioKind::fourati, 4);
+    const Scenario c = make_scenario(ScenarioKind::continuous, 4);
+    ASSERT_EQ(c.rows.size(), f.rows.size());
+    for (std::size_t i = 0; i < c.rows.size(); ++i) {
+        ASSERT_EQ(c.rows[i].q_earth_sensor.coeffs(), f.rows[i].q_earth_sensor.coeffs());
+        ASSERT_TRUE(c.rows[i].moving);
+    }
+    EXPECT_EQ(c.gyro_bias_rad_s.cwiseAbs(), Vec3::Constant(0.02));
+    EXPECT_NEAR(c.spec.gyro_noise_rad_s * kRadToDeg, 0.3, 1e-12);
+    EXPECT_DOUBLE_EQ(c.spec.accel_noise_m_s2, 0.03);
+    EXPECT_DOUBLE_EQ(c.spec.mag_noise_ut, 0.5);
+    // The seed draws the signs: some seed of the first few has another pattern.
+    bool other = false;
+    for (const std::uint64_t seed : {1u, 2u, 3u, 5u, 6u})
+        other = other || make_scenario(ScenarioKind::continuous, seed).gyro_bias_rad_s != c.gyro_bias_rad_s;
+    EXPECT_TRUE(other);
 }
 
 // Integrating the noiseless, unbiased gyro with q_k = q_{k-1} ⊗ exp(ω_k dt/2) reproduces
@@ -112,7 +180,7 @@ TEST(Scenario, AccelAndMagFollowTruth) {
                 ASSERT_NEAR(math::rotate(row.q_earth_sensor, f).z(), 9.81, 1e-9);
             }
         }
-        if (k != ScenarioKind::fourati) {
+        if (k == ScenarioKind::realistic || k == ScenarioKind::magnetic) {
             EXPECT_GT(rest, 500u) << scenario_name(k);
         }
     }

@@ -144,10 +144,13 @@ TEST(ParticleFilter, FouratiScenarioWithItsNoiseLevels) {
     for (const std::uint64_t seed : {1u, 2u, 3u}) {
         ParticleFilter f(p);
         const testing::Rmse r = testing::run(f, sim::make_scenario(sim::ScenarioKind::fourati, seed).rows, 5.0);
-        EXPECT_LT(r.roll_deg, 1.5) << seed;
+        // Inclination measured 1.06-1.12° over seeds 1-5 (Euler roll 1.7-3.2°: Table I's path
+        // passes near pitch ±90°, where roll is ill-conditioned).
+        EXPECT_LT(r.inclination_deg, 1.5) << seed;
         EXPECT_LT(r.pitch_deg, 1.5) << seed;
         // Heading under a field noise twice the horizontal field is this filter's weak spot
-        // (measured 11-34° on seeds 1-3; the earlier per-sample-σ design reached < 9°), left
+        // (measured 7-28° on seeds 1-5; the earlier per-sample-σ design reached < 9° on a
+        // slower stand-in of Table I's motion), left
         // as an open item in docs/accuracy.md, "Particle filter (pf)"; the bound catches a
         // heading that does not converge at all.
         EXPECT_LT(r.yaw_deg, 45.0) << seed;
