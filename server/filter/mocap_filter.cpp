@@ -309,9 +309,11 @@ void MocapFilter::update_bias(const math::Vec3& acc_e) {
         e = out3(s.rest_gyro_lp) - s.bias_rad_s;
         h = math::Mat3::Identity();
         w = math::Vec3::Constant(bias_rest_w_);
-    } else if (p.motion_bias) {
+    } else if (p.motion_bias && s.bias_r_lp.running) {
         // The accelerometer's correction this step is the rotation vector (acc_e.y, -acc_e.x)
-        // in earth axes; in steady state it cancels R·(bias error)·ts.
+        // in earth axes; in steady state it cancels R·(bias error)·ts. While the low-passes
+        // still average their first tau_acc_s, the corrections are the start-up alignment
+        // instead, so the measurement waits for them.
         h = r_lp;
         e.x() = -acc_e.y() / s.ts_s + s.bias_b_lp.out[0] - h.row(0).dot(s.bias_rad_s);
         e.y() = acc_e.x() / s.ts_s + s.bias_b_lp.out[1] - h.row(1).dot(s.bias_rad_s);
