@@ -143,7 +143,9 @@ void ParticleFilter::fill_noise() {
 }
 
 ParticleFilter::ParticleFilter(const ParticleFilterParams& params)
-    : params_(params), n_(std::clamp(params.particles, 1, 65536)), detector_(detector_params()),
+    : params_(params),
+      n_(std::clamp(params.particles, 1, 65536)),
+      detector_(detector_params()),
       clock_(params.max_step_s) {
     for (auto* v : {&qw_, &qx_, &qy_, &qz_, &bx_, &by_, &bz_, &w_, &cost_, &qw_tmp_, &qx_tmp_, &qy_tmp_, &qz_tmp_,
                     &bx_tmp_, &by_tmp_, &bz_tmp_})
