@@ -1,6 +1,9 @@
 #include "filter_tool/filter_run.hpp"
 
+#include <cstddef>
 #include <cstdio>
+#include <span>
+#include <utility>
 #include <numbers>
 #include <ostream>
 
@@ -17,16 +20,17 @@ Quat from_enu(const Quat& q_enu_sensor, EarthFrame frame) {
     return frame == EarthFrame::ned ? math::mul(math::q_enu_ned(), q_enu_sensor) : q_enu_sensor;
 }
 
-RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, const RunOptions& options) {
+namespace {
+
+// The output rows of one run from its per-sample ENU estimates.
+RunOutput collect(const Recording& recording, const RunOptions& options, std::span<const Quat> q_enu) {
     RunOutput out;
     out.estimates.reserve(recording.rows.size());
     out.compared.reserve(recording.rows.size());
-    if (options.trace) out.trace.reserve(recording.rows.size());
-    f.reset();
     const std::int64_t t0_us = recording.rows.empty() ? 0 : recording.rows.front().sample.t_us;
-    for (const RecordingRow& row : recording.rows) {
-        f.update(row.sample);
-        const Quat q = math::canonical(from_enu(f.orientation(), options.frame));
+    for (std::size_t i = 0; i < recording.rows.size(); ++i) {
+        const RecordingRow& row = recording.rows[i];
+        const Quat q = math::canonical(from_enu(q_enu[i], options.frame));
         out.estimates.push_back({row.sample.t_us, q});
         EvalSample s;
         s.t_s = static_cast<double>(row.sample.t_us - t0_us) * 1e-6;
@@ -35,9 +39,39 @@ RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, c
         s.has_reference = recording.has_reference && row.ref_valid;
         s.evaluated = row.movement && s.t_s >= options.skip_seconds;
         out.compared.push_back(s);
-        if (options.trace) out.trace.push_back({row.sample.t_us, f.diagnostics(), f.gyro_bias_rad_s()});
     }
     return out;
+}
+
+std::vector<ImuSample> samples_of(const Recording& recording) {
+    std::vector<ImuSample> samples;
+    samples.reserve(recording.rows.size());
+    for (const RecordingRow& row : recording.rows) samples.push_back(row.sample);
+    return samples;
+}
+
+}  // namespace
+
+RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, const RunOptions& options) {
+    std::vector<Quat> q_enu;
+    q_enu.reserve(recording.rows.size());
+    std::vector<TraceRow> trace;
+    if (options.trace) trace.reserve(recording.rows.size());
+    f.reset();
+    for (const RecordingRow& row : recording.rows) {
+        f.update(row.sample);
+        q_enu.push_back(f.orientation());
+        if (options.trace) trace.push_back({row.sample.t_us, f.diagnostics(), f.gyro_bias_rad_s()});
+    }
+    RunOutput out = collect(recording, options, q_enu);
+    out.trace = std::move(trace);
+    return out;
+}
+
+RunOutput run_offline(filter::OrientationFilter& f, const filter::OfflineSmoother& smoother,
+                      const Recording& recording, const RunOptions& options) {
+    const std::vector<ImuSample> samples = samples_of(recording);
+    return collect(recording, options, smoother.smooth(f, samples).orientation);
 }
 
 bool write_trace_csv(std::ostream& out, const std::vector<TraceRow>& rows) {

@@ -15,6 +15,7 @@
 #include <string_view>
 #include <vector>
 
+#include "filter/offline_smoother.hpp"
 #include "filter/orientation_filter.hpp"
 #include "filter_tool/evaluation.hpp"
 #include "filter_tool/recording_csv.hpp"
@@ -51,6 +52,12 @@ struct RunOutput {
 /// Resets the filter, feeds every row in order and collects the estimates. Evaluated
 /// samples: movement = 1 (or no movement column), t - t_first >= skip_seconds, a reference.
 RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, const RunOptions& options);
+
+/// The non-causal re-solve of the whole recording with `f` (offline_smoother.hpp), evaluated
+/// as run_filter is. RunOptions::trace is not honoured (a smoothed estimate has no
+/// per-sample filter state); the caller rejects it.
+RunOutput run_offline(filter::OrientationFilter& f, const filter::OfflineSmoother& smoother,
+                      const Recording& recording, const RunOptions& options);
 
 /// Columns t,rest,mag_field_disturbed,mag_heading_disturbed,mag_rejected,mag_offset_weight,
 /// bias_x,bias_y,bias_z (gyro bias estimate, °/s, sensor frame),mag_offset_x,mag_offset_y,

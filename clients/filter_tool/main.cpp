@@ -1,13 +1,15 @@
 // mocap-filter: runs one orientation filter over a benchmark recording (docs/design.md, "Command-line contracts").
 //
 //   mocap-filter --filter NAME [--param k=v]... [--frame enu|ned] --in IN.csv --out OUT.csv
-//                [--eval] [--skip-seconds S] [--trace TRACE.csv]
+//                [--eval] [--skip-seconds S] [--trace TRACE.csv | --offline]
 //   mocap-filter --list        prints every filter name with its parameter keys and defaults
 //
 // Exit codes: 0 success, 1 bad input file / output not writable, 2 bad command line or
 // filter parameters. --eval prints one JSON object (evaluation.hpp) on stdout. --trace writes
 // the filter's disturbance flags and bias estimate per sample (filter_run.hpp) and changes
-// nothing else.
+// nothing else. --offline re-solves the whole recording non-causally with the filter
+// (filter/offline_smoother.hpp: forward and backward passes, blended) instead of running it
+// causally; --eval and --frame apply to it as to a causal run.
 #include <CLI/CLI.hpp>
 
 #include <fstream>
@@ -40,6 +42,7 @@ static int run(int argc, char** argv) {
     std::string out_path;
     std::string trace_path;
     bool eval = false;
+    bool offline = false;
     double skip_seconds = 0.0;
     bool list = false;
     app.add_flag("--list", list, "Print every filter name with its parameters (key=default) and exit");
@@ -55,6 +58,8 @@ static int run(int argc, char** argv) {
     app.add_option("--trace", trace_path,
                    "Per-sample CSV of the filter's disturbance flags and gyro bias estimate (why an estimate went "
                    "wrong)");
+    app.add_flag("--offline", offline,
+                 "Re-solve the whole recording non-causally (forward and backward passes of the filter, blended)");
     app.add_flag("--eval", eval, "Print the error metrics against the reference as one JSON object");
     app.add_option("--skip-seconds", skip_seconds, "Do not evaluate the first S seconds (convergence)")
         ->check(CLI::NonNegativeNumber)
@@ -74,6 +79,7 @@ static int run(int argc, char** argv) {
     if (filter_name.empty() || in_path.empty() || out_path.empty()) {
         return fail(2, "--filter, --in and --out are required (see --help)");
     }
+    if (offline && !trace_path.empty()) return fail(2, "--trace describes a causal run; it cannot go with --offline");
 
     // key=value pairs in order; a key given twice takes its last value (filter_factory.hpp).
     mocap::filter::FilterParamList params;
@@ -101,7 +107,9 @@ static int run(int argc, char** argv) {
     options.frame = *mocap::tools::parse_earth_frame(frame_name);
     options.skip_seconds = skip_seconds;
     options.trace = !trace_path.empty();
-    const mocap::tools::RunOutput run = mocap::tools::run_filter(*filter, recording, options);
+    const mocap::tools::RunOutput run =
+        offline ? mocap::tools::run_offline(*filter, mocap::filter::OfflineSmoother(), recording, options)
+                : mocap::tools::run_filter(*filter, recording, options);
 
     std::ofstream out(out_path, std::ios::binary | std::ios::trunc);
     if (!out || !mocap::tools::write_orientation_csv(out, run.estimates) || !out.flush()) {

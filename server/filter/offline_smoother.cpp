@@ -1,0 +1,126 @@
+#include "filter/offline_smoother.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <numbers>
+
+#include "filter/mag_delay.hpp"
+#include "math/markley_average.hpp"
+
+namespace mocap::filter {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+/// One pass over the recording, per sample.
+struct PassOutput {
+    std::vector<math::Quat> q;          ///< the filter's estimate after the sample
+    std::vector<double> run_s;          ///< time the pass had run
+    std::vector<double> residual_rad;   ///< heading of the field reading seen through q
+    std::vector<char> mag_used;         ///< the filter used that reading (present, not rejected)
+};
+
+/// Runs `filter` over the samples in the order of `forward`: true from the first sample to
+/// the last, false from the last to the first. A backward step plays the interval it crosses
+/// in reverse: the gyro reading that covered it, negated, on a time base that advances by
+/// the recording's own steps (so a gap stays a gap).
+PassOutput run_pass(OrientationFilter& filter, std::span<const ImuSample> samples, bool forward) {
+    const std::size_t n = samples.size();
+    PassOutput out{std::vector<math::Quat>(n), std::vector<double>(n), std::vector<double>(n), std::vector<char>(n)};
+    filter.reset();
+    std::int64_t t_us = samples[forward ? 0 : n - 1].t_us;
+    double run_s = 0.0;
+    for (std::size_t k = 0; k < n; ++k) {
+        const std::size_t i = forward ? k : n - 1 - k;
+        ImuSample s = samples[i];
+        if (!forward) {
+            if (k > 0) {
+                const ImuSample& later = samples[i + 1];  // its gyro reading covers (t_i, t_i+1]
+                const std::int64_t d_us = later.t_us - s.t_us;
+                t_us += d_us;
+                run_s += static_cast<double>(d_us) * 1e-6;
+                s.gyro_rad_s = math::to_array(-math::to_vec3(later.gyro_rad_s));
+            }
+            s.t_us = t_us;
+        } else if (k > 0) {
+            run_s += static_cast<double>(s.t_us - samples[i - 1].t_us) * 1e-6;
+        }
+        filter.update(s);
+        const FilterDiagnostics d = filter.diagnostics();
+        const math::Quat q = filter.orientation();
+        // The filter's earth frame has the horizontal field on +y (magnetic north): the
+        // residual is the heading of the reading, less any offset the filter subtracts.
+        const math::Vec3 h = math::rotate(q, math::to_vec3(s.mag_ut) - d.mag_offset_weight * d.mag_offset_ut);
+        out.q[i] = q;
+        out.run_s[i] = run_s;
+        out.mag_used[i] = s.has_mag() && !d.mag_rejected && (h.x() != 0.0 || h.y() != 0.0);
+        out.residual_rad[i] = out.mag_used[i] ? std::atan2(h.x(), h.y()) : 0.0;
+    }
+    return out;
+}
+
+/// Mean squared heading residual of each pass over ±window_s around every sample, counting
+/// only the samples where both passes used the field; 0 where fewer than one second's worth
+/// (or none) of such samples is in the window.
+void residual_variances(std::span<const ImuSample> samples, const PassOutput& fwd, const PassOutput& bwd,
+                        double window_s, std::vector<double>& var_fwd, std::vector<double>& var_bwd) {
+    const std::size_t n = samples.size();
+    var_fwd.assign(n, 0.0);
+    var_bwd.assign(n, 0.0);
+    if (window_s <= 0.0 || n < 2) return;
+    // Prefix sums: squared residuals of each pass and the count of usable samples.
+    std::vector<double> sf(n + 1, 0.0), sb(n + 1, 0.0), count(n + 1, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const bool both = fwd.mag_used[i] && bwd.mag_used[i];
+        sf[i + 1] = sf[i] + (both ? fwd.residual_rad[i] * fwd.residual_rad[i] : 0.0);
+        sb[i + 1] = sb[i] + (both ? bwd.residual_rad[i] * bwd.residual_rad[i] : 0.0);
+        count[i + 1] = count[i] + (both ? 1.0 : 0.0);
+    }
+    const double span_s = static_cast<double>(samples.back().t_us - samples.front().t_us) * 1e-6;
+    const double per_second = static_cast<double>(n - 1) / std::max(span_s, 1e-6);
+    const auto window_us = static_cast<std::int64_t>(window_s * 1e6);
+    std::size_t lo = 0, hi = 0;  // window [lo, hi)
+    for (std::size_t i = 0; i < n; ++i) {
+        while (samples[lo].t_us < samples[i].t_us - window_us) ++lo;
+        while (hi < n && samples[hi].t_us <= samples[i].t_us + window_us) ++hi;
+        const double c = count[hi] - count[lo];
+        if (c < per_second) continue;
+        var_fwd[i] = (sf[hi] - sf[lo]) / c;
+        var_bwd[i] = (sb[hi] - sb[lo]) / c;
+    }
+}
+
+}  // namespace
+
+OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const ImuSample> raw) const {
+    OfflineResult result;
+    if (raw.empty()) return result;
+    result.mag_delay_s = estimate_mag_delay(raw, params_.mag_delay_max_s).delay_s;
+    const std::vector<ImuSample> samples = advance_mag(raw, result.mag_delay_s);
+
+    const PassOutput fwd = run_pass(filter, samples, true);
+    const PassOutput bwd = run_pass(filter, samples, false);
+    std::vector<double> resid_fwd, resid_bwd;
+    residual_variances(samples, fwd, bwd, params_.residual_window_s, resid_fwd, resid_bwd);
+
+    const double floor = params_.sigma_floor_deg * kDeg;
+    const double start = params_.sigma_start_deg * kDeg;
+    const auto variance = [&](double run_s, double resid) {
+        const double s = start * std::exp(-run_s / params_.converge_tau_s);
+        return floor * floor + s * s + resid;
+    };
+    const std::size_t n = samples.size();
+    result.orientation.resize(n);
+    result.forward_weight.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const double wf = 1.0 / variance(fwd.run_s[i], resid_fwd[i]);
+        const double wb = 1.0 / variance(bwd.run_s[i], resid_bwd[i]);
+        result.forward_weight[i] = wf / (wf + wb);
+        result.orientation[i] = math::average_two(fwd.q[i], wf, bwd.q[i], wb);
+    }
+    return result;
+}
+
+}  // namespace mocap::filter

@@ -1,0 +1,150 @@
+#include "filter/offline_smoother.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "filter/mag_delay.hpp"
+#include "filter/mocap_filter.hpp"
+#include "seed_filter_fixture.hpp"
+
+namespace mocap::filter {
+namespace {
+
+using testing::kRadToDeg;
+
+// Turning about all three axes, never at rest (body rate up to ~1.3 rad/s).
+math::Vec3 wobble(double t) {
+    return {0.6 * std::sin(0.9 * t), 0.5 * std::sin(0.7 * t + 1.0), 0.8 * std::cos(0.5 * t)};
+}
+
+std::vector<ImuSample> samples_of(const std::vector<sim::ScenarioRow>& rows) {
+    std::vector<ImuSample> out;
+    for (const sim::ScenarioRow& r : rows) out.push_back(r.sample);
+    return out;
+}
+
+// The causal filter's estimate after every sample.
+std::vector<math::Quat> run_causal(const std::vector<ImuSample>& samples) {
+    MocapFilter f;
+    std::vector<math::Quat> q;
+    for (const ImuSample& s : samples) {
+        f.update(s);
+        q.push_back(f.orientation());
+    }
+    return q;
+}
+
+double rms_deg(const std::vector<math::Quat>& q, const std::vector<sim::ScenarioRow>& rows, double from_s,
+               double to_s) {
+    double sum = 0.0;
+    int n = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+        const double t = static_cast<double>(rows[i].sample.t_us) * 1e-6;
+        if (t < from_s || t >= to_s) continue;
+        sum += std::pow(math::error_total_rad(q[i] * rows[i].q_earth_sensor.conjugate()) * kRadToDeg, 2);
+        ++n;
+    }
+    return std::sqrt(sum / n);
+}
+
+// A recording whose first second carries a jolt (4 m/s² of linear acceleration along east):
+// a causal filter starts tilted and needs its accelerometer time constant to recover.
+std::vector<sim::ScenarioRow> jolted_start() {
+    auto rows = testing::rotating(math::from_euler_zyx({0.2, -0.1, 1.0}), wobble, 100.0, 40.0);
+    for (sim::ScenarioRow& r : rows) {
+        if (r.sample.t_us >= 1'000'000) break;
+        const math::Vec3 f = math::to_vec3(r.sample.accel_m_s2) + math::rotate(r.q_earth_sensor.conjugate(), {4, 0, 0});
+        r.sample.accel_m_s2 = math::to_array(f);
+    }
+    return rows;
+}
+
+TEST(OfflineSmoother, BackwardPassRemovesTheStartUpTransient) {
+    const auto rows = jolted_start();
+    const std::vector<ImuSample> samples = samples_of(rows);
+    const std::vector<math::Quat> causal = run_causal(samples);
+    MocapFilter f;
+    const OfflineResult r = OfflineSmoother().smooth(f, samples);
+    ASSERT_EQ(r.orientation.size(), samples.size());
+    const double causal_start = rms_deg(causal, rows, 0.0, 6.0);
+    const double offline_start = rms_deg(r.orientation, rows, 0.0, 6.0);
+    // The forward pass alone is the causal filter: several degrees off while it recovers.
+    EXPECT_GT(causal_start, 2.0);
+    EXPECT_LT(offline_start, 0.3 * causal_start) << "causal " << causal_start << "°, offline " << offline_start << "°";
+    // Early samples trust the backward pass, late ones the forward pass.
+    EXPECT_LT(r.forward_weight.front(), 0.05);
+    EXPECT_GT(r.forward_weight.back(), 0.9);
+    // Away from both ends the blend is as good as the converged filter.
+    EXPECT_LT(rms_deg(r.orientation, rows, 10.0, 30.0), rms_deg(causal, rows, 10.0, 30.0) + 0.1);
+}
+
+TEST(OfflineSmoother, DeterministicAndEmptyInputGivesEmptyResult) {
+    const std::vector<ImuSample> samples = samples_of(jolted_start());
+    MocapFilter f, g;
+    const OfflineSmoother smoother;
+    const OfflineResult a = smoother.smooth(f, samples);
+    const OfflineResult b = smoother.smooth(g, samples);
+    ASSERT_EQ(a.orientation.size(), b.orientation.size());
+    for (std::size_t i = 0; i < a.orientation.size(); ++i) {
+        ASSERT_TRUE(a.orientation[i].coeffs() == b.orientation[i].coeffs())
+            << i << ": " << (a.orientation[i].coeffs() - b.orientation[i].coeffs()).transpose();
+    }
+    EXPECT_TRUE(smoother.smooth(f, {}).orientation.empty());
+}
+
+TEST(OfflineSmoother, RemovesAMagnetometerLagThatMisleadsTheCausalFilter) {
+    // 1 kHz truth, 100 Hz samples whose field is read 30 ms late, turning back and forth about
+    // the vertical as a limb does (the lag shows where the rate changes).
+    const auto fine = testing::rotating(
+        math::from_euler_zyx({0.0, 0.2, 0.1}),
+        [](double t) { return math::Vec3(0.3 * std::sin(2.0 * t), 0.2 * std::cos(3.0 * t), 2.5 * std::sin(4.0 * t)); },
+        1000.0, 40.0);
+    std::vector<sim::ScenarioRow> rows;
+    for (std::size_t i = 30; i < fine.size(); i += 10) {
+        sim::ScenarioRow r = fine[i];
+        math::Vec3 w = math::Vec3::Zero();  // the mean rate over the 10 ms the sample covers
+        for (std::size_t k = i - 9; k <= i; ++k) w += fine[k].gyro_true_rad_s / 10.0;
+        r.sample.gyro_rad_s = math::to_array(w);
+        r.sample.mag_ut = fine[i - 30].sample.mag_ut;
+        rows.push_back(r);
+    }
+    const std::vector<ImuSample> samples = samples_of(rows);
+    EXPECT_NEAR(estimate_mag_delay(samples, 0.05).delay_s, 0.030, 0.002);
+    const std::vector<math::Quat> causal = run_causal(samples);
+    MocapFilter f;
+    const OfflineResult r = OfflineSmoother().smooth(f, samples);
+    EXPECT_NEAR(r.mag_delay_s, 0.030, 0.002);
+    EXPECT_LT(rms_deg(r.orientation, rows, 5.0, 35.0), 0.5 * rms_deg(causal, rows, 5.0, 35.0));
+}
+
+TEST(MagDelay, AdvanceInterpolatesAndMarksMissingReadings) {
+    std::vector<ImuSample> s(4);
+    for (std::size_t i = 0; i < s.size(); ++i) {
+        s[i].t_us = static_cast<std::int64_t>(i) * 10'000;
+        s[i].mag_ut = {10.0 * static_cast<double>(i), 0.0, 1.0};
+    }
+    s[2].flags = kImuNoMag;
+    const std::vector<ImuSample> same = advance_mag(s, 0.0);
+    for (std::size_t i = 0; i < s.size(); ++i) {
+        EXPECT_EQ(same[i].mag_ut, s[i].mag_ut);
+        EXPECT_EQ(same[i].flags, s[i].flags);
+    }
+    const std::vector<ImuSample> half = advance_mag(s, 0.005);
+    EXPECT_DOUBLE_EQ(half[0].mag_ut[0], 5.0);
+    EXPECT_TRUE(half[0].has_mag());
+    EXPECT_FALSE(half[1].has_mag());  // between readings 1 and 2, and 2 has none
+    EXPECT_FALSE(half[2].has_mag());
+    EXPECT_DOUBLE_EQ(half[3].mag_ut[0], 30.0);  // past the last reading: the last one
+    EXPECT_TRUE(half[3].has_mag());
+}
+
+TEST(MagDelay, NoEstimateWithoutEnoughTurningSamples) {
+    const auto still = testing::constant_rate(math::Quat::Identity(), math::Vec3::Zero(), 100.0, 10.0);
+    EXPECT_EQ(estimate_mag_delay(samples_of(still), 0.05).delay_s, 0.0);
+    EXPECT_EQ(estimate_mag_delay({}, 0.05).delay_s, 0.0);
+}
+
+}  // namespace
+}  // namespace mocap::filter
