@@ -1,7 +1,9 @@
-// filter_bench — cost of one update() per filter on the realistic scenario (100 Hz, 9-axis).
+// filter_bench — cost of one update() per filter on the realistic scenario (100 Hz, 9-axis),
+// and of the offline re-solve (OfflineSmoother with the default filter) per sample.
 //
 // A buffer of samples is generated once and cycled through, timestamps shifted on each
-// pass so the filters never see a gap. docs/performance.md records the numbers and the
+// pass so the filters never see a gap; the offline re-solve takes the whole buffer per
+// iteration and counts its samples as items, so its items/s reads as a cost per sample. docs/performance.md records the numbers and the
 // command. Not a ctest test (timing on a shared machine); a smoke run keeps it working.
 #include <benchmark/benchmark.h>
 
@@ -12,6 +14,7 @@
 #include "filter/madgwick.hpp"
 #include "filter/mahony.hpp"
 #include "filter/mocap_filter.hpp"
+#include "filter/offline_smoother.hpp"
 #include "filter/particle_filter.hpp"
 #include "sim/scenario.hpp"
 
@@ -66,11 +69,23 @@ void BM_ParticleFilter(benchmark::State& state) {
     run(state, f);
 }
 
+void BM_OfflineSmoother(benchmark::State& state) {
+    const std::vector<ImuSample>& buf = samples();
+    MocapFilter f;
+    const OfflineSmoother smoother;
+    for (auto _ : state) {
+        const OfflineResult r = smoother.smooth(f, buf);
+        benchmark::DoNotOptimize(r.orientation.data());
+    }
+    state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(buf.size()));
+}
+
 BENCHMARK_TEMPLATE(BM_Update, MadgwickFilter);
 BENCHMARK_TEMPLATE(BM_Update, MahonyFilter);
 BENCHMARK_TEMPLATE(BM_Update, MocapFilter);
 BENCHMARK_TEMPLATE(BM_Update, Csmo);
 BENCHMARK(BM_ParticleFilter)->Arg(64)->Arg(256)->Arg(1024);
+BENCHMARK(BM_OfflineSmoother)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
