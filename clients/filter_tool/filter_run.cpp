@@ -2,10 +2,10 @@
 
 #include <cstddef>
 #include <cstdio>
-#include <span>
-#include <utility>
 #include <numbers>
 #include <ostream>
+#include <span>
+#include <utility>
 
 namespace mocap::tools {
 
@@ -46,7 +46,8 @@ RunOutput collect(const Recording& recording, const RunOptions& options, std::sp
 std::vector<ImuSample> samples_of(const Recording& recording) {
     std::vector<ImuSample> samples;
     samples.reserve(recording.rows.size());
-    for (const RecordingRow& row : recording.rows) samples.push_back(row.sample);
+    for (const RecordingRow& row : recording.rows)
+        samples.push_back(row.sample);
     return samples;
 }
 
@@ -68,8 +69,8 @@ RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, c
     return out;
 }
 
-RunOutput run_offline(filter::OrientationFilter& f, const filter::OfflineSmoother& smoother,
-                      const Recording& recording, const RunOptions& options) {
+RunOutput run_offline(filter::OrientationFilter& f, const filter::OfflineSmoother& smoother, const Recording& recording,
+                      const RunOptions& options) {
     const std::vector<ImuSample> samples = samples_of(recording);
     return collect(recording, options, smoother.smooth(f, samples).orientation);
 }

@@ -56,8 +56,8 @@ RunOutput run_filter(filter::OrientationFilter& f, const Recording& recording, c
 /// The non-causal re-solve of the whole recording with `f` (offline_smoother.hpp), evaluated
 /// as run_filter is. RunOptions::trace is not honoured (a smoothed estimate has no
 /// per-sample filter state); the caller rejects it.
-RunOutput run_offline(filter::OrientationFilter& f, const filter::OfflineSmoother& smoother,
-                      const Recording& recording, const RunOptions& options);
+RunOutput run_offline(filter::OrientationFilter& f, const filter::OfflineSmoother& smoother, const Recording& recording,
+                      const RunOptions& options);
 
 /// Columns t,rest,mag_field_disturbed,mag_heading_disturbed,mag_rejected,mag_offset_weight,
 /// bias_x,bias_y,bias_z (gyro bias estimate, °/s, sensor frame),mag_offset_x,mag_offset_y,

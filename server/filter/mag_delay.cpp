@@ -23,7 +23,8 @@ Advanced advance(std::span<const ImuSample> samples, double delay_s) {
     std::size_t j = 0;  // samples[j].t_us <= t < samples[j + 1].t_us
     for (std::size_t i = 0; i < n; ++i) {
         const std::int64_t t = samples[i].t_us + delay_us;
-        while (j + 1 < n && samples[j + 1].t_us <= t) ++j;
+        while (j + 1 < n && samples[j + 1].t_us <= t)
+            ++j;
         if (j + 1 >= n || samples[j].t_us >= t) {
             // At or past the last reading, or exactly on one: that reading.
             a.mag_ut[i] = math::to_vec3(samples[j].mag_ut);
@@ -63,7 +64,8 @@ MagDelayEstimate estimate_mag_delay(std::span<const ImuSample> samples, double m
     if (samples.size() < 3 || max_delay_s <= 0.0) return est;
     std::vector<std::int64_t> steps;
     steps.reserve(samples.size() - 1);
-    for (std::size_t i = 1; i < samples.size(); ++i) steps.push_back(samples[i].t_us - samples[i - 1].t_us);
+    for (std::size_t i = 1; i < samples.size(); ++i)
+        steps.push_back(samples[i].t_us - samples[i - 1].t_us);
     std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
     const double ts_s = static_cast<double>(steps[steps.size() / 2]) * 1e-6;
     if (ts_s <= 0.0) return est;

@@ -21,7 +21,7 @@
 namespace mocap::filter {
 
 struct MagDelayEstimate {
-    double delay_s = 0.0;  ///< magnetometer lag behind the gyro, s (0 if not estimable)
+    double delay_s = 0.0;     ///< magnetometer lag behind the gyro, s (0 if not estimable)
     std::size_t samples = 0;  ///< samples that entered the estimate (turning, with a field reading)
 };
 

@@ -16,10 +16,10 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 
 /// One pass over the recording, per sample.
 struct PassOutput {
-    std::vector<math::Quat> q;          ///< the filter's estimate after the sample
-    std::vector<double> run_s;          ///< time the pass had run
-    std::vector<double> residual_rad;   ///< heading of the field reading seen through q
-    std::vector<char> mag_used;         ///< the filter used that reading (present, not rejected)
+    std::vector<math::Quat> q;         ///< the filter's estimate after the sample
+    std::vector<double> run_s;         ///< time the pass had run
+    std::vector<double> residual_rad;  ///< heading of the field reading seen through q
+    std::vector<char> mag_used;        ///< the filter used that reading (present, not rejected)
 };
 
 /// Runs `filter` over the samples in the order of `forward`: true from the first sample to
@@ -83,8 +83,10 @@ void residual_variances(std::span<const ImuSample> samples, const PassOutput& fw
     const auto window_us = static_cast<std::int64_t>(window_s * 1e6);
     std::size_t lo = 0, hi = 0;  // window [lo, hi)
     for (std::size_t i = 0; i < n; ++i) {
-        while (samples[lo].t_us < samples[i].t_us - window_us) ++lo;
-        while (hi < n && samples[hi].t_us <= samples[i].t_us + window_us) ++hi;
+        while (samples[lo].t_us < samples[i].t_us - window_us)
+            ++lo;
+        while (hi < n && samples[hi].t_us <= samples[i].t_us + window_us)
+            ++hi;
         const double c = count[hi] - count[lo];
         if (c < per_second) continue;
         var_fwd[i] = (sf[hi] - sf[lo]) / c;
@@ -94,16 +96,16 @@ void residual_variances(std::span<const ImuSample> samples, const PassOutput& fw
 
 }  // namespace
 
-OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const ImuSample> raw) const {
+OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const ImuSample> samples) const {
     OfflineResult result;
-    if (raw.empty()) return result;
-    result.mag_delay_s = estimate_mag_delay(raw, params_.mag_delay_max_s).delay_s;
-    const std::vector<ImuSample> samples = advance_mag(raw, result.mag_delay_s);
+    if (samples.empty()) return result;
+    result.mag_delay_s = estimate_mag_delay(samples, params_.mag_delay_max_s).delay_s;
+    const std::vector<ImuSample> aligned = advance_mag(samples, result.mag_delay_s);
 
-    const PassOutput fwd = run_pass(filter, samples, true);
-    const PassOutput bwd = run_pass(filter, samples, false);
+    const PassOutput fwd = run_pass(filter, aligned, true);
+    const PassOutput bwd = run_pass(filter, aligned, false);
     std::vector<double> resid_fwd, resid_bwd;
-    residual_variances(samples, fwd, bwd, params_.residual_window_s, resid_fwd, resid_bwd);
+    residual_variances(aligned, fwd, bwd, params_.residual_window_s, resid_fwd, resid_bwd);
 
     const double floor = params_.sigma_floor_deg * kDeg;
     const double start = params_.sigma_start_deg * kDeg;
@@ -111,7 +113,7 @@ OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const
         const double s = start * std::exp(-run_s / params_.converge_tau_s);
         return floor * floor + s * s + resid;
     };
-    const std::size_t n = samples.size();
+    const std::size_t n = aligned.size();
     result.orientation.resize(n);
     result.forward_weight.resize(n);
     for (std::size_t i = 0; i < n; ++i) {

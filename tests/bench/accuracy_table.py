@@ -736,7 +736,11 @@ shifted by a fixed 3 samples: 1.92 / 1.89 / 2.23 against 1.81 with the default 1
 Recording 01 is the one the re-solve makes worse (1.92° online): in its slow rotations the
 field's heading, seen through the reference, sits about 2.5° off the reference's heading at rest,
 the forward pass lags it towards the reference and the backward pass away from it; VQF's offline
-mode shows the same (3.37° against 1.99° online).
+mode shows the same (3.37° against 1.99° online). The committed 87 s excerpt of recording 36
+(ctest `accuracy_real_excerpt_offline`) is the other: 2.71° offline against 1.43° online, where
+the whole recording gives 1.39° against 1.46°. The excerpt ends 10 s before the magnet is
+attached, so the backward pass starts with little undisturbed field behind it; a short take that
+ends near a disturbance is where the blend is weakest today.
 
 Cost, side by side in one run (`BM_OfflineSmoother`, the whole 9001-sample `realistic` recording per
 iteration, against one `mocap` update): 0.90 µs per sample against 0.37 µs (2.4×: the lag search,

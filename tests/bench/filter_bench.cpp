@@ -3,8 +3,8 @@
 //
 // A buffer of samples is generated once and cycled through, timestamps shifted on each
 // pass so the filters never see a gap; the offline re-solve takes the whole buffer per
-// iteration and counts its samples as items, so its items/s reads as a cost per sample. docs/performance.md records the numbers and the
-// command. Not a ctest test (timing on a shared machine); a smoke run keeps it working.
+// iteration and counts its samples as items, so its items/s reads as a cost per sample. docs/performance.md records the
+// numbers and the command. Not a ctest test (timing on a shared machine); a smoke run keeps it working.
 #include <benchmark/benchmark.h>
 
 #include <memory>

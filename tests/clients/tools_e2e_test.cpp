@@ -192,10 +192,10 @@ TEST_F(ToolsEndToEnd, OfflineReSolvesTheWholeRecording) {
     // disturbance that the forward pass has to carry through it on the gyro.
     EXPECT_LT(json_number(offline.out, "rmse_total_deg"), json_number(online.out, "rmse_total_deg") - 0.1);
     // A trace describes a causal run: asking for both is a command-line error.
-    EXPECT_EQ(run(filt("--filter mocap --in " + in + " --out " + out + " --offline --trace " +
-                       path("trace.csv").string()))
-                  .exit_code,
-              2);
+    EXPECT_EQ(
+        run(filt("--filter mocap --in " + in + " --out " + out + " --offline --trace " + path("trace.csv").string()))
+            .exit_code,
+        2);
 }
 
 TEST_F(ToolsEndToEnd, NedFrameGivesTheSameTotalErrorAndNedOutput) {
