@@ -84,7 +84,10 @@ public:
     /// then every kEnsureRetry while it fails), then publishes everything queued.
     void publish_queued();
     /// Publisher thread: the connection was lost; check the stream again when it is back.
-    void connection_lost() { stream_ready_ = false; }
+    void connection_lost() {
+        stream_ready_ = false;
+        next_ensure_us_ = 0;  // at once when it is back, not after a retry wait of the old connection
+    }
     /// Publisher thread, before a connection the client closed is destroyed: what it still
     /// owed an acknowledgement is counted as failed and the context is freed; the queue stays
     /// for the next attach().
