@@ -10,7 +10,7 @@
 #         assembler), ingest (sink listener), serve (pose server, broadcaster, clients, live
 #         BVH, HTTP/WebSocket, recorders, the VMC sender) and the integration tests, which run the TSan-built
 #         mocapd itself (the wired pipeline: ingest, workers, assembler, servers, recorder
-#         writers on a full disk, signals, a played take).
+#         writers on a full disk, signals, a played take, takes recorded and exported).
 #         ctest -R selects their test suites by name.
 #   all   both (default).
 #
@@ -30,7 +30,7 @@ export TSAN_OPTIONS="${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}"
 
 tsan_executables=(core_tests ingest_tests serve_tests serve_outputs_tests serve_http_tests serve_vmc_tests
                   daemon_integration_tests faults_integration_tests http_integration_tests
-                  disk_integration_tests limits_integration_tests play_integration_tests)
+                  disk_integration_tests limits_integration_tests play_integration_tests takes_integration_tests)
 
 # ctest in DIR with ARGS; after a failure the digest of why (tests/ctest_digest.py) comes last.
 run_ctest() {

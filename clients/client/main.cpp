@@ -5,7 +5,9 @@
 //   mocap-client --connect HOST:PORT stats [--json]
 //   mocap-client --connect HOST:PORT control --token T calibrate --subject ID [--pose T|N]
 //   mocap-client --connect HOST:PORT control --token T record-start [--path FILE]
-//   mocap-client --connect HOST:PORT control --token T record-stop | reload
+//   mocap-client --connect HOST:PORT control --token T record-start --take [--name N] [--notes TEXT]
+//   mocap-client --connect HOST:PORT control --token T record-stop [--take] | reload
+//   mocap-client [--http HOST:PORT] takes list|download|start|stop|delete ... (take_commands.hpp)
 //   mocap-client --connect HOST:PORT load --clients N --duration S [--protocol pose|bvh|ws] [--json]
 //   mocap-client --connect HOST:7002 record --out FILE.bvh --frames N [--subject ID]
 //   mocap-client --connect HOST:PORT angles --out FILE.csv --frames N [--subject ID]
@@ -27,6 +29,7 @@
 #include "nats_pose_client.hpp"
 #include "output_commands.hpp"
 #include "pose_client.hpp"
+#include "take_commands.hpp"
 
 namespace {
 
@@ -219,7 +222,7 @@ int run_control(PoseClient& client, const v1::ControlRequest& request) {
         std::cerr << "mocap-client: refused: " << reply.error() << "\n";
         return kExitFailed;
     }
-    std::cout << "ok\n";
+    std::cout << "ok" << (reply.take_name().empty() ? "" : " " + reply.take_name()) << "\n";
     return 0;
 }
 
@@ -291,10 +294,18 @@ static int run(int argc, char** argv) {
     calibrate->add_option("--pose", cal_pose, "T or N")
         ->check(CLI::IsMember({"T", "N", "t", "n"}))
         ->capture_default_str();
-    auto* record_start = control->add_subcommand("record-start", "start recording");
+    auto* record_start = control->add_subcommand("record-start", "start recording a BVH file, or a take");
     std::string record_path;
-    record_start->add_option("--path", record_path, "output path (default: the daemon's)");
-    auto* record_stop = control->add_subcommand("record-stop", "stop recording");
+    bool record_take = false;
+    std::string take_name, take_notes;
+    auto* path_opt = record_start->add_option("--path", record_path, "BVH output path (default: the daemon's)");
+    auto* take_flag =
+        record_start->add_flag("--take", record_take, "start a take (raw samples + metadata)")->excludes(path_opt);
+    record_start->add_option("--name", take_name, "take name (default: take-<UTC start>)")->needs(take_flag);
+    record_start->add_option("--notes", take_notes, "take notes")->needs(take_flag);
+    auto* record_stop = control->add_subcommand("record-stop", "stop recording the BVH file, or the take");
+    bool stop_take = false;
+    record_stop->add_flag("--take", stop_take, "stop the running take");
     auto* reload = control->add_subcommand("reload", "reload the configuration");
 
     auto* load = app.add_subcommand("load", "N subscriptions; frames, gaps, drops, latency");
@@ -333,9 +344,53 @@ static int run(int argc, char** argv) {
             ->capture_default_str();
     }
 
+    // Takes over the web endpoint (take_commands.hpp).
+    std::string http_endpoint = "127.0.0.1:8080";
+    app.add_option("--http", http_endpoint, "mocapd's web endpoint, for takes")->capture_default_str();
+    mocap::client::TakeCommand take_command;
+    double takes_timeout_s = 120.0;
+    auto* takes = app.add_subcommand("takes", "list, download, start, stop and delete takes (web endpoint)");
+    takes->add_option("--token", take_command.token, "control token for start/stop/delete (or set MOCAP_TOKEN)");
+    takes->add_option("--timeout", takes_timeout_s, "seconds any socket call may take (an export can be long)")
+        ->capture_default_str();
+    takes->require_subcommand(1);
+    auto* takes_list = takes->add_subcommand("list", "the takes, one line each");
+    takes_list->add_flag("--json", take_command.json, "the daemon's JSON as is");
+    auto* takes_download = takes->add_subcommand("download", "a take as raw, BVH or joint-angle CSV");
+    takes_download->add_option("name", take_command.name, "take name")->required();
+    takes_download->add_option("--format", take_command.format, "raw, bvh or csv")
+        ->check(CLI::IsMember({"raw", "bvh", "csv"}))
+        ->capture_default_str();
+    takes_download->add_option("--filter", take_command.filter, "bvh/csv: re-solve with this filter");
+    takes_download->add_option("--subject", take_command.subject, "bvh: the subject (default: the daemon's rule)");
+    takes_download->add_option("-o,--out", take_command.out, "output file (default: NAME.<format>; must not exist)");
+    auto* takes_start = takes->add_subcommand("start", "start a take");
+    takes_start->add_option("--name", take_command.name, "take name (default: take-<UTC start>)");
+    takes_start->add_option("--notes", take_command.notes, "free text kept with the take");
+    takes->add_subcommand("stop", "stop the running take");
+    auto* takes_delete = takes->add_subcommand("delete", "delete a take");
+    takes_delete->add_option("name", take_command.name, "take name")->required();
+
     CLI11_PARSE(app, argc, argv);
 
     std::string error;
+    if (*takes) {
+        const auto http = mocap::client::parse_endpoint(http_endpoint, error);
+        if (!http) {
+            std::cerr << "mocap-client: --http: " << error << "\n";
+            return kExitConnection;
+        }
+        take_command.host = http->host;
+        take_command.port = http->port;
+        take_command.action = takes->get_subcommands().front()->get_name();
+        take_command.timeout = std::chrono::milliseconds(static_cast<long long>(takes_timeout_s * 1000));
+        if (take_command.token.empty()) {
+            // Single-threaded here: no other thread exists yet to change the environment.
+            // NOLINTNEXTLINE(concurrency-mt-unsafe)
+            if (const char* env = std::getenv("MOCAP_TOKEN")) take_command.token = env;
+        }
+        return mocap::client::run_takes(take_command);
+    }
     const auto connect_timeout = std::chrono::milliseconds(static_cast<long long>(connect_timeout_s * 1000));
     export_options.timeout = std::chrono::milliseconds(static_cast<long long>(export_timeout_s * 1000));
     if (*load) {
@@ -409,9 +464,13 @@ static int run(int argc, char** argv) {
         request.mutable_calibrate()->set_subject_id(cal_subject);
         request.mutable_calibrate()->set_pose(cal_pose == "N" || cal_pose == "n" ? v1::POSE_N : v1::POSE_T);
     } else if (*record_start) {
-        request.mutable_start_recording()->set_path(record_path);
+        auto* start = request.mutable_start_recording();
+        start->set_path(record_path);
+        start->set_take(record_take);
+        start->set_take_name(take_name);
+        start->set_notes(take_notes);
     } else if (*record_stop) {
-        request.mutable_stop_recording();
+        request.mutable_stop_recording()->set_take(stop_take);
     } else if (*reload) {
         request.mutable_reload();
     }

@@ -9,6 +9,7 @@
 #include "cluster/calibration_bucket.hpp"
 #include "daemon/config_check.hpp"
 #include "daemon/peer_limits.hpp"
+#include "daemon/take_export.hpp"
 
 namespace mocap::daemon {
 
@@ -42,6 +43,10 @@ serve::ControlHandlers Daemon::control_handlers() {
         return bvh_recorder_->stop_recording(&err) ? serve::ControlResult::success()
                                                    : serve::ControlResult::failure(err);
     };
+    handlers.start_take = [this](const std::string& name, const std::string& notes) {
+        return take_recorder_->start_take(name, notes);
+    };
+    handlers.stop_take = [this] { return take_recorder_->stop_take(); };
     return handlers;
 }
 
@@ -70,6 +75,13 @@ bool Daemon::start(std::string* error) {
     pipeline_->solver().load_calibrations();
 
     // Outputs (docs/outputs.md): every one comes from the registry in outputs.cpp.
+    // Takes live under the record directory (docs/outputs.md, "Takes"); a download re-solves
+    // one with this config (daemon/take_export.hpp), on the web endpoint's export thread.
+    auto takes = std::make_shared<serve::TakeStore>(config_.record_dir + "/takes");
+    serve::TakeExporter exporter = [config = config_, takes](const serve::TakeExportRequest& request,
+                                                             const std::atomic<bool>& cancel) {
+        return export_take(config, *takes, request, cancel);
+    };
     const OutputContext outputs{config_,
                                 *pipeline_,
                                 clock_,
@@ -77,10 +89,13 @@ bool Daemon::start(std::string* error) {
                                 [this] { return metrics(); },
                                 [this] { return health(); },
                                 nullptr,
-                                std::make_shared<serve::ControlAttemptLimiter>()};
+                                std::make_shared<serve::ControlAttemptLimiter>(),
+                                takes,
+                                std::move(exporter)};
     add_outputs(outputs, *pipeline_);
     for (const auto& o : pipeline_->outputs()) {
         if (auto* r = dynamic_cast<BvhRecorderOutput*>(o.get())) bvh_recorder_ = r;
+        if (auto* t = dynamic_cast<TakeRecorderOutput*>(o.get())) take_recorder_ = t;
     }
 
     // Ingest: the sinks and the CAN buses, or a recorded take played as if live.

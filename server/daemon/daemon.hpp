@@ -81,6 +81,7 @@ private:
     std::unique_ptr<pipeline::Pipeline> pipeline_;
     // Set once in start(): the output the control handlers reach by type.
     BvhRecorderOutput* bvh_recorder_ = nullptr;
+    TakeRecorderOutput* take_recorder_ = nullptr;
     // Filled in start() before any reader runs; read-only afterwards (core/metrics_registry.hpp).
     MetricsRegistry metrics_;
 

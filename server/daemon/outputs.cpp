@@ -281,6 +281,16 @@ std::unique_ptr<pipeline::Output> make_raw_recorder(const OutputContext& ctx) {
     return std::make_unique<RawRecorderOutput>(rrc, ctx.clock);
 }
 
+std::unique_ptr<pipeline::Output> make_take_recorder(const OutputContext& ctx) {
+    if (ctx.replay || !ctx.takes) return nullptr;
+    serve::TakeRecorderConfig tc;
+    tc.raw.flush_interval_s = ctx.config.record_flush_interval_s;
+    tc.raw.ring_capacity = ctx.config.raw_ring_capacity;
+    tc.filter = ctx.config.filter_name;
+    tc.calibration_dir = ctx.config.calibration_dir;
+    return std::make_unique<TakeRecorderOutput>(*ctx.takes, tc, ctx.clock);
+}
+
 std::unique_ptr<pipeline::Output> make_angles_csv(const OutputContext& ctx) {
     if (!ctx.replay || ctx.replay->angles_out.empty()) return nullptr;
     return std::make_unique<AnglesCsvOutput>(ctx.replay->angles_out, joint_angle_names(ctx.pipeline));
@@ -308,6 +318,8 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     hh.control = ctx.control;
     hh.metrics = ctx.metrics;
     hh.health = ctx.health;
+    hh.takes = ctx.takes;
+    hh.export_take = ctx.export_take;
     return std::make_unique<HttpOutput>(
         std::make_unique<serve::HttpServer>(std::move(hc), std::move(hd), std::move(hh)));
 }
@@ -343,14 +355,15 @@ std::unique_ptr<pipeline::Output> make_vmc(const OutputContext& ctx) {
 
 // The registry: one line per output, in the order they receive frames.
 constexpr OutputEntry kOutputs[] = {
-    {"pose", &make_pose_service},        // [pose] protobuf pose service (always on live)
-    {"bvh_live", &make_bvh_live},        // [outputs].bvh_live
-    {"bvh_record", &make_bvh_recorder},  // [outputs].record_dir (live, by control); --bvh-out (replay)
-    {"raw_record", &make_raw_recorder},  // [outputs].raw_record
-    {"angles_csv", &make_angles_csv},    // --angles-out (replay)
-    {"http", &make_http},                // [http].enabled
-    {"cluster", &make_cluster},          // [cluster].nats_url
-    {"vmc", &make_vmc},                  // [vmc].enabled
+    {"pose", &make_pose_service},          // [pose] protobuf pose service (always on live)
+    {"bvh_live", &make_bvh_live},          // [outputs].bvh_live
+    {"bvh_record", &make_bvh_recorder},    // [outputs].record_dir (live, by control); --bvh-out (replay)
+    {"raw_record", &make_raw_recorder},    // [outputs].raw_record
+    {"take_record", &make_take_recorder},  // live: takes in <record_dir>/takes, by control
+    {"angles_csv", &make_angles_csv},      // --angles-out (replay)
+    {"http", &make_http},                  // [http].enabled
+    {"cluster", &make_cluster},            // [cluster].nats_url
+    {"vmc", &make_vmc},                    // [vmc].enabled
 };
 
 }  // namespace

@@ -22,6 +22,7 @@
 #include "serve/bvh_recorder.hpp"
 #include "serve/http_server.hpp"
 #include "serve/pose_server.hpp"
+#include "serve/take_recorder.hpp"
 
 namespace mocap::daemon {
 
@@ -38,6 +39,9 @@ struct OutputContext {
     const ReplayOptions* replay = nullptr;
     /// Failed control attempts, counted once for the pose service and HTTP together.
     std::shared_ptr<serve::ControlAttemptLimiter> control_attempts = nullptr;  ///< null: each server makes its own
+    /// The takes (live only): recorded by the take_record output, served by HTTP.
+    std::shared_ptr<serve::TakeStore> takes = nullptr;
+    serve::TakeExporter export_take = nullptr;  ///< BVH/CSV downloads of takes (daemon/take_export.hpp)
 };
 
 /// Returns the output, or nullptr when its config section leaves it off.
@@ -81,6 +85,36 @@ private:
     serve::BvhRecorder recorder_;
     std::string start_path_;
     std::uint64_t frames_written_ = 0;
+};
+
+/// Takes (serve/take_recorder.hpp): every sample of a running take into its raw file; started
+/// and stopped by control requests. Live, whenever the daemon has a take store.
+class TakeRecorderOutput final : public pipeline::Output {
+public:
+    TakeRecorderOutput(serve::TakeStore& store, const serve::TakeRecorderConfig& config, const Clock& clock)
+        : recorder_(store, config, clock) {}
+    [[nodiscard]] std::string_view name() const override { return "take_record"; }
+    bool start(std::string* /*error*/) override { return true; }
+    /// Stops a running take (ingest, its producer, has stopped).
+    bool stop(std::string* error) override {
+        if (!recorder_.running()) return true;
+        const serve::ControlResult r = recorder_.stop();
+        if (!r.ok) *error = r.error;
+        return r.ok;
+    }
+    void on_frame(const SubjectFrame& /*frame*/, const skeleton::SkeletonPose& /*pose*/) override {}
+    [[nodiscard]] bool wants_samples() const override { return true; }
+    void on_sample(const SegmentSample& sample) override { recorder_.push(sample); }
+    void register_metrics(MetricsRegistry& registry) const override { recorder_.register_metrics(registry); }
+
+    /// Control requests (any thread).
+    serve::ControlResult start_take(const std::string& name, const std::string& notes) {
+        return recorder_.start(name, notes);
+    }
+    serve::ControlResult stop_take() { return recorder_.stop(); }
+
+private:
+    serve::TakeRecorder recorder_;
 };
 
 }  // namespace mocap::daemon

@@ -210,6 +210,10 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
         serve::RawRecordingReader reader;
         if (!reader.open(path, error)) return false;
         for (;;) {
+            if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed)) {
+                *error = "cancelled";
+                return false;
+            }
             const int r = reader.next(s, error);
             if (r < 0) {
                 *error = path + ": " + *error;

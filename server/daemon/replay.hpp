@@ -24,6 +24,7 @@
 // would.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -66,6 +67,9 @@ struct ReplayOptions {
     std::string angles_out;         ///< "" = no CSV
     std::string calibration_dir;    ///< "" = neither load nor save calibrations
     std::vector<ReplayCalibration> calibrate;
+    /// Non-null: checked per sample; once true the replay stops and returns false (a take
+    /// export the daemon abandons, daemon/take_export.hpp).
+    const std::atomic<bool>* cancel = nullptr;
 };
 
 struct ReplayResult {

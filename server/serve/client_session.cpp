@@ -262,11 +262,23 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
                 result = h.calibrate ? h.calibrate(request.calibrate().subject_id(), pose) : unsupported();
                 break;
             }
-            case R::kStartRecording:
-                result = h.start_recording ? h.start_recording(request.start_recording().path()) : unsupported();
+            case R::kStartRecording: {
+                const auto& start = request.start_recording();
+                if (!start.take()) {
+                    result = h.start_recording ? h.start_recording(start.path()) : unsupported();
+                } else if (!start.path().empty()) {
+                    result = ControlResult::failure("a take has a name, not a path");
+                } else {
+                    result = h.start_take ? h.start_take(start.take_name(), start.notes()) : unsupported();
+                }
                 break;
+            }
             case R::kStopRecording:
-                result = h.stop_recording ? h.stop_recording() : unsupported();
+                if (request.stop_recording().take()) {
+                    result = h.stop_take ? h.stop_take() : unsupported();
+                } else {
+                    result = h.stop_recording ? h.stop_recording() : unsupported();
+                }
                 break;
             case R::kReload:
                 result = h.reload ? h.reload() : unsupported();
@@ -282,6 +294,7 @@ void ClientSession::handle_control(const v1::ClientMessage& message) {
     reply->set_request_id(request.request_id());
     reply->set_ok(result.ok);
     reply->set_error(result.error);
+    reply->set_take_name(result.take);
     send_reply(*reply_);
 }
 

@@ -7,8 +7,8 @@
 
 #include <chrono>
 
-#include "core/parse_number.hpp"
 #include "serve/control_access.hpp"
+#include "serve/http_query.hpp"
 #include "serve/origin_check.hpp"
 #include "serve/pose_json.hpp"
 #include "serve/viewer_assets.hpp"
@@ -23,25 +23,6 @@ namespace {
 
 constexpr std::size_t kMaxRequestHeaderBytes = std::size_t{8} * 1024;
 constexpr std::size_t kMaxRequestBodyBytes = std::size_t{16} * 1024;
-
-// "a=1&b=x" -> value of `key` (no percent-decoding: the keys and values used are plain).
-std::optional<std::string_view> query_value(std::string_view query, std::string_view key) {
-    while (!query.empty()) {
-        const std::size_t amp = query.find('&');
-        const std::string_view pair = query.substr(0, amp);
-        const std::size_t eq = pair.find('=');
-        if (pair.substr(0, eq) == key) return eq == std::string_view::npos ? "" : pair.substr(eq + 1);
-        if (amp == std::string_view::npos) break;
-        query.remove_prefix(amp + 1);
-    }
-    return std::nullopt;
-}
-
-std::optional<std::uint32_t> parse_u32(std::string_view s) {
-    std::uint32_t v = 0;
-    if (!core::parse_number(s, v)) return std::nullopt;
-    return v;
-}
 
 }  // namespace
 
@@ -136,6 +117,7 @@ void HttpServer::HttpSession::respond(const Request& request, std::string_view p
         return h.ok ? send_text(request, http::status::ok, "ok\n")
                     : send_text(request, http::status::service_unavailable, "unhealthy: " + h.detail + "\n");
     }
+    if (path == "/api/takes" || path.starts_with("/api/takes/")) return takes(request, path, query);
     if (path.substr(0, 5) == "/api/") {
         if (request.method() != http::verb::post) {
             return send_text(request, http::status::method_not_allowed, "POST only\n");
@@ -159,30 +141,34 @@ void HttpServer::HttpSession::respond(const Request& request, std::string_view p
     send_text(request, http::status::not_found, "not found\n");
 }
 
-// POST /api/...: token and loopback checks first, then the daemon's handler.
-void HttpServer::HttpSession::control(const Request& request, std::string_view path, std::string_view query) {
+bool HttpServer::HttpSession::authorized(const Request& request, std::string_view path) {
     const HttpServerConfig& config = server_.config_;
-    HttpServerCounters& counters = server_.counters_;
-    auto reply = [&](http::status status, const ControlResult& r) {
-        send_text(request, status, encode_control_reply_json(r), "application/json");
-    };
     const auto token_field = request.find("X-Mocap-Token");
     const std::string_view token = token_field == request.end()
                                        ? std::string_view()
                                        : std::string_view(token_field->value().data(), token_field->value().size());
     const std::string who = fmt::format("http: control request {}", path);
-    if (const auto refusal =
-            authorize_control({config.control_token, config.control_loopback_only, config.control_attempts.get()},
-                              remote_address(stream_.socket()), token, counters.control, server_.log_, who)) {
-        const bool token_problem =
-            refusal->kind == ControlRefusal::kNoToken || refusal->kind == ControlRefusal::kBadToken;
-        // 401 tells the viewer to ask for the token again; 429: wait, too many failed
-        // attempts (control_access.hpp); 403: no token would help.
-        const http::status status = refusal->kind == ControlRefusal::kThrottled ? http::status::too_many_requests
-                                    : token_problem                             ? http::status::unauthorized
-                                                                                : http::status::forbidden;
-        return reply(status, ControlResult::failure(refusal->reason));
-    }
+    const auto refusal =
+        authorize_control({config.control_token, config.control_loopback_only, config.control_attempts.get()},
+                          remote_address(stream_.socket()), token, server_.counters_.control, server_.log_, who);
+    if (!refusal) return true;
+    const bool token_problem = refusal->kind == ControlRefusal::kNoToken || refusal->kind == ControlRefusal::kBadToken;
+    // 401 tells the viewer to ask for the token again; 429: wait, too many failed
+    // attempts (control_access.hpp); 403: no token would help.
+    const http::status status = refusal->kind == ControlRefusal::kThrottled ? http::status::too_many_requests
+                                : token_problem                             ? http::status::unauthorized
+                                                                            : http::status::forbidden;
+    send_text(request, status, encode_control_reply_json(ControlResult::failure(refusal->reason)), "application/json");
+    return false;
+}
+
+// POST /api/...: token and loopback checks first, then the daemon's handler.
+void HttpServer::HttpSession::control(const Request& request, std::string_view path, std::string_view query) {
+    HttpServerCounters& counters = server_.counters_;
+    auto reply = [&](http::status status, const ControlResult& r) {
+        send_text(request, status, encode_control_reply_json(r), "application/json");
+    };
+    if (!authorized(request, path)) return;
     const ControlHandlers& h = server_.handlers_.control;
     std::optional<ControlResult> result;
     if (path == "/api/calibrate") {
@@ -208,18 +194,24 @@ void HttpServer::HttpSession::control(const Request& request, std::string_view p
 
 void HttpServer::HttpSession::send_text(const Request& request, http::status status, std::string body,
                                         const char* content_type) {
+    send_text({request.version(), request.keep_alive(), request.method() == http::verb::head}, status, std::move(body),
+              content_type);
+}
+
+void HttpServer::HttpSession::send_text(const ReplyTo& to, http::status status, std::string body,
+                                        const char* content_type) {
     if (static_cast<unsigned>(status) >= 400 && status != http::status::service_unavailable &&
         status != http::status::conflict) {
         server_.counters_.bad_requests.add();
     }
-    http::response<http::string_body> res{status, request.version()};
+    http::response<http::string_body> res{status, to.version};
     res.set(http::field::server, "mocapd");
     res.set(http::field::content_type, content_type);
     res.set(http::field::cache_control, "no-store");
     res.body() = std::move(body);
-    res.keep_alive(request.keep_alive());
+    res.keep_alive(to.keep_alive);
     res.prepare_payload();
-    if (request.method() == http::verb::head) res.body().clear();
+    if (to.head) res.body().clear();
     send(std::move(res));
 }
 

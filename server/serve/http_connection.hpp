@@ -1,5 +1,6 @@
 // http_connection.hpp — one HTTP/1.1 connection of the web endpoint (keep-alive): reads
-// requests and answers them (viewer files, /metrics, /healthz, POST /api/... control), or
+// requests and answers them (viewer files, /metrics, /healthz, POST /api/... control, the
+// takes under /api/takes: http_takes.cpp), or
 // hands its socket to a WsSession after an Upgrade on /ws. Its lane's thread only.
 #pragma once
 
@@ -12,6 +13,7 @@
 #include <string_view>
 
 #include "serve/http_server.hpp"
+#include "serve/take_export_queue.hpp"
 #include "serve/ws_connection.hpp"  // HttpServer::Session
 
 namespace mocap::serve {
@@ -26,14 +28,36 @@ public:
 
 private:
     using Request = boost::beast::http::request<boost::beast::http::string_body>;
+    using FileResponse = boost::beast::http::response<boost::beast::http::file_body>;
+    /// What a reply needs of its request, kept while the request waits for a take export.
+    struct ReplyTo {
+        unsigned version = 11;
+        bool keep_alive = false;
+        bool head = false;
+    };
 
     void do_read();
     void on_read(const boost::beast::error_code& ec);
     void upgrade(Request request, std::string_view query);
     void respond(const Request& request, std::string_view path, std::string_view query);
     void control(const Request& request, std::string_view path, std::string_view query);
+    /// The control rules (control_access.hpp); false = refused, and the refusal was sent.
+    bool authorized(const Request& request, std::string_view path);
     void send_text(const Request& request, boost::beast::http::status status, std::string body,
                    const char* content_type = "text/plain; charset=utf-8");
+    void send_text(const ReplyTo& to, boost::beast::http::status status, std::string body,
+                   const char* content_type = "text/plain; charset=utf-8");
+    // /api/takes... (http_takes.cpp)
+    void takes(const Request& request, std::string_view path, std::string_view query);
+    void start_or_stop_take(const Request& request, std::string_view path, std::string_view query);
+    void download(const Request& request, const std::string& name, std::string_view query);
+    void on_export(const ReplyTo& to, const std::string& file_name, const TakeExportResult& result);
+    /// Streams an open file (taken over: closed when sent), one chunk per write, each with
+    /// the idle timeout, so a stalled client is dropped and a slow one is not.
+    void send_file(const ReplyTo& to, int fd, const char* content_type, const std::string& file_name);
+    void write_file_some(
+        const std::shared_ptr<FileResponse>& res,
+        const std::shared_ptr<boost::beast::http::response_serializer<boost::beast::http::file_body>>& sr);
     template <class Body>
     void send(boost::beast::http::response<Body>&& response);
     void on_write(const boost::beast::error_code& ec);

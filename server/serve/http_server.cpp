@@ -31,6 +31,11 @@ HttpServerCounters::HttpServerCounters() {
     group.add("ws_backlog_dropped", ws_backlog_dropped);
     group.add("ws_client_messages", ws_client_messages);
     group.add("write_errors", write_errors);
+    group.add("takes_listed", takes_listed);
+    group.add("take_downloads", take_downloads);
+    group.add("take_exports_busy", take_exports_busy);
+    group.add("take_exports_failed", take_exports_failed);
+    group.add("takes_deleted", takes_deleted);
     control.register_in(group);
 }
 
@@ -52,7 +57,8 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
       sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections_closed)),
       ws_sessions_(serve_.lanes()),
       backlog_(serve_.ios(), config_.publish_backlog_frames,
-               [this](std::size_t lane, const SubjectText& frame) { deliver(lane, frame); }) {
+               [this](std::size_t lane, const SubjectText& frame) { deliver(lane, frame); }),
+      exports_(config_.export_waiting) {
     register_metrics(own_metrics_);
     if (!config_.control_attempts) config_.control_attempts = std::make_shared<ControlAttemptLimiter>();
     if (!config_.wall_clock_us) {
@@ -73,6 +79,8 @@ bool HttpServer::start(std::string& error) {
 }
 
 void HttpServer::stop() {
+    // Exports first: a running one is cancelled and answers its client while the lanes run.
+    exports_.stop();
     serve_.stop();
 }
 

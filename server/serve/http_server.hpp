@@ -11,6 +11,15 @@
 //        [control] token; refused when no token is configured, and from non-loopback
 //        peers when loopback_only. A custom header cannot be sent cross-site without a
 //        CORS preflight, which this server never grants. Reply: JSON {"ok":..,"error":..}.
+//   GET    /api/takes                       the takes, JSON (take_store.hpp)
+//   GET    /api/takes/NAME                  one take, JSON
+//   GET    /api/takes/NAME/download?format=raw|bvh|csv[&filter=F][&subject=N]
+//          raw: the recorded file as is; bvh/csv: re-solved from it by the daemon's exporter
+//          (HttpHandlers::export_take) on the TakeExportQueue's thread, never on a serve
+//          thread; 503 when that queue is full
+//   POST   /api/takes/start[?name=N][&notes=TEXT], /api/takes/stop     control (token)
+//   DELETE /api/takes/NAME                                             control (token)
+//   docs/client-protocol.md, "Takes" has the details and the replies.
 //
 // WebSocket messages (text, one JSON object each; numbers in SI units, wall-clock µs):
 //   {"type":"hello","subject":N,"subjects":[..],"world_frame":"ENU","queue_frames":Q,
@@ -61,6 +70,8 @@
 #include "serve/serve_counters.hpp"
 #include "serve/serve_thread.hpp"
 #include "serve/session_table.hpp"
+#include "serve/take_export_queue.hpp"
+#include "serve/take_store.hpp"
 #include "skeleton/skeleton_pose.hpp"
 
 namespace mocap::serve {
@@ -86,7 +97,8 @@ struct HttpServerConfig {
     std::shared_ptr<ControlAttemptLimiter> control_attempts;
     /// Wall clock (CLOCK_REALTIME µs) for encoded_us; empty = system_clock.
     std::function<std::int64_t()> wall_clock_us;
-    std::size_t threads = 1;  ///< serve threads ([http] threads); connections spread over them
+    std::size_t threads = 1;         ///< serve threads ([http] threads); connections spread over them
+    std::size_t export_waiting = 4;  ///< take exports that may wait behind the running one
 };
 
 struct HttpSegment {
@@ -114,6 +126,10 @@ struct HttpHandlers {
     /// (register_metrics). Empty = this server's own metrics only.
     std::function<MetricsSnapshot()> metrics;
     std::function<HealthStatus()> health;  ///< empty = always healthy
+    std::shared_ptr<TakeStore> takes;      ///< null = no /api/takes
+    /// Re-solves a take into BVH or CSV; called on the export queue's thread, not a serve
+    /// thread. Empty = those formats answer 501.
+    TakeExporter export_take;
 };
 
 struct HttpServerCounters {
@@ -135,6 +151,11 @@ struct HttpServerCounters {
     Counter ws_backlog_dropped;  ///< the serve thread fell behind publish()
     Counter ws_client_messages;  ///< messages browsers sent (ignored)
     Counter write_errors;
+    Counter takes_listed;         ///< GET /api/takes and /api/takes/NAME answered
+    Counter take_downloads;       ///< downloads whose file started to go out
+    Counter take_exports_busy;    ///< bvh/csv downloads refused: the export queue was full
+    Counter take_exports_failed;  ///< bvh/csv exports that failed or were cancelled
+    Counter takes_deleted;
     ControlCounters control;  ///< http.control_* (control_access.hpp)
 
     /// Component "http": every counter above by its member name (the metrics registry's
@@ -196,11 +217,12 @@ private:
     MetricsRegistry own_metrics_;  ///< this server's alone: /metrics without a metrics handler
     LogLimiter log_;               ///< one refusal line per 10 s, not one per request
 
-    ServeThread serve_;  // before the sessions and the backlog, which use its io_contexts
+    ServeThread serve_;  // before the sessions, the backlog and the exports, which use its io_contexts
     /// HTTP and WebSocket, one table per lane, used on that lane's thread (open(): any thread).
     std::vector<std::unique_ptr<SessionTable<Session>>> sessions_;
     std::vector<WsTable> ws_sessions_;  // one per lane, used on that lane's thread
     PublishBacklog backlog_;
+    TakeExportQueue exports_;  // posts its results to the lanes' io_contexts
 
     mutable std::mutex subjects_mutex_;
     std::vector<std::pair<std::uint32_t, std::int64_t>> subject_last_us_;  // guarded

@@ -79,7 +79,9 @@ std::string encode_drops_json(std::uint64_t dropped, std::uint64_t dropped_total
 }
 
 std::string encode_control_reply_json(const ControlResult& result) {
-    return dump(nlohmann::ordered_json{{"ok", result.ok}, {"error", result.error}}) + "\n";
+    nlohmann::ordered_json j{{"ok", result.ok}, {"error", result.error}};
+    if (!result.take.empty()) j["take"] = result.take;
+    return dump(j) + "\n";
 }
 
 }  // namespace mocap::serve

@@ -38,7 +38,8 @@ std::string encode_frame_json(const SubjectFrame& frame, const skeleton::Skeleto
 /// {"type":"drops",...}: frames dropped for this viewer since the last frame it got.
 std::string encode_drops_json(std::uint64_t dropped, std::uint64_t dropped_total);
 
-/// {"ok":..,"error":".."} and a newline: the reply to POST /api/....
+/// {"ok":..,"error":".."[,"take":".."]} and a newline: the reply to POST /api/... (and
+/// DELETE /api/takes/NAME); "take" for the start/stop of a take.
 std::string encode_control_reply_json(const ControlResult& result);
 
 }  // namespace mocap::serve

@@ -85,8 +85,9 @@ enum class CalibrationPose { kT, kN };
 struct ControlResult {
     bool ok = false;
     std::string error;  ///< shown to the client when !ok
-    static ControlResult success() { return {true, {}}; }
-    static ControlResult failure(std::string why) { return {false, std::move(why)}; }
+    std::string take;   ///< start/stop of a take: its name (ControlReply.take_name)
+    static ControlResult success() { return {true, {}, {}}; }
+    static ControlResult failure(std::string why) { return {false, std::move(why), {}}; }
 };
 
 /// Actions the daemon performs for control requests, and its stats. Each is called on
@@ -97,6 +98,9 @@ struct ControlHandlers {
     std::function<ControlResult(std::uint32_t subject_id, CalibrationPose pose)> calibrate;
     std::function<ControlResult(const std::string& path)> start_recording;  ///< "" = default
     std::function<ControlResult()> stop_recording;
+    /// Takes (serve/take_recorder.hpp): name "" = generated from the start time.
+    std::function<ControlResult(const std::string& name, const std::string& notes)> start_take;
+    std::function<ControlResult()> stop_take;
     std::function<ControlResult()> reload;
     /// Every metric for StatsRequest: the daemon's registry (core/metrics_registry.hpp),
     /// which holds the pose service's own counters too. Empty = the server's own counters.

@@ -93,6 +93,29 @@ std::string Process::log() const {
     return read_file(log_path_);
 }
 
+std::string WebDaemon::config(const std::string& dir, const std::string& token) const {
+    std::ostringstream cfg;
+    cfg << "[log]\nstats_interval_s = 0\n"
+        << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port << "\"\n"
+        << "[pipeline]\nworkers = 2\nmax_subjects = 2\n"
+        << "[skeleton]\ncalibration_dir = \"" << dir << "\"\n"
+        << "[serve]\npose_listen = \"127.0.0.1:" << pose_port << "\"\n"
+        << "[control]\ntoken = \"" << token << "\"\n"
+        << "[outputs]\nbvh_live = false\nrecord_dir = \"" << dir << "\"\n"
+        << "[http]\nlisten = \"127.0.0.1:" << http_port << "\"\n";
+    return cfg.str();
+}
+
+std::vector<std::string> WebDaemon::walk_sim(const std::string& sim_bin, int duration_s) const {
+    return {sim_bin,      "stream",
+            "--connect",  "127.0.0.1:" + std::to_string(sink_port),
+            "--subjects", "1",
+            "--nodes",    "15",
+            "--rate",     "100",
+            "--motion",   "walk",
+            "--duration", std::to_string(duration_s)};
+}
+
 std::uint16_t free_port() {
     static std::mutex mutex;
     static std::set<std::uint16_t> handed_out;

@@ -55,6 +55,18 @@ private:
 };
 
 std::uint16_t free_port();
+
+/// A mocapd on loopback with sinks, the pose service and the web endpoint (live BVH off),
+/// control by `token`, calibrations and recordings in `dir`; the ports are free_port()s.
+struct WebDaemon {
+    std::uint16_t sink_port = free_port();
+    std::uint16_t pose_port = free_port();
+    std::uint16_t http_port = free_port();
+    /// The config file's text.
+    [[nodiscard]] std::string config(const std::string& dir, const std::string& token) const;
+    /// mocap-sim's arguments: one subject of 15 nodes at 100 Hz walking for `duration_s`.
+    [[nodiscard]] std::vector<std::string> walk_sim(const std::string& sim_bin, int duration_s) const;
+};
 /// The SYNC column (second) of a joint-angle CSV (`mocapd --replay ... --angles-out`), in
 /// row order.
 std::vector<std::uint64_t> csv_syncs(const std::string& text);

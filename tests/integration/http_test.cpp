@@ -87,19 +87,7 @@ Scrape scrape(std::uint16_t port) {
 class WebEndpoint : public ::testing::Test {
 protected:
     void SetUp() override {
-        sink_port_ = free_port();
-        pose_port_ = free_port();
-        http_port_ = free_port();
-        std::ostringstream cfg;
-        cfg << "[log]\nstats_interval_s = 0\n"
-            << "[ingest]\nsink_listen = \"127.0.0.1:" << sink_port_ << "\"\n"
-            << "[pipeline]\nworkers = 2\nmax_subjects = 2\n"
-            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
-            << "[serve]\npose_listen = \"127.0.0.1:" << pose_port_ << "\"\n"
-            << "[control]\ntoken = \"" << kToken << "\"\n"
-            << "[outputs]\nbvh_live = false\nrecord_dir = \"" << dir_.path().string() << "\"\n"
-            << "[http]\nlisten = \"127.0.0.1:" << http_port_ << "\"\n";
-        write_file(dir_.file("mocapd.toml"), cfg.str());
+        write_file(dir_.file("mocapd.toml"), ports_.config(dir_.path().string(), kToken));
         daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", dir_.file("mocapd.toml")},
                                             dir_.file("mocapd.log"), dir_.path().string());
         ASSERT_TRUE(wait_for_port(http_port_, 10s)) << daemon_->log();
@@ -110,16 +98,11 @@ protected:
         if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
         EXPECT_EQ(daemon_->stop(10s), 0);
     }
-    void start_sim() {
-        sim_ = std::make_unique<Process>(
-            std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(sink_port_),
-                                     "--subjects", "1", "--nodes", "15", "--rate", "100", "--motion", "walk",
-                                     "--duration", "60"},
-            dir_.file("sim.log"));
-    }
+    void start_sim() { sim_ = std::make_unique<Process>(ports_.walk_sim(MOCAP_SIM_BIN, 60), dir_.file("sim.log")); }
 
     TempDir dir_;
-    std::uint16_t sink_port_ = 0, pose_port_ = 0, http_port_ = 0;
+    const WebDaemon ports_;
+    const std::uint16_t sink_port_ = ports_.sink_port, pose_port_ = ports_.pose_port, http_port_ = ports_.http_port;
     std::unique_ptr<Process> daemon_;
     std::unique_ptr<Process> sim_;
 };

@@ -11,7 +11,8 @@
 namespace mocap::daemon {
 namespace {
 
-std::vector<std::string> registered(const DaemonConfig& config, const ReplayOptions* replay) {
+std::vector<std::string> registered(const DaemonConfig& config, const ReplayOptions* replay,
+                                    std::shared_ptr<serve::TakeStore> takes = nullptr) {
     WallClock clock;
     std::string error;
     auto pc = pipeline_config_from_config(config, &error);
@@ -20,7 +21,7 @@ std::vector<std::string> registered(const DaemonConfig& config, const ReplayOpti
     auto p = pipeline::Pipeline::create(std::move(*pc), clock, &error);
     EXPECT_TRUE(p) << error;
     if (!p) return {};
-    add_outputs({config, *p, clock, {}, {}, {}, replay}, *p);
+    add_outputs({config, *p, clock, {}, {}, {}, replay, nullptr, std::move(takes)}, *p);
     std::vector<std::string> names;
     for (const auto& o : p->outputs())
         names.emplace_back(o->name());
@@ -56,6 +57,11 @@ TEST(OutputRegistry, ConfigSectionsTurnLiveOutputsOnAndOff) {
     c.vmc_enabled = true;
     EXPECT_EQ(registered(c, nullptr),
               (Names{"pose", "bvh_live", "bvh_record", "raw_record", "http", "cluster", "vmc"}));
+    // Takes: recorded whenever the daemon gives a take store (creating it writes nothing).
+    const auto takes = std::make_shared<serve::TakeStore>("never-created");
+    EXPECT_EQ(registered(c, nullptr, takes),
+              (Names{"pose", "bvh_live", "bvh_record", "raw_record", "take_record", "http", "cluster", "vmc"}));
+    EXPECT_FALSE(std::filesystem::exists("never-created"));
 }
 
 TEST(OutputRegistry, ReplayRegistersOnlyTheFilesItsCommandLineAsksFor) {
@@ -70,6 +76,9 @@ TEST(OutputRegistry, ReplayRegistersOnlyTheFilesItsCommandLineAsksFor) {
     both.bvh_out = "out.bvh";
     both.angles_out = "angles.csv";
     EXPECT_EQ(registered(c, &both), (Names{"bvh_record", "angles_csv"}));
+    EXPECT_EQ(registered(c, &both, std::make_shared<serve::TakeStore>("never-created")),
+              (Names{"bvh_record", "angles_csv"}))
+        << "a replay records no take";
 }
 
 TEST(OutputRegistry, EveryEntryHasAUniqueName) {
@@ -80,7 +89,7 @@ TEST(OutputRegistry, EveryEntryHasAUniqueName) {
             EXPECT_NE(n, e.name);
         names.emplace_back(e.name);
     }
-    EXPECT_EQ(names.size(), 8u);
+    EXPECT_EQ(names.size(), 9u);
 }
 
 }  // namespace

@@ -1,0 +1,228 @@
+// http_takes.cpp — the web endpoint's /api/takes: list, show, download, start/stop, delete
+// (http_server.hpp has the routes, docs/client-protocol.md "Takes" the replies).
+//
+// A name from the URL is checked by valid_take_name before anything touches the disk, so
+// no request reaches outside the store's root. Reading needs no token (the pose stream
+// needs none either); every change goes through the control rules. A raw download opens
+// the file on the serve thread (one open()) and streams it; BVH and CSV wait for the export
+// queue, and the session reads no further request meanwhile.
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include "serve/http_connection.hpp"
+#include "serve/http_query.hpp"
+#include "serve/pose_json.hpp"
+
+namespace mocap::serve {
+
+namespace beast = boost::beast;
+namespace http = beast::http;
+
+namespace {
+
+constexpr std::string_view kPrefix = "/api/takes";
+
+nlohmann::ordered_json take_json(const TakeEntry& e) {
+    auto j = nlohmann::ordered_json::parse(encode_take_json(e.meta));
+    j["recording"] = e.recording;
+    j["raw_bytes"] = e.raw_bytes;
+    return j;
+}
+
+std::string dump(const nlohmann::ordered_json& j) {
+    return j.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
+}
+
+/// A filter name as the factory spells them: [a-z0-9_-]{1,32}.
+bool valid_filter_name(std::string_view f) {
+    if (f.empty() || f.size() > 32) return false;
+    for (const char c : f) {
+        if (!((c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '-')) return false;
+    }
+    return true;
+}
+
+}  // namespace
+
+void HttpServer::HttpSession::takes(const Request& request, std::string_view path, std::string_view query) {
+    const TakeStore* store = server_.handlers_.takes.get();
+    if (store == nullptr) return send_text(request, http::status::not_found, "takes are off\n");
+    const http::verb method = request.method();
+    std::string_view rest = path.substr(kPrefix.size());
+    if (rest.empty() || rest == "/") {
+        if (method != http::verb::get) return send_text(request, http::status::method_not_allowed, "GET only\n");
+        auto list = nlohmann::ordered_json::array();
+        for (const TakeEntry& e : store->list())
+            list.push_back(take_json(e));
+        server_.counters_.takes_listed.add();
+        return send_text(request, http::status::ok, dump({{"takes", std::move(list)}}), "application/json");
+    }
+    if (method == http::verb::post && (rest == "/start" || rest == "/stop")) {
+        return start_or_stop_take(request, path, query);
+    }
+    rest.remove_prefix(1);
+    const std::size_t slash = rest.find('/');
+    const std::string name(rest.substr(0, slash));
+    const std::string_view action = slash == std::string_view::npos ? "" : rest.substr(slash);
+    if (!valid_take_name(name)) return send_text(request, http::status::bad_request, "invalid take name\n");
+    if (action == "/download") {
+        if (method != http::verb::get) return send_text(request, http::status::method_not_allowed, "GET only\n");
+        return download(request, name, query);
+    }
+    if (!action.empty()) return send_text(request, http::status::not_found, "not found\n");
+    if (method == http::verb::get) {
+        const auto entry = store->find(name);
+        if (!entry) return send_text(request, http::status::not_found, "no take '" + name + "'\n");
+        server_.counters_.takes_listed.add();
+        return send_text(request, http::status::ok, dump(take_json(*entry)), "application/json");
+    }
+    if (method != http::verb::delete_) return send_text(request, http::status::method_not_allowed, "GET or DELETE\n");
+    if (!authorized(request, path)) return;
+    std::string error;
+    ControlResult result = ControlResult::success();
+    result.take = name;
+    http::status status = http::status::ok;
+    switch (server_.handlers_.takes->remove(name, &error)) {
+        case TakeStore::Removal::kRemoved:
+            server_.counters_.takes_deleted.add();
+            break;
+        case TakeStore::Removal::kNotFound:
+            status = http::status::not_found;
+            result.ok = false;
+            result.error = "no take '" + name + "'";
+            break;
+        case TakeStore::Removal::kRecording:
+            status = http::status::conflict;
+            result.ok = false;
+            result.error = error;
+            break;
+        case TakeStore::Removal::kFailed:
+            status = http::status::internal_server_error;
+            result.ok = false;
+            result.error = error;
+            break;
+    }
+    server_.counters_.control.count_result(result);
+    send_text(request, status, encode_control_reply_json(result), "application/json");
+}
+
+void HttpServer::HttpSession::start_or_stop_take(const Request& request, std::string_view path,
+                                                 std::string_view query) {
+    if (!authorized(request, path)) return;
+    auto reply = [&](http::status status, const ControlResult& r) {
+        send_text(request, status, encode_control_reply_json(r), "application/json");
+    };
+    const ControlHandlers& h = server_.handlers_.control;
+    const bool start = path.ends_with("/start");
+    if (!(start ? static_cast<bool>(h.start_take) : static_cast<bool>(h.stop_take))) {
+        return reply(http::status::not_implemented, ControlResult::failure("not supported by this server"));
+    }
+    ControlResult result;
+    if (start) {
+        const auto name = percent_decode(query_value(query, "name").value_or(""));
+        const auto notes = percent_decode(query_value(query, "notes").value_or(""));
+        if (!name || !notes || (!name->empty() && !valid_take_name(*name))) {
+            return reply(http::status::bad_request,
+                         ControlResult::failure("expected ?name=[A-Za-z0-9][A-Za-z0-9._-]{0,63}&notes=TEXT"));
+        }
+        result = h.start_take(*name, *notes);
+    } else {
+        result = h.stop_take();
+    }
+    server_.counters_.control.count_result(result);
+    reply(result.ok ? http::status::ok : http::status::conflict, result);
+}
+
+void HttpServer::HttpSession::download(const Request& request, const std::string& name, std::string_view query) {
+    const std::string_view format = query_value(query, "format").value_or("raw");
+    const auto filter = percent_decode(query_value(query, "filter").value_or(""));
+    const auto subject_text = query_value(query, "subject");
+    const auto subject = subject_text ? parse_u32(*subject_text) : std::optional<std::uint32_t>(0);
+    if ((format != "raw" && format != "bvh" && format != "csv") || !filter ||
+        (!filter->empty() && !valid_filter_name(*filter)) || !subject) {
+        return send_text(request, http::status::bad_request,
+                         "expected ?format=raw|bvh|csv[&filter=NAME][&subject=ID]\n");
+    }
+    const ReplyTo to{request.version(), request.keep_alive(), false};
+    if (format == "raw") {
+        const auto entry = server_.handlers_.takes->find(name);
+        if (!entry) return send_text(request, http::status::not_found, "no take '" + name + "'\n");
+        if (entry->raw_files.size() != 1) {
+            return send_text(request, http::status::conflict,
+                             "take '" + name + "' holds " + std::to_string(entry->raw_files.size()) + " raw files\n");
+        }
+        // Opened now: a delete from here on unlinks a file this download keeps reading.
+        const int fd = ::open(entry->raw_files.front().c_str(), O_RDONLY | O_CLOEXEC);
+        if (fd < 0) return send_text(request, http::status::not_found, "no take '" + name + "'\n");
+        return send_file(to, fd, "application/octet-stream", name + ".mocapraw");
+    }
+    const TakeExporter& exporter = server_.handlers_.export_take;
+    if (!exporter) return send_text(request, http::status::not_implemented, "no exporter in this server\n");
+    TakeExportRequest job{name, format == "bvh" ? TakeFormat::kBvh : TakeFormat::kCsv, *filter, *subject};
+    const std::string file_name = name + (format == "bvh" ? ".bvh" : ".csv");
+    const auto executor = stream_.get_executor();
+    const bool queued = server_.exports_.submit([self = shared_from_this(), job = std::move(job), to, file_name,
+                                                 executor, &exporter](const std::atomic<bool>& cancel) {
+        auto result = std::make_shared<TakeExportResult>(exporter(job, cancel));
+        asio::post(executor, [self, to, file_name, result] { self->on_export(to, file_name, *result); });
+    });
+    if (!queued) {
+        server_.counters_.take_exports_busy.add();
+        return send_text(request, http::status::service_unavailable, "busy: other exports are waiting, retry later\n");
+    }
+}
+
+void HttpServer::HttpSession::on_export(const ReplyTo& to, const std::string& file_name,
+                                        const TakeExportResult& result) {
+    if (closed_) {
+        if (result.fd >= 0) ::close(result.fd);
+        return;
+    }
+    // The read's deadline ran on while the export did: the reply gets a fresh one.
+    stream_.expires_after(std::chrono::seconds(server_.config_.idle_timeout_s));
+    if (result.status == TakeExportResult::kOk) {
+        const bool csv = file_name.ends_with(".csv");
+        return send_file(to, result.fd, csv ? "text/csv; charset=utf-8" : "text/plain; charset=utf-8", file_name);
+    }
+    server_.counters_.take_exports_failed.add();
+    http::status status = http::status::internal_server_error;
+    if (result.status == TakeExportResult::kNotFound) status = http::status::not_found;
+    if (result.status == TakeExportResult::kBadRequest) status = http::status::bad_request;
+    if (result.status == TakeExportResult::kCancelled) status = http::status::service_unavailable;
+    send_text(to, status, result.error + "\n");
+}
+
+void HttpServer::HttpSession::send_file(const ReplyTo& to, int fd, const char* content_type,
+                                        const std::string& file_name) {
+    beast::file body_file;
+    body_file.native_handle(fd);
+    auto res = std::make_shared<FileResponse>(http::status::ok, to.version);
+    beast::error_code ec;
+    res->body().reset(std::move(body_file), ec);
+    if (ec) return send_text(to, http::status::internal_server_error, "cannot read the file\n");
+    res->set(http::field::server, "mocapd");
+    res->set(http::field::content_type, content_type);
+    res->set(http::field::cache_control, "no-store");
+    res->set(http::field::content_disposition, "attachment; filename=\"" + file_name + "\"");
+    res->keep_alive(to.keep_alive);
+    res->prepare_payload();
+    server_.counters_.take_downloads.add();
+    keep_alive_ = res->keep_alive();
+    response_ = res;
+    write_file_some(res, std::make_shared<http::response_serializer<http::file_body>>(*res));
+}
+
+void HttpServer::HttpSession::write_file_some(const std::shared_ptr<FileResponse>& res,
+                                              const std::shared_ptr<http::response_serializer<http::file_body>>& sr) {
+    stream_.expires_after(std::chrono::seconds(server_.config_.idle_timeout_s));
+    http::async_write_some(stream_, *sr,
+                           [self = shared_from_this(), res, sr](const beast::error_code& ec, std::size_t) {
+                               if (ec || sr->is_done()) return self->on_write(ec);
+                               self->slot_->progress(ServeThread::now_us());
+                               self->write_file_some(res, sr);
+                           });
+}
+
+}  // namespace mocap::serve

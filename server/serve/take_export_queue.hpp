@@ -1,0 +1,73 @@
+// take_export_queue.hpp — what a take download asks of the daemon (a re-solve of the raw
+// file into BVH or joint-angle CSV, daemon/take_export.hpp) and the queue that runs those
+// requests off the serve threads.
+//
+// A re-solve runs the take through a whole pipeline (~90x real time with the default filter,
+// so ~40 s for an hour of one subject): far too long for a serve thread, whose other clients
+// would wait. The web endpoint hands it to this queue instead: ONE worker thread runs one
+// export at a time, at most `max_waiting` more wait, and a request beyond that is refused at
+// once (HTTP 503), so a client cannot pile up work or memory. stop() sets the cancel flag
+// every running and waiting job sees (an export checks it per sample), runs what waits (each
+// finds the flag set and returns at once) and joins the thread.
+//
+// Threads: submit() from any thread; jobs run on the queue's thread; stop() from the owner.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <thread>
+
+namespace mocap::serve {
+
+enum class TakeFormat { kRaw, kBvh, kCsv };
+
+struct TakeExportRequest {
+    std::string name;
+    TakeFormat format = TakeFormat::kBvh;
+    std::string filter;         ///< "" = the daemon's configured filter
+    std::uint32_t subject = 0;  ///< BVH: 0 = the [outputs].bvh_subject rule
+};
+
+struct TakeExportResult {
+    enum Status { kOk, kNotFound, kBadRequest, kFailed, kCancelled } status = kFailed;
+    std::string error;
+    int fd = -1;  ///< kOk: an open, already unlinked file holding the export; the receiver closes it
+};
+
+/// Runs one export on the queue's thread; must return soon after `cancel` becomes true.
+using TakeExporter = std::function<TakeExportResult(const TakeExportRequest& request, const std::atomic<bool>& cancel)>;
+
+class TakeExportQueue {
+public:
+    using Job = std::function<void(const std::atomic<bool>& cancel)>;
+
+    explicit TakeExportQueue(std::size_t max_waiting) : max_waiting_(max_waiting) {}
+    ~TakeExportQueue() { stop(); }
+    TakeExportQueue(const TakeExportQueue&) = delete;
+    TakeExportQueue& operator=(const TakeExportQueue&) = delete;
+
+    /// Queues `job` (the thread starts with the first one). False when max_waiting jobs wait
+    /// already, or after stop().
+    bool submit(Job job);
+    /// Cancels, runs what waits with the flag set, joins. Idempotent.
+    void stop();
+
+private:
+    void run();
+
+    std::size_t max_waiting_;
+    std::mutex mutex_;
+    std::condition_variable wake_;
+    std::deque<Job> waiting_;  // mutex_
+    bool stopping_ = false;    // mutex_
+    std::atomic<bool> cancel_{false};
+    std::thread thread_;  // started under mutex_
+};
+
+}  // namespace mocap::serve
