@@ -19,7 +19,7 @@ struct PassOutput {
     std::vector<math::Quat> q;         ///< the filter's estimate after the sample
     std::vector<double> run_s;         ///< time the pass had run
     std::vector<double> residual_rad;  ///< heading of the field reading seen through q
-    std::vector<char> mag_used;        ///< the filter used that reading (present, not rejected)
+    std::vector<char> field_clean;     ///< a reading the filter took as undisturbed (norm and dip)
 };
 
 /// Runs `filter` over the samples in the order of `forward`: true from the first sample to
@@ -55,27 +55,38 @@ PassOutput run_pass(OrientationFilter& filter, std::span<const ImuSample> sample
         const math::Vec3 h = math::rotate(q, math::to_vec3(s.mag_ut) - d.mag_offset_weight * d.mag_offset_ut);
         out.q[i] = q;
         out.run_s[i] = run_s;
-        out.mag_used[i] = s.has_mag() && !d.mag_rejected && (h.x() != 0.0 || h.y() != 0.0);
-        out.residual_rad[i] = out.mag_used[i] ? std::atan2(h.x(), h.y()) : 0.0;
+        // Not d.mag_rejected: a pass that is far off in heading rejects the field as a heading
+        // disturbance, and its residual must count against it.
+        out.field_clean[i] = s.has_mag() && !d.mag_field_disturbed && (h.x() != 0.0 || h.y() != 0.0);
+        out.residual_rad[i] = out.field_clean[i] ? std::atan2(h.x(), h.y()) : 0.0;
     }
     return out;
 }
 
-/// Mean squared heading residual of each pass over ±window_s around every sample, counting
-/// only the samples where both passes used the field; 0 where fewer than one second's worth
-/// (or none) of such samples is in the window.
+/// Each pass's heading error variance over ±window_s around every sample, from the heading
+/// residuals r_f, r_b of the field readings both passes took as undisturbed. A residual is
+/// the field's own heading error φ (noise, motion, calibration, a disturbance the norm and
+/// dip do not show), common to both passes, less the pass's error e: r = φ − e. With the
+/// passes' errors independent of each other, mean(r_f·r_b) estimates mean(φ²), so a pass's
+/// error variance is mean(r²) − mean(r_f·r_b) (clamped at 0; the two add up to
+/// mean((r_f − r_b)²), the passes' disagreement): the field's common error no longer evens
+/// out the weights of a pass that is off and one that is not. 0 where fewer than one
+/// second's worth (or none) of such samples is in the window.
 void residual_variances(std::span<const ImuSample> samples, const PassOutput& fwd, const PassOutput& bwd,
                         double window_s, std::vector<double>& var_fwd, std::vector<double>& var_bwd) {
     const std::size_t n = samples.size();
     var_fwd.assign(n, 0.0);
     var_bwd.assign(n, 0.0);
     if (window_s <= 0.0 || n < 2) return;
-    // Prefix sums: squared residuals of each pass and the count of usable samples.
-    std::vector<double> sf(n + 1, 0.0), sb(n + 1, 0.0), count(n + 1, 0.0);
+    // Prefix sums: squared residuals of each pass, their product and the count of usable samples.
+    std::vector<double> sf(n + 1, 0.0), sb(n + 1, 0.0), sfb(n + 1, 0.0), count(n + 1, 0.0);
     for (std::size_t i = 0; i < n; ++i) {
-        const bool both = fwd.mag_used[i] && bwd.mag_used[i];
-        sf[i + 1] = sf[i] + (both ? fwd.residual_rad[i] * fwd.residual_rad[i] : 0.0);
-        sb[i + 1] = sb[i] + (both ? bwd.residual_rad[i] * bwd.residual_rad[i] : 0.0);
+        const bool both = fwd.field_clean[i] && bwd.field_clean[i];
+        const double rf = both ? fwd.residual_rad[i] : 0.0;
+        const double rb = both ? bwd.residual_rad[i] : 0.0;
+        sf[i + 1] = sf[i] + rf * rf;
+        sb[i + 1] = sb[i] + rb * rb;
+        sfb[i + 1] = sfb[i] + rf * rb;
         count[i + 1] = count[i] + (both ? 1.0 : 0.0);
     }
     const double span_s = static_cast<double>(samples.back().t_us - samples.front().t_us) * 1e-6;
@@ -89,8 +100,9 @@ void residual_variances(std::span<const ImuSample> samples, const PassOutput& fw
             ++hi;
         const double c = count[hi] - count[lo];
         if (c < per_second) continue;
-        var_fwd[i] = (sf[hi] - sf[lo]) / c;
-        var_bwd[i] = (sb[hi] - sb[lo]) / c;
+        const double common = (sfb[hi] - sfb[lo]) / c;
+        var_fwd[i] = std::max(0.0, (sf[hi] - sf[lo]) / c - common);
+        var_bwd[i] = std::max(0.0, (sb[hi] - sb[lo]) / c - common);
     }
 }
 

@@ -17,17 +17,22 @@
 //        sigma_floor² + sigma_start²·exp(−2 s/converge_tau_s) + e²
 //     with s the time the pass has run (a pass just started, with its start-up transient,
 //     counts little: early samples trust the backward pass, late ones the forward pass), and
-//     e² the mean square of the heading of the field readings seen through the pass's
-//     estimate over ±residual_window_s (the pass that explains the magnetometer better
-//     weighs more). Disturbances: e² counts only the samples where both passes used the
-//     field (neither rejected it, FilterDiagnostics::mag_rejected; the field offset a filter
-//     subtracts, mag_offset_ut, is subtracted here too), since a disturbed field would favour
-//     the pass that follows the disturbance; where the field was rejected for the whole
-//     window the passes are blended by their run time alone.
+//     e² the pass's heading error variance over ±residual_window_s seen in the field readings:
+//     a reading's heading through the pass's estimate (less the field offset the filter
+//     subtracts, mag_offset_ut) is r = φ − e, the field's own heading error φ (noise, motion,
+//     calibration, common to both passes) less the pass's error e, so e² = mean(r²) −
+//     mean(r_f·r_b) (at least 0): the common φ² no longer evens out the weights of a pass that
+//     is off and one that is not. Disturbances: e² counts the samples whose field both passes
+//     took as undisturbed by norm and dip (FilterDiagnostics::mag_field_disturbed), since a
+//     disturbed field would favour the pass that follows it; a pass's rejection of the field
+//     as a heading disturbance does not exempt it, because that is how a pass far off in
+//     heading sees the clean field (a take ending near a magnet: the backward pass starts off
+//     and can reject the clean field for a minute). Where no such sample is in the window the
+//     passes are blended by their run time alone.
 //
 // Any OrientationFilter works (it is driven only through the interface); with the default
 // "mocap" filter this is the product's offline re-solve. On the six BROAD recordings: mean
-// total RMSE 1.68° against 2.10° for the same filter online (docs/accuracy.md).
+// total RMSE 1.62° against 2.01° for the same filter online (docs/accuracy.md).
 //
 // API for batch callers (the mocap-filter tool; replay of one subject's segment): hand in
 // one sensor's samples in strictly increasing time order (gaps allowed: the filter's own
