@@ -20,6 +20,7 @@ struct PassOutput {
     std::vector<double> run_s;         ///< time the pass had run
     std::vector<double> residual_rad;  ///< heading of the field reading seen through q
     std::vector<char> field_clean;     ///< a reading the filter took as undisturbed (norm and dip)
+    std::vector<char> mag_used;        ///< a reading the filter used for heading (not rejected)
 };
 
 /// Runs `filter` over the samples in the order of `forward`: true from the first sample to
@@ -28,7 +29,7 @@ struct PassOutput {
 /// the recording's own steps (so a gap stays a gap).
 PassOutput run_pass(OrientationFilter& filter, std::span<const ImuSample> samples, bool forward) {
     const std::size_t n = samples.size();
-    PassOutput out{std::vector<math::Quat>(n), std::vector<double>(n), std::vector<double>(n), std::vector<char>(n)};
+    PassOutput out{std::vector<math::Quat>(n), std::vector<double>(n), std::vector<double>(n), std::vector<char>(n), std::vector<char>(n)};
     filter.reset();
     std::int64_t t_us = samples[forward ? 0 : n - 1].t_us;
     double run_s = 0.0;
@@ -55,16 +56,18 @@ PassOutput run_pass(OrientationFilter& filter, std::span<const ImuSample> sample
         const math::Vec3 h = math::rotate(q, math::to_vec3(s.mag_ut) - d.mag_offset_weight * d.mag_offset_ut);
         out.q[i] = q;
         out.run_s[i] = run_s;
-        // Not d.mag_rejected: a pass that is far off in heading rejects the field as a heading
-        // disturbance, and its residual must count against it.
         out.field_clean[i] = s.has_mag() && !d.mag_field_disturbed && (h.x() != 0.0 || h.y() != 0.0);
+        out.mag_used[i] = s.has_mag() && !d.mag_rejected;
         out.residual_rad[i] = out.field_clean[i] ? std::atan2(h.x(), h.y()) : 0.0;
     }
     return out;
 }
 
 /// Each pass's heading error variance over ±window_s around every sample, from the heading
-/// residuals r_f, r_b of the field readings both passes took as undisturbed. A residual is
+/// residuals r_f, r_b of the field readings both passes took as undisturbed by norm and dip
+/// and at least one used: a pass far off in heading rejects the clean field as a heading
+/// disturbance, and its residual must count against it; a reading both passes rejected
+/// (a disturbance norm and dip do not show) tells neither apart. A residual is
 /// the field's own heading error φ (noise, motion, calibration, a disturbance the norm and
 /// dip do not show), common to both passes, less the pass's error e: r = φ − e. With the
 /// passes' errors independent of each other, mean(r_f·r_b) estimates mean(φ²), so a pass's
@@ -81,7 +84,7 @@ void residual_variances(std::span<const ImuSample> samples, const PassOutput& fw
     // Prefix sums: squared residuals of each pass, their product and the count of usable samples.
     std::vector<double> sf(n + 1, 0.0), sb(n + 1, 0.0), sfb(n + 1, 0.0), count(n + 1, 0.0);
     for (std::size_t i = 0; i < n; ++i) {
-        const bool both = fwd.field_clean[i] && bwd.field_clean[i];
+        const bool both = fwd.field_clean[i] && bwd.field_clean[i] && (fwd.mag_used[i] || bwd.mag_used[i]);
         const double rf = both ? fwd.residual_rad[i] : 0.0;
         const double rb = both ? bwd.residual_rad[i] : 0.0;
         sf[i + 1] = sf[i] + rf * rf;

@@ -23,12 +23,13 @@
 //     calibration, common to both passes) less the pass's error e, so e² = mean(r²) −
 //     mean(r_f·r_b) (at least 0): the common φ² no longer evens out the weights of a pass that
 //     is off and one that is not. Disturbances: e² counts the samples whose field both passes
-//     took as undisturbed by norm and dip (FilterDiagnostics::mag_field_disturbed), since a
-//     disturbed field would favour the pass that follows it; a pass's rejection of the field
-//     as a heading disturbance does not exempt it, because that is how a pass far off in
-//     heading sees the clean field (a take ending near a magnet: the backward pass starts off
-//     and can reject the clean field for a minute). Where no such sample is in the window the
-//     passes are blended by their run time alone.
+//     took as undisturbed by norm and dip (FilterDiagnostics::mag_field_disturbed) and at
+//     least one used (not mag_rejected), since a disturbed field would favour the pass that
+//     follows it; one pass's rejection of the field as a heading disturbance does not exempt
+//     it, because that is how a pass far off in heading sees the clean field (a take ending
+//     near a magnet: the backward pass starts off and can reject the clean field for a
+//     minute). Where no such sample is in the window the passes are blended by their run
+//     time alone.
 //
 // Any OrientationFilter works (it is driven only through the interface); with the default
 // "mocap" filter this is the product's offline re-solve. On the six BROAD recordings: mean
