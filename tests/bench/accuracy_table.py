@@ -764,7 +764,9 @@ shifted by a fixed 3 samples: 1.92 / 1.89 / 2.23 against 1.81 with the default 1
 Also tried for the short takes and not kept: the squared *mean* residual over ±5 / 10 / 30 s
 as a pass's variance (mean 1.95 / 1.83 / 1.73°); both passes' residuals with one common field
 offset, the mean of theirs (recording 36: 1.70° against 1.12°); start-up time constants of 6 and
-12 s, or a start-up that counts only the time a pass used the field (no gain, more bad windows).
+12 s, or a start-up that counts only the time a pass used the field (no gain, more bad windows);
+a field offset fixed to the sensor fitted to the whole take (a sphere through the readings, 0.8–4.4
+µT) and taken out before the passes (recording 01 1.95°, but the mean 2.49°: 07 2.81°, 36 3.01°).
 Recording 01 (slow rotation) is the one the re-solve still makes worse: 3.21° against 1.88°
 online. There the field itself is off: while the sensor turns (30–150 s), the field's heading
 seen through the reference sits 2.3–4.8° off the reference's heading, against 0.7° at rest. Each
