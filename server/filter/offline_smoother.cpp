@@ -29,7 +29,8 @@ struct PassOutput {
 /// the recording's own steps (so a gap stays a gap).
 PassOutput run_pass(OrientationFilter& filter, std::span<const ImuSample> samples, bool forward) {
     const std::size_t n = samples.size();
-    PassOutput out{std::vector<math::Quat>(n), std::vector<double>(n), std::vector<double>(n), std::vector<char>(n), std::vector<char>(n)};
+    PassOutput out{std::vector<math::Quat>(n), std::vector<double>(n), std::vector<double>(n), std::vector<char>(n),
+                   std::vector<char>(n)};
     filter.reset();
     std::int64_t t_us = samples[forward ? 0 : n - 1].t_us;
     double run_s = 0.0;

@@ -140,7 +140,8 @@ public:
             started_ = true;
         } else {
             const math::Vec3 angle = math::to_vec3(s.gyro_rad_s) * (static_cast<double>(s.t_us - t_us_) * 1e-6);
-            if (angle.norm() > 0.0) q_ = (q_ * math::Quat(Eigen::AngleAxisd(angle.norm(), angle.normalized()))).normalized();
+            if (angle.norm() > 0.0)
+                q_ = (q_ * math::Quat(Eigen::AngleAxisd(angle.norm(), angle.normalized()))).normalized();
         }
         t_us_ = s.t_us;
         const math::Vec3 h = math::rotate(q_, math::to_vec3(s.mag_ut));
