@@ -108,4 +108,51 @@ std::vector<ImuSample> advance_mag(std::span<const ImuSample> samples, double de
     return out;
 }
 
+math::Vec3 mag_ahead(const math::Vec3& mag_ut, const math::Vec3& gyro_rad_s, double delay_s) {
+    return math::rotate(math::quat_from_rotvec(-delay_s * gyro_rad_s), mag_ut);
+}
+
+void MagDelayTracker::update(const math::Vec3& gyro_rad_s, const math::Vec3& mag_ut, bool mag_ok, double dt_s,
+                             bool usable, double forgetting) {
+    if (!mag_ok || dt_s <= 0.0) {
+        history_ = 0;
+        if (!mag_ok) return;
+    }
+    // Central differences need two equal steps; a step that differs by over 10 % (a dropped
+    // sample) restarts the history instead.
+    if (history_ == 2 && std::abs(dt_s - dt_prev_s_) <= 0.1 * dt_prev_s_) {
+        const double span_s = dt_s + dt_prev_s_;
+        const math::Vec3 w = 0.5 * (gyro_rad_s + gyro_[0]);
+        if (usable && w.norm() >= kMagDelayMinRateRadS) {
+            const math::Vec3 r = (mag_ut - mag_[1]) / span_s + w.cross(mag_[0]);
+            const math::Vec3 g = ((gyro_rad_s - gyro_[1]) / span_s).cross(mag_[0]);
+            n_ = forgetting * n_ + 1.0;
+            turning_s_ = forgetting * turning_s_ + dt_s;
+            sgg_ = forgetting * sgg_ + g.squaredNorm();
+            sgr_ = forgetting * sgr_ + g.dot(r);
+            srr_ = forgetting * srr_ + r.squaredNorm();
+            const double se = std_error_s();
+            if (turning_s_ >= kMinTurningS && se < kConvergedStdErrS) converged_ = true;
+            if (se > 2.0 * kConvergedStdErrS) converged_ = false;
+        }
+    }
+    gyro_[1] = gyro_[0];
+    gyro_[0] = gyro_rad_s;
+    mag_[1] = mag_[0];
+    mag_[0] = mag_ut;
+    dt_prev_s_ = dt_s;
+    history_ = std::min(history_ + 1, 2);
+}
+
+double MagDelayTracker::std_error_s() const {
+    if (n_ <= 1.0 || sgg_ <= 0.0) return std::numeric_limits<double>::infinity();
+    // Residual variance per sample (Σ r² − d Σ g·r = Σ (r − d g)² at the optimum).
+    const double residual = std::max(srr_ - sgr_ * sgr_ / sgg_, 0.0) / n_;
+    return std::sqrt(residual / sgg_);
+}
+
+double MagDelayTracker::delay_s(double max_delay_s) const {
+    return converged() ? std::clamp(estimate_s(), 0.0, max_delay_s) : 0.0;
+}
+
 }  // namespace mocap::filter

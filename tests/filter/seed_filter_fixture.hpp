@@ -89,6 +89,31 @@ inline std::vector<sim::ScenarioRow> constant_rate(const math::Quat& q0, const m
         q0, [&w_rad_s](double) { return w_rad_s; }, rate_hz, duration_s);
 }
 
+/// 100 Hz samples of a sensor swaying about every axis while it turns about the vertical at
+/// 1 rad/s on average (a lag shows where the rate changes, and the steady turn makes a late
+/// field a steady heading error), from a 1 kHz noiseless truth: each gyro
+/// reading is the mean rate over the 10 ms it covers, each field reading is the field
+/// lag_ms earlier, as a magnetometer with a lag reports it.
+inline std::vector<sim::ScenarioRow> turning_with_late_field(int lag_ms, double duration_s) {
+    const auto fine = rotating(
+        math::from_euler_zyx({0.0, 0.2, 0.1}),
+        [](double t) {
+            return math::Vec3(0.3 * std::sin(2.0 * t), 0.2 * std::cos(3.0 * t), 1.0 + 1.5 * std::sin(4.0 * t));
+        },
+        1000.0, duration_s);
+    std::vector<sim::ScenarioRow> rows;
+    for (std::size_t i = 50; i < fine.size(); i += 10) {
+        sim::ScenarioRow r = fine[i];
+        math::Vec3 w = math::Vec3::Zero();
+        for (std::size_t k = i - 9; k <= i; ++k)
+            w += fine[k].gyro_true_rad_s / 10.0;
+        r.sample.gyro_rad_s = math::to_array(w);
+        r.sample.mag_ut = fine[i - static_cast<std::size_t>(lag_ms)].sample.mag_ut;
+        rows.push_back(r);
+    }
+    return rows;
+}
+
 /// The fourati scenario's truth starts at the paper's q(0) = identity in NED, which is
 /// q_enu_ned() here; the paper's far-off initial estimate maps the same way.
 inline math::Quat fourati_start_truth() {
