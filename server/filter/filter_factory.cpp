@@ -147,6 +147,8 @@ const Entry<MocapFilterParams, MocapFilter>& mocap_entry() {
                                           {"mag_offset_tau_s", &P::mag_offset_tau_s},
                                           {"mag_offset_ridge", &P::mag_offset_ridge},
                                           {"mag_offset_min", &P::mag_offset_min},
+                                          {"mag_delay_s", &P::mag_delay_s},
+                                          {"mag_delay_share", &P::mag_delay_share},
                                           {"max_step_s", &P::max_step_s}},
                                          [](const P& p) { return p.check(); }};
     return e;

@@ -10,6 +10,11 @@ namespace mocap::filter {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+// Magnetometer lag: the longest one taken out, s, and the window of the online estimate, s
+// of turning with an undisturbed field (a sensor's lag does not change; a long window keeps
+// the estimate steady).
+constexpr double kMagDelayMaxS = 0.05;
+constexpr double kMagDelayWindowS = 60.0;
 
 // Butterworth cut-off chosen so the non-oscillating part of the step response has time
 // constant tau (as in VQF). tau <= 0 means "no filtering".
@@ -123,6 +128,8 @@ std::string MocapFilterParams::check() const {
     if (!(mag_offset_tau_s >= 0.0)) return "mag_offset_tau_s must be >= 0";
     if (!(mag_offset_ridge > 0.0 && mag_offset_ridge <= 1.0)) return "mag_offset_ridge must be in (0, 1]";
     if (!(mag_offset_min > 0.0)) return "mag_offset_min must be > 0";
+    if (!(mag_delay_s <= kMagDelayMaxS)) return "mag_delay_s must be <= 0.05";
+    if (!(mag_delay_share >= 0.0 && mag_delay_share <= 1.0)) return "mag_delay_share must be in [0, 1]";
     if (!(max_step_s > 0.0)) return "max_step_s must be > 0";
     return {};
 }
@@ -181,6 +188,7 @@ void MocapFilter::compute_coeffs(double ts_s) {
     k_noise_fast_ = gain_from_tau(1.0, ts_s);
     k_noise_floor_ = gain_from_tau(300.0, ts_s);
     k_mag_offset_ = p.mag_offset_tau_s > 0.0 ? gain_from_tau(p.mag_offset_tau_s, ts_s) : 0.0;
+    mag_delay_forgetting_ = std::exp(-ts_s / kMagDelayWindowS);
     // Bias Kalman filter in units of 0.01 °/s, which keeps the numbers near 1.
     bias_p0_ = std::pow(p.bias_sigma_init_deg_s * 100.0, 2);
     bias_v_ = std::pow(0.1 * p.bias_sigma_init_deg_s * 100.0, 2) * ts_s / p.bias_forgetting_time_s;
@@ -194,6 +202,7 @@ void MocapFilter::compute_coeffs(double ts_s) {
 void MocapFilter::update(const ImuSample& sample) {
     MocapFilterState& s = state_;
     const double dt = s.clock.step_s(sample.t_us);
+    const math::Vec3 gyro = math::to_vec3(sample.gyro_rad_s);
     ++s.samples;
     if (!s.initialised) {
         s.initialised = true;  // dt == 0: the first sample sets attitude, not motion
@@ -205,9 +214,10 @@ void MocapFilter::update(const ImuSample& sample) {
             s.ts_lp_s += 0.01 * (dt - s.ts_lp_s);
             if (std::abs(s.ts_lp_s - s.ts_s) > 0.02 * s.ts_s) compute_coeffs(s.ts_lp_s);
         }
-        update_gyro(math::to_vec3(sample.gyro_rad_s), dt);
+        update_gyro(gyro, dt);
         adapt_time_constants();
     }
+    const math::Vec3 rate = gyro - s.bias_rad_s;
     const MargReading m = read_marg(sample);
     if (m.accel_ok) {
         update_acc(m.accel_m_s2);
@@ -215,9 +225,10 @@ void MocapFilter::update(const ImuSample& sample) {
         ++s.zero_acc_samples;
     }
     if (m.mag_ok) {
-        update_mag(m.mag_ut);
+        update_mag(m.mag_ut, rate, dt);
     } else {
         ++s.no_mag_samples;
+        if (params_.mag_delay_s < 0.0) s.mag_delay.update(rate, m.mag_ut, false, dt, false, mag_delay_forgetting_);
     }
 }
 
@@ -481,7 +492,24 @@ void MocapFilter::update_mag_offset(const math::Vec3& mag_s, const math::Mat3& r
     s.mag_offset_weight = s.mag_guard_blind ? 0.0 : std::clamp(rel / params_.mag_offset_min - 1.0, 0.0, 1.0);
 }
 
-void MocapFilter::update_mag(const math::Vec3& mag_raw) {
+// Magnetometer lag (header, "Magnetometer lag"): a reading d late has turned by ω·d less than
+// the sensor, which the heading correction takes for an error while the sensor turns. The
+// reading is predicted d ahead from the rate, so the lag costs no latency. d is learned on
+// the part of the field that turns with the sensor (the offset fixed to it taken out), from
+// samples whose field the guard accepts, and nothing is taken out before the estimate has
+// converged.
+math::Vec3 MocapFilter::take_out_mag_delay(const math::Vec3& mag, const math::Vec3& rate, double dt_s) {
+    MocapFilterState& s = state_;
+    const MocapFilterParams& p = params_;
+    if (p.mag_delay_s < 0.0) {
+        const bool usable = !p.mag_guard || !(mag_rejected() || s.mag_guard_blind);
+        s.mag_delay.update(rate, mag, true, dt_s, usable, mag_delay_forgetting_);
+    }
+    s.mag_delay_s = p.mag_delay_s < 0.0 ? p.mag_delay_share * s.mag_delay.delay_s(kMagDelayMaxS) : p.mag_delay_s;
+    return s.mag_delay_s > 0.0 ? mag_ahead(mag, rate, s.mag_delay_s) : mag;
+}
+
+void MocapFilter::update_mag(const math::Vec3& mag_raw, const math::Vec3& rate, double dt_s) {
     MocapFilterState& s = state_;
     const MocapFilterParams& p = params_;
     const math::Quat q6 = s.q_e6_i * s.q_i_sensor;
@@ -490,6 +518,7 @@ void MocapFilter::update_mag(const math::Vec3& mag_raw) {
         update_mag_offset(mag_raw, q6.toRotationMatrix());
         mag -= s.mag_offset_weight * s.mag_offset_ut;
     }
+    mag = take_out_mag_delay(mag, rate, dt_s);
     const math::Vec3 mag_e = math::rotate(q6, mag);
     if (p.mag_guard) update_mag_guard(mag_e);
 

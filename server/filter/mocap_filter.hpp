@@ -29,6 +29,12 @@
 //    once it exceeds mag_offset_min of the field (fully from twice that, so it comes and goes
 //    without a step). At rest the estimate is held. The guard above then sees the corrected
 //    field; what the estimate cannot explain it still rejects.
+//  * magnetometer lag: a MEMS magnetometer reports the field some milliseconds after the gyro
+//    reports the rate (mag_delay.hpp); while the sensor turns, the late reading looks like a
+//    heading error. The lag d is learned online from the readings alone (MagDelayTracker:
+//    least squares on dm/dt + ω × m = d·(dω/dt × m) over turning samples with an accepted
+//    field, a 60 s window) and each reading is predicted d ahead by turning it with the
+//    rate, so no latency is added. See "Magnetometer lag" below.
 //
 // Output: q_earth_sensor = Rz(delta) ⊗ q_E'_I ⊗ q_I_sensor, ENU.
 //
@@ -64,8 +70,20 @@
 // low-passes: the corrections before it are the initial alignment, and a bias learned from
 // them left a still sensor 0.28° off after 30 s.
 //
+// Magnetometer lag: on the six BROAD recordings of docs/accuracy.md the learned lag is
+// 10.4–12.5 ms (converged 2–15 s after the motion starts), as the offline estimate finds.
+// Taking all of it out makes the field's heading, seen through the optical reference, more
+// consistent on every recording, yet the filter's heading error falls on some (fast rotation
+// 1.79° -> 1.59°) and rises on the fast ones with translation or near a magnet (stationary
+// magnet 1.77° -> 2.76°), where the field's heading also carries the filter's tilt error
+// (at these recordings' 70° dip, 1° of tilt is 2.7° of heading). Half of it
+// (mag_delay_share 0.5) lowers the mean from 2.01° to 1.80° with no recording worse by more
+// than 0.27° (the stationary-magnet one); 0.4 gives 1.81° and +0.17°, 0.6 1.81° and +0.39°.
+// The simulated scenarios have no lag and learn none (docs/accuracy.md, "Magnetometer lag").
+//
 // Thread-safety: none (one instance per worker). Cost: ~0.3 µs per update (docs/
-// performance.md; the field-offset estimate adds about 10 %), no allocation.
+// performance.md; the field-offset estimate adds about 10 %, the magnetometer lag about 12 %),
+// no allocation.
 
 #pragma once
 
@@ -74,6 +92,7 @@
 #include <string>
 #include <string_view>
 
+#include "filter/mag_delay.hpp"
 #include "filter/orientation_filter.hpp"
 
 namespace mocap::filter {
@@ -153,6 +172,10 @@ struct MocapFilterParams {
     double mag_offset_min = 0.04;             ///< key "mag_offset_min": an offset below this fraction of the
                                               ///< field norm is not applied (calibration residue); it is
                                               ///< applied in full from twice this
+    double mag_delay_s = -1.0;                ///< key "mag_delay_s": magnetometer lag behind the gyro taken out
+                                              ///< of every reading, s, at most 0.05 (see "Magnetometer lag");
+                                              ///< negative: learned from the readings, 0: none
+    double mag_delay_share = 0.5;             ///< key "mag_delay_share": share of a learned lag taken out, 0..1
     double max_step_s = 0.5;                  ///< key "max_step_s": larger timestamp steps restart the time base, s
 
     /// Empty if every value is usable, else a message naming the first bad key.
@@ -241,6 +264,10 @@ struct MocapFilterState {
     math::Vec3 mag_offset_ut = math::Vec3::Zero();  ///< estimated offset, µT
     double mag_offset_weight = 0.0;                 ///< share of it subtracted from readings, 0..1
 
+    // Magnetometer lag (take_out_mag_delay)
+    MagDelayTracker mag_delay;  ///< the lag learned from the readings (mag_delay_s < 0)
+    double mag_delay_s = 0.0;   ///< lag taken out of the last reading, s
+
     // Counters (only go up until reset())
     std::uint64_t samples = 0;
     std::uint64_t mag_samples_rejected = 0;  ///< mag readings not used (disturbed, gain 0)
@@ -275,7 +302,8 @@ private:
     void compute_coeffs(double ts_s);
     void update_gyro(const math::Vec3& gyro, double dt_s);
     void update_acc(const math::Vec3& acc);
-    void update_mag(const math::Vec3& mag);
+    void update_mag(const math::Vec3& mag, const math::Vec3& rate_rad_s, double dt_s);
+    math::Vec3 take_out_mag_delay(const math::Vec3& mag, const math::Vec3& rate_rad_s, double dt_s);
     void update_mag_guard(const math::Vec3& mag_earth);
     void update_bias(const math::Vec3& acc_earth_unit);
     void update_heading_guard();
@@ -288,7 +316,7 @@ private:
     // Derived coefficients, functions of params_ and state_.ts_s.
     LowPassCoeffs acc_lp_, rest_lp_, mag_current_lp_;
     double k_mag_ = 0.0, k_mag_ref_ = 0.0, k_mag_noise_ = 0.0, k_dis_ = 0.0;
-    double k_noise_fast_ = 0.0, k_noise_floor_ = 0.0, k_mag_offset_ = 0.0;
+    double k_noise_fast_ = 0.0, k_noise_floor_ = 0.0, k_mag_offset_ = 0.0, mag_delay_forgetting_ = 1.0;
     double bias_p0_ = 0.0, bias_v_ = 0.0, bias_motion_w_ = 0.0, bias_vertical_w_ = 0.0, bias_rest_w_ = 0.0;
 };
 
