@@ -362,6 +362,8 @@ static int run(int argc, char** argv) {
         ->check(CLI::IsMember({"raw", "bvh", "csv"}))
         ->capture_default_str();
     takes_download->add_option("--filter", take_command.filter, "bvh/csv: re-solve with this filter");
+    takes_download->add_flag("--offline", take_command.offline,
+                             "bvh/csv: the non-causal re-solve (forward and backward over the whole take)");
     takes_download->add_option("--subject", take_command.subject, "bvh: the subject (default: the daemon's rule)");
     takes_download->add_option("-o,--out", take_command.out, "output file (default: NAME.<format>; must not exist)");
     auto* takes_start = takes->add_subcommand("start", "start a take");

@@ -172,6 +172,7 @@ int run_takes(const TakeCommand& c) {
     if (c.action == "download") {
         target = base + "/" + url_encode(c.name) + "/download?format=" + url_encode(c.format);
         if (!c.filter.empty()) target += "&filter=" + url_encode(c.filter);
+        if (c.offline) target += "&offline=1";
         if (c.subject != 0) target += "&subject=" + std::to_string(c.subject);
         return download(conn, c, target);
     }

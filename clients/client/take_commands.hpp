@@ -2,10 +2,11 @@
 // (docs/client-protocol.md, "Takes"; default --http 127.0.0.1:8080):
 //
 //   mocap-client takes list [--json]
-//   mocap-client takes download NAME --format raw|bvh|csv [--filter F] [--subject ID] [-o FILE]
+//   mocap-client takes download NAME --format raw|bvh|csv [--filter F] [--offline] [--subject ID] [-o FILE]
 //       raw: the recorded file; bvh/csv: re-solved by the daemon (with another filter when
-//       given). FILE defaults to NAME.mocapraw / NAME.bvh / NAME.csv and must not exist; the
-//       body goes to FILE.part first and is renamed once complete, so FILE is never partial.
+//       given; --offline: the non-causal re-solve of mocapd --replay --offline). FILE defaults to NAME.mocapraw /
+//       NAME.bvh / NAME.csv and must not exist; the body goes to FILE.part first and is renamed once complete, so FILE
+//       is never partial.
 //   mocap-client takes start [--name N] [--notes TEXT] | stop | delete NAME   (need the token)
 //
 // Blocking Beast HTTP/1.1, one connection per command, every socket call bounded by
@@ -28,6 +29,7 @@ struct TakeCommand {
     std::string name;
     std::string format = "raw";
     std::string filter;
+    bool offline = false;
     std::uint32_t subject = 0;  ///< 0 = not sent (the daemon's rule)
     std::string out;
     std::string notes;

@@ -65,6 +65,8 @@ static int run(int argc, char** argv) {
         app.add_option("--to", to_text, "replay: samples received up to this time (RFC 3339 or epoch s)"));
     replay_only.push_back(
         app.add_flag("--realtime", replay.realtime, "replay at the recorded pace (default: as fast as possible)"));
+    replay_only.push_back(app.add_flag("--offline", replay.offline,
+                                       "replay: re-solve each sensor's whole take forward and backward (non-causal)"));
     replay_only.push_back(app.add_option("--bvh-out", replay.bvh_out, "replay: write a BVH file (must not exist)"));
     replay_only.push_back(app.add_option("--bvh-subject", replay.bvh_subject,
                                          "replay: subject written to the BVH (0 = [outputs].bvh_subject)"));

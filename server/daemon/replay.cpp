@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <ctime>
 #include <functional>
 #include <limits>
+#include <map>
 #include <thread>
 
 #include "cluster/raw_take_reader.hpp"
@@ -16,6 +18,8 @@
 #include "daemon/pipeline_config.hpp"
 #include "daemon/sync_order.hpp"
 #include "daemon/wall_clock.hpp"
+#include "filter/filter_factory.hpp"
+#include "filter/offline_smoother.hpp"
 #include "pipeline/pipeline.hpp"
 #include "serve/raw_recorder.hpp"
 
@@ -104,6 +108,46 @@ bool replay_jetstream(const DaemonConfig& config, const ReplayOptions& options,
         feed(s);
     }
     spdlog::info("replay: read {} JetStream messages of {}", reader.messages(), reader.subject());
+    return true;
+}
+
+bool finite_sample(const ImuSample& s) {
+    const auto finite = [](const Vec3d& v) {
+        return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+    };
+    return finite(s.gyro_rad_s) && finite(s.accel_m_s2) && (!s.has_mag() || finite(s.mag_ut));
+}
+
+/// Offline: replaces each node's samples' orientation by the smoothed one (replay.hpp).
+/// Returns how many samples carry a smoothed orientation; false + error if a filter cannot be
+/// built.
+bool smooth_offline(const DaemonConfig& config, const pipeline::Pipeline& pipeline, std::vector<SegmentSample>& samples,
+                    std::uint64_t* smoothed, std::string* error) {
+    std::map<std::pair<std::uint32_t, std::uint8_t>, std::vector<std::size_t>> nodes;
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+        const SegmentSample& s = samples[i];
+        if (s.has_node_quat || pipeline.segment_of(s.node_id) < 0 || !finite_sample(s.imu)) continue;
+        auto& idx = nodes[{s.subject_id, s.node_id}];
+        if (idx.empty() || s.imu.t_us > samples[idx.back()].imu.t_us) idx.push_back(i);
+    }
+    const filter::OfflineSmoother smoother;
+    std::vector<ImuSample> imu;
+    for (const auto& [key, idx] : nodes) {
+        const auto& segment = pipeline.model().segments[static_cast<std::size_t>(pipeline.segment_of(key.second))];
+        auto f = filter::make_filter(segment.filter, config.filter_params, error);
+        if (!f) return false;
+        imu.clear();
+        for (std::size_t i : idx)
+            imu.push_back(samples[i].imu);
+        const filter::OfflineResult r = smoother.smooth(*f, imu);
+        for (std::size_t k = 0; k < idx.size(); ++k) {
+            SegmentSample& s = samples[idx[k]];
+            const math::Quat& q = r.orientation[k];
+            s.node_q_wxyz = {q.w(), q.x(), q.y(), q.z()};
+            s.has_node_quat = true;
+        }
+        *smoothed += idx.size();
+    }
     return true;
 }
 
@@ -196,8 +240,11 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
                 break;
         }
     };
-    // Selected samples go through SyncOrder (sync_order.hpp) on their way to the pipeline.
-    SyncOrder order(play);
+    // Selected samples go through SyncOrder (sync_order.hpp) on their way to the pipeline;
+    // offline, they are held until every one is in, smoothed, then played.
+    std::vector<SegmentSample> held;
+    SyncOrder order(options.offline ? SyncOrder::Emit([&](const SegmentSample& s) { held.push_back(s); })
+                                    : SyncOrder::Emit(play));
     const auto feed = [&](const SegmentSample& s) {
         if ((options.subject != 0 && s.subject_id != options.subject) || s.times.received_us < options.from_us ||
             s.times.received_us > options.to_us)
@@ -229,6 +276,12 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
         }
     }
     order.flush();
+    if (options.offline) {
+        if (!smooth_offline(config, *pipeline, held, &result->samples_smoothed, error)) return false;
+        spdlog::info("replay: offline re-solve of {} of {} samples", result->samples_smoothed, held.size());
+        for (const SegmentSample& h : held)
+            play(h);
+    }
     result->samples_reordered = order.reordered();
     result->samples_too_late = order.too_late();
     if (order.reordered() + order.too_late() > 0)

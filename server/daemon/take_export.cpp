@@ -73,6 +73,7 @@ serve::TakeExportResult export_take(const DaemonConfig& config, const serve::Tak
     options.files = entry->raw_files;
     options.calibration_dir = work;
     options.bvh_subject = request.subject;
+    options.offline = request.offline;
     options.cancel = &cancel;
     const std::string out = work + (request.format == serve::TakeFormat::kBvh ? "/take.bvh" : "/take.csv");
     (request.format == serve::TakeFormat::kBvh ? options.bvh_out : options.angles_out) = out;

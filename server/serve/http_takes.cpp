@@ -140,10 +140,12 @@ void HttpServer::HttpSession::download(const Request& request, const std::string
     const auto filter = percent_decode(query_value(query, "filter").value_or(""));
     const auto subject_text = query_value(query, "subject");
     const auto subject = subject_text ? parse_u32(*subject_text) : std::optional<std::uint32_t>(0);
+    const std::string_view offline = query_value(query, "offline").value_or("0");
     if ((format != "raw" && format != "bvh" && format != "csv") || !filter ||
-        (!filter->empty() && !valid_filter_name(*filter)) || !subject) {
+        (!filter->empty() && !valid_filter_name(*filter)) || !subject || (offline != "0" && offline != "1") ||
+        (format == "raw" && offline == "1")) {
         return send_text(request, http::status::bad_request,
-                         "expected ?format=raw|bvh|csv[&filter=NAME][&subject=ID]\n");
+                         "expected ?format=raw|bvh|csv[&filter=NAME][&subject=ID][&offline=1] (offline: bvh or csv)\n");
     }
     const ReplyTo to{request.version(), request.keep_alive(), false};
     if (format == "raw") {
@@ -160,7 +162,8 @@ void HttpServer::HttpSession::download(const Request& request, const std::string
     }
     const TakeExporter& exporter = server_.handlers_.export_take;
     if (!exporter) return send_text(request, http::status::not_implemented, "no exporter in this server\n");
-    TakeExportRequest job{name, format == "bvh" ? TakeFormat::kBvh : TakeFormat::kCsv, *filter, *subject};
+    TakeExportRequest job{name, format == "bvh" ? TakeFormat::kBvh : TakeFormat::kCsv, *filter, *subject,
+                          offline == "1"};
     const std::string file_name = name + (format == "bvh" ? ".bvh" : ".csv");
     const auto executor = stream_.get_executor();
     const bool queued = server_.exports_.submit([self = shared_from_this(), job = std::move(job), to, file_name,

@@ -32,6 +32,7 @@ struct TakeExportRequest {
     TakeFormat format = TakeFormat::kBvh;
     std::string filter;         ///< "" = the daemon's configured filter
     std::uint32_t subject = 0;  ///< BVH: 0 = the [outputs].bvh_subject rule
+    bool offline = false;       ///< the non-causal re-solve (mocapd --replay --offline)
 };
 
 struct TakeExportResult {

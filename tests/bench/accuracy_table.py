@@ -748,7 +748,7 @@ time, the `realistic` recording, load average 2.6 on the shared 2 cores): 0.38 �
 with the lag tracked and taken out (`build/tests/bench/filter_bench --benchmark_filter=MocapFilter
 --benchmark_repetitions=5 --benchmark_report_aggregates_only=true`, the same on the commit before)."""
 
-OFFLINE_TEXT = """**Offline re-solve** (`mocap-filter --offline`, server/filter/offline_smoother.hpp): for a take
+OFFLINE_TEXT = """**Offline re-solve** (`mocap-filter --offline`, `mocapd --replay --offline`, take downloads with `&offline=1`; server/filter/offline_smoother.hpp): for a take
 re-processed after the shoot, the filter runs over the whole recording forward and again backward
 (samples in reverse order, gyro negated), and the two estimates are blended per sample by the
 Markley average with weights 1/σ². Before the passes, the magnetometer's lag behind the gyro is

@@ -157,6 +157,18 @@ TEST_F(Takes, RecordListDownloadAndDeleteWithTheToken) {
     EXPECT_EQ(csv_syncs(csv.body).size(), parsed.clip->frame_count);
     EXPECT_EQ(csv_syncs(csv_madgwick.body), csv_syncs(csv.body));
     EXPECT_NE(csv_madgwick.body, csv.body) << "the filter was not applied";
+    // The offline re-solve (mocapd --replay --offline): the same frames, other angles; the
+    // same bytes from mocap-client --offline (the re-solve is deterministic).
+    const auto csv_offline = http_request(http_port_, "/api/takes/walk/download?format=csv&offline=1");
+    ASSERT_EQ(csv_offline.status, 200u) << csv_offline.body;
+    EXPECT_EQ(csv_syncs(csv_offline.body), csv_syncs(csv.body));
+    EXPECT_NE(csv_offline.body, csv.body) << "the offline re-solve was not applied";
+    ASSERT_EQ(client({"takes", "download", "walk", "--format", "csv", "--offline", "-o", dir_.file("off.csv")}, &out),
+              0)
+        << out;
+    EXPECT_TRUE(read_file(dir_.file("off.csv")) == csv_offline.body);
+    EXPECT_EQ(http_request(http_port_, "/api/takes/walk/download?format=raw&offline=1").status, 400u);
+    EXPECT_EQ(http_request(http_port_, "/api/takes/walk/download?format=csv&offline=yes").status, 400u);
 
     // mocap-client: the list, and the same BVH (a re-solve is deterministic).
     ASSERT_EQ(client({"takes", "list"}, &out), 0) << out;

@@ -79,6 +79,7 @@ for run in 1 2; do
   mkdir "$MOCAP_REGRESSION_WRITE"
   for name in $filters; do "$HERE/run_case.sh" filter "$name"; done
   "$HERE/run_case.sh" replay
+  "$HERE/run_case.sh" replay_offline
 done
 diff -r "$SCRATCH/run1" "$SCRATCH/run2" || { echo "NOT DETERMINISTIC: two runs differ (above)" >&2; exit 1; }
 echo "deterministic: two runs gave identical files"

@@ -5,6 +5,7 @@
 #
 #   run_case.sh filter NAME   mocap-filter --filter NAME on the fixed simulated recording
 #   run_case.sh replay        mocapd --replay of data/walk.mocapraw: BVH and joint angles
+#   run_case.sh replay_offline   the same with --offline (the non-causal re-solve)
 #   run_case.sh names         every filter of `mocap-filter --list` has an expected file
 #
 # Tools from the environment (ctest sets them): MOCAP_SIM, MOCAP_FILTER, MOCAPD, PYTHON3.
@@ -44,13 +45,21 @@ case "${1:-}" in
     "$MOCAP_FILTER" --filter "$name" --in "$DIR/in.csv" --out "$DIR/out.csv"
     result quat "$DIR/out.csv" "filter_$name.csv" "$FILTER_EVERY"
     ;;
-  replay)
+  replay|replay_offline)
+    case_name=$1
+    extra=()
+    if [[ $case_name == replay_offline ]]; then extra=(--offline); fi
     "$MOCAPD" --config "$HERE/replay.toml" --replay "$HERE/data/walk.mocapraw" --bvh-out "$DIR/replay.bvh" \
-      --angles-out "$DIR/replay.csv" --calibrate-at "$CALIBRATE_AT" > "$DIR/replay.log" 2>&1 \
+      --angles-out "$DIR/replay.csv" --calibrate-at "$CALIBRATE_AT" "${extra[@]}" > "$DIR/replay.log" 2>&1 \
       || { cat "$DIR/replay.log" >&2; exit 1; }
     grep -q "subject 1: calibrated" "$DIR/replay.log" || { echo "replay: no calibration:" >&2; cat "$DIR/replay.log" >&2; exit 1; }
-    result bvh "$DIR/replay.bvh" replay.bvh "$REPLAY_EVERY"
-    result angles "$DIR/replay.csv" replay_angles.csv "$REPLAY_EVERY"
+    if [[ $case_name == replay_offline ]]; then
+      # Every sample of the 15 nodes is re-solved (the recording has no node estimates).
+      grep -q "offline re-solve of 2205 of 2205 samples" "$DIR/replay.log" \
+        || { echo "replay --offline: not every sample re-solved:" >&2; cat "$DIR/replay.log" >&2; exit 1; }
+    fi
+    result bvh "$DIR/replay.bvh" "$case_name.bvh" "$REPLAY_EVERY"
+    result angles "$DIR/replay.csv" "${case_name}_angles.csv" "$REPLAY_EVERY"
     ;;
   names)
     "$MOCAP_FILTER" --list | cut -d' ' -f1 | sort > "$DIR/listed"
