@@ -746,7 +746,9 @@ re-solve removes the lag before its passes, which then learn almost none (mean 1
 Cost of one `mocap` update, side by side in one run (`BM_Update<MocapFilter>`, median of 5, CPU
 time, the `realistic` recording, load average 2.6 on the shared 2 cores): 0.38 µs before, 0.43 µs
 with the lag tracked and taken out (`build/tests/bench/filter_bench --benchmark_filter=MocapFilter
---benchmark_repetitions=5 --benchmark_report_aggregates_only=true`, the same on the commit before)."""
+--benchmark_repetitions=5 --benchmark_report_aggregates_only=true`, the same on the commit before).
+Every filter's cost, the offline re-solve's included, side by side in one run: [performance.md,
+"Filter update cost"](performance.md#filter-update-cost)."""
 
 OFFLINE_TEXT = """**Offline re-solve** (`mocap-filter --offline`, `mocapd --replay --offline`, take downloads with `&offline=1`; server/filter/offline_smoother.hpp): for a take
 re-processed after the shoot, the filter runs over the whole recording forward and again backward
