@@ -11,6 +11,7 @@
 #include "daemon/config_check.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/replay.hpp"
+#include "daemon/take_args.hpp"
 
 namespace {
 
@@ -41,8 +42,9 @@ static int run(int argc, char** argv) {
     ReplayOptions replay;
     std::vector<std::string> calibrate_at;
     std::string from_text, to_text;
-    auto* replay_opt =
-        app.add_option("--replay", replay.files, "re-run raw recording(s) through the pipeline and exit");
+    auto* replay_opt = app.add_option("--replay", replay.files,
+                                      "re-run raw recording(s) or take(s) (a name in [outputs].record_dir/takes, or a "
+                                      "take's directory) through the pipeline and exit");
     auto* jetstream_opt = app.add_option("--jetstream", replay.jetstream_url,
                                          "replay a take from JetStream at this NATS URL (needs --subject; credentials "
                                          "from [cluster]) and exit")
@@ -50,7 +52,8 @@ static int run(int argc, char** argv) {
     // A take served as if live (take_player.hpp): every socket as configured, no sinks.
     PlayOptions play;
     auto* play_opt = app.add_option("--play", play.files,
-                                    "serve raw recording(s) as if live (pose, BVH, viewer, VMC; no sink listener)")
+                                    "serve raw recording(s) or take(s) as if live (pose, BVH, viewer, VMC; no sink "
+                                    "listener)")
                          ->excludes(replay_opt)
                          ->excludes(jetstream_opt);
     app.add_flag("--loop", play.loop, "with --play: start the take again after its end, forever")->needs(play_opt);
@@ -110,6 +113,16 @@ static int run(int argc, char** argv) {
     // when the daemon is killed. Log lines are rare (counted events are logged once).
     spdlog::flush_on(spdlog::level::trace);
     google::protobuf::SetLogHandler(&protobuf_log);
+    // Takes stand for their raw files (take_args.hpp).
+    for (std::vector<std::string>* files : {&replay.files, &play.files}) {
+        if (files->empty()) continue;
+        auto expanded = expand_take_args(*files, config->record_dir, &error);
+        if (!expanded) {
+            std::cerr << "mocapd: " << error << "\n";
+            return 1;
+        }
+        *files = std::move(*expanded);
+    }
     if (replaying) {
         if ((!from_text.empty() && !parse_replay_time(from_text, &replay.from_us, &error)) ||
             (!to_text.empty() && !parse_replay_time(to_text, &replay.to_us, &error))) {

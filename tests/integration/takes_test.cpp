@@ -168,6 +168,19 @@ TEST_F(Takes, RecordListDownloadAndDeleteWithTheToken) {
         << out;
     EXPECT_TRUE(read_file(dir_.file("off.csv")) == csv_offline.body);
     EXPECT_EQ(http_request(http_port_, "/api/takes/walk/download?format=raw&offline=1").status, 400u);
+
+    // `mocapd --replay` takes the take by name (its raw files in <record_dir>/takes): every
+    // sample of it, the frames of the CSV download.
+    {
+        Process replay({MOCAPD_BIN, "--config", dir_.file("mocapd.toml"), "--replay", "walk", "--angles-out",
+                        dir_.file("by_name.csv")},
+                       dir_.file("replay.log"), dir_.path().string());
+        ASSERT_EQ(replay.wait(60s).value_or(-1), 0) << replay.log();
+        EXPECT_NE(replay.log().find("replayed " + std::to_string(take.at("samples").get<std::uint64_t>()) + " samples"),
+                  std::string::npos)
+            << replay.log();
+        EXPECT_EQ(csv_syncs(read_file(dir_.file("by_name.csv"))), csv_syncs(csv.body));
+    }
     EXPECT_EQ(http_request(http_port_, "/api/takes/walk/download?format=csv&offline=yes").status, 400u);
 
     // mocap-client: the list, and the same BVH (a re-solve is deterministic).
