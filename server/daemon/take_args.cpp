@@ -25,8 +25,9 @@ std::optional<std::vector<std::string>> expand_take_args(const std::vector<std::
             where = dir.string();
             take = serve::TakeStore(dir.parent_path().string()).find(dir.filename().string());
         } else if (serve::valid_take_name(arg)) {
-            where = record_dir + "/takes/" + arg;
-            take = serve::TakeStore(record_dir + "/takes").find(arg);
+            const std::string takes = record_dir + "/takes";
+            where = (fs::path(takes) / arg).string();
+            take = serve::TakeStore(takes).find(arg);
         }
         if (!take) {
             *error = arg + ": neither a raw recording file nor a take" +
