@@ -5,6 +5,7 @@
 // stale flags. Latency is Date.now() minus the sink's send stamp: both wall clocks.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { initTakesPanel } from './takes_panel.js';
 
 const kStale = 1;
 const kNeverSeen = 2;
@@ -120,6 +121,8 @@ window.mocapViewer = state;
 // Scene positions in three.js coordinates (y up), for tests and debugging.
 state.scene = () => ({ grid: grid.position.toArray(), camera: camera.position.toArray(),
                        target: controls.target.toArray(), root: origin[0] ? origin[0].toArray() : null });
+// The segment origins last drawn (world frame), live or from a take.
+state.pose = () => origin.map((o) => o.toArray());
 let latest = null;
 let arrivals = [];
 let latencies = [];
@@ -207,10 +210,19 @@ setInterval(() => {
   $('dropped').textContent = String(state.dropped);
 }, 500);
 
+// The Takes panel draws a take's frames instead of the live stream while it plays.
+let live = true;
 let drawn = null;
+initTakesPanel({
+  segmentNames: () => segments.map((s) => s.name),
+  subject: current,
+  show: (frame) => { if (segments.length) applyFrame(frame); },
+  live: (on) => { live = on; drawn = null; state.live = on; },
+});
+state.live = live;
 function animate() {
   requestAnimationFrame(animate);
-  if (latest && latest !== drawn && segments.length) {
+  if (live && latest && latest !== drawn && segments.length) {
     applyFrame(latest);
     drawn = latest;
   }

@@ -92,6 +92,11 @@ TEST(HttpServer, ServesEmbeddedViewer) {
     EXPECT_EQ(three.status, 200u) << "three.js not embedded: run npm ci in clients/viewer and reconfigure";
     EXPECT_GT(three.body.size(), 500'000u);
     EXPECT_EQ(http_request(f.port(), "/three/addons/controls/OrbitControls.js").status, 200u);
+    const auto takes = http_request(f.port(), "/takes_panel.js");  // the Takes panel and its BVH parser
+    EXPECT_EQ(takes.status, 200u);
+    EXPECT_EQ(takes.content_type, js.content_type);
+    EXPECT_NE(takes.body.find("BVHLoader"), std::string::npos);
+    EXPECT_EQ(http_request(f.port(), "/three/addons/loaders/BVHLoader.js").status, 200u);
     EXPECT_EQ(http_request(f.port(), "/nope").status, 404u);
     EXPECT_EQ(http_request(f.port(), "/", verb::delete_).status, 405u);
 }
