@@ -2,8 +2,11 @@
 # The live viewer end to end: mocapd (generated config, free ports) fed by mocap-sim
 # stream, the page opened in Debian's headless chromium by viewer/viewer_test.mjs
 # (playwright-core from npm: `npm ci` in tests/integration/viewer, done by setup.sh).
-# Usage: viewer_test.sh MOCAPD MOCAP_SIM [SAVE_PNG]   (SAVE_PNG: e.g. docs/viewer.png)
+# With --takes it runs viewer/takes_test.mjs (the Takes panel) instead.
+# Usage: viewer_test.sh [--takes] MOCAPD MOCAP_SIM [SAVE_PNG]   (SAVE_PNG: e.g. docs/viewer.png)
 set -euo pipefail
+takes=0
+if [[ "${1:-}" == "--takes" ]]; then takes=1; shift; fi
 mocapd="$1"
 sim="$2"
 save="${3:-}"
@@ -51,7 +54,12 @@ done
 "$sim" stream --connect "127.0.0.1:$sink_port" --subjects 1 --nodes 15 --rate 100 --motion walk \
   --duration 120 --calibrate-s 6 >"$work/sim.log" 2>&1 &
 pids+=($!)
-if ! node "$here/viewer/viewer_test.mjs" "http://127.0.0.1:$http_port/?subject=1" viewer-test-token "$work" $save; then
+if ((takes)); then
+  run=(node "$here/viewer/takes_test.mjs" "http://127.0.0.1:$http_port/?subject=1" viewer-test-token)
+else
+  run=(node "$here/viewer/viewer_test.mjs" "http://127.0.0.1:$http_port/?subject=1" viewer-test-token "$work" $save)
+fi
+if ! "${run[@]}"; then
   echo "--- mocapd log ---" >&2
   cat "$work/mocapd.log" >&2
   exit 1

@@ -5,9 +5,8 @@
 // Before the shots it presses "Calibrate (T-pose)" and answers the token prompt (the
 // simulated subject stands in a T-pose for its first seconds), and waits for calibrated
 // frames. Usage: node viewer_test.mjs URL TOKEN OUT_DIR [SAVE_PNG]
-import { chromium } from 'playwright-core';
-import { mkdtempSync, writeFileSync, rmSync } from 'node:fs';
-import { tmpdir } from 'node:os';
+import { openBrowser } from './chromium.mjs';
+import { writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 
 const [url, token, outDir, savePng] = process.argv.slice(2);
@@ -17,16 +16,8 @@ if (!url || !token || !outDir) {
 }
 const fail = (msg) => { console.error(`FAIL: ${msg}`); process.exitCode = 1; };
 
-const profile = mkdtempSync(join(tmpdir(), 'mocapd-viewer-chromium-'));
-const context = await chromium.launchPersistentContext(profile, {
-  executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
-  headless: true,
-  viewport: { width: 1280, height: 720 },
-  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-         '--disable-background-networking', '--disable-component-update', '--disable-sync',
-         // WebGL without a GPU: software rendering (SwiftShader through ANGLE).
-         '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-});
+const browser = await openBrowser(720);
+const { context } = browser;
 try {
   const page = context.pages()[0] ?? await context.newPage();
   const errors = [];
@@ -97,6 +88,5 @@ try {
   if (stats.moved < 200) fail('the skeleton does not move between the screenshots');
   if (errors.length) fail(`page errors: ${errors.join('; ')}`);
 } finally {
-  await context.close();
-  rmSync(profile, { recursive: true, force: true });
+  await browser.close();
 }
