@@ -116,7 +116,7 @@ function applyFrame(f) {
 }
 
 // Stream state, also read by the integration test (window.mocapViewer).
-const state = { frames: 0, dropped: 0, subject: 0, fps: 0, latencyMs: NaN, connected: false, calibrated: false, hello: null };
+const state = { frames: 0, dropped: 0, subject: 0, sampleUs: 0, fps: 0, latencyMs: NaN, connected: false, calibrated: false, hello: null };
 window.mocapViewer = state;
 // Scene positions in three.js coordinates (y up), for tests and debugging.
 state.scene = () => ({ grid: grid.position.toArray(), camera: camera.position.toArray(),
@@ -150,6 +150,7 @@ function connect() {
       latest = m;
       state.frames += 1;
       state.subject = m.subject;
+      state.sampleUs = m.sample_us;
       state.calibrated = m.flags.length > 0 && (m.flags[0] & kCalibrated) !== 0;
       arrivals.push(now);
       const sent = m.stamps.sink_send_us || m.stamps.received_us;

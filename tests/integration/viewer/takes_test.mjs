@@ -37,9 +37,12 @@ try {
   console.log(`wrong token: ${await page.textContent('#takes-message')}`);
   if (await page.locator('#takes-list li[data-take="refused1"]').count()) fail('a refused take is listed');
 
-  // Into the walk (the simulated subject stands for its first 6 s), then record about three
-  // seconds of the live stream (300 frames at 100 Hz) from the panel.
-  await page.waitForFunction(() => window.mocapViewer.frames > 800, null, kWait);
+  // Into the walk (the simulated subject stands for its first 6 s, which began before the
+  // page's first frame), then record about three seconds of samples from the panel. Sample
+  // time, not frames counted: a slow software-rendered page is sent fewer frames.
+  const firstUs = await page.evaluate(() => window.mocapViewer.sampleUs);
+  const sampleAfter = (us) => page.waitForFunction((t) => window.mocapViewer.sampleUs > t, us, kWait);
+  await sampleAfter(firstUs + 7e6);
   const livePose = await page.evaluate(() => window.mocapViewer.pose());
   const parents = await page.evaluate(() => window.mocapViewer.hello.segments.map((s) => s.parent));
   await page.fill('#takes-token', token);
@@ -47,8 +50,7 @@ try {
   await page.fill('#takes-notes', 'from the viewer test');
   await page.click('#takes-start');
   await page.waitForSelector('#takes-list li[data-take="panel1"]', kWait);
-  const at = await page.evaluate(() => window.mocapViewer.frames);
-  await page.waitForFunction((n) => window.mocapViewer.frames > n + 300, at, kWait);
+  await sampleAfter(await page.evaluate(() => window.mocapViewer.sampleUs) + 3e6);
   await page.click('#takes-stop');
   await page.waitForFunction(() => document.getElementById('takes-message').textContent === 'take panel1: stopped', null, kWait);
   await page.waitForSelector('#takes-list li[data-take="panel1"] button', kWait);
