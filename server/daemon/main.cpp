@@ -114,11 +114,11 @@ static int run(int argc, char** argv) {
     spdlog::flush_on(spdlog::level::trace);
     google::protobuf::SetLogHandler(&protobuf_log);
     // Takes stand for their raw files (take_args.hpp).
-    for (std::vector<std::string>* files : {&replay.files, &play.files}) {
+    for (const auto& [what, files] : {std::pair{"replay", &replay.files}, std::pair{"play", &play.files}}) {
         if (files->empty()) continue;
         auto expanded = expand_take_args(*files, config->record_dir, &error);
         if (!expanded) {
-            std::cerr << "mocapd: " << error << "\n";
+            std::cerr << "mocapd: " << what << ": " << error << "\n";
             return 1;
         }
         *files = std::move(*expanded);
