@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <ctime>
 #include <functional>
 #include <limits>
@@ -20,6 +19,7 @@
 #include "daemon/wall_clock.hpp"
 #include "filter/filter_factory.hpp"
 #include "filter/offline_smoother.hpp"
+#include "pipeline/filter_processor.hpp"
 #include "pipeline/pipeline.hpp"
 #include "serve/raw_recorder.hpp"
 
@@ -111,13 +111,6 @@ bool replay_jetstream(const DaemonConfig& config, const ReplayOptions& options,
     return true;
 }
 
-bool finite_sample(const ImuSample& s) {
-    const auto finite = [](const Vec3d& v) {
-        return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
-    };
-    return finite(s.gyro_rad_s) && finite(s.accel_m_s2) && (!s.has_mag() || finite(s.mag_ut));
-}
-
 /// Offline: replaces each node's samples' orientation by the smoothed one (replay.hpp).
 /// Returns how many samples carry a smoothed orientation; false + error if a filter cannot be
 /// built.
@@ -126,7 +119,8 @@ bool smooth_offline(const DaemonConfig& config, const pipeline::Pipeline& pipeli
     std::map<std::pair<std::uint32_t, std::uint8_t>, std::vector<std::size_t>> nodes;
     for (std::size_t i = 0; i < samples.size(); ++i) {
         const SegmentSample& s = samples[i];
-        if (s.has_node_quat || pipeline.segment_of(s.node_id) < 0 || !finite_sample(s.imu)) continue;
+        if (s.has_node_quat || pipeline.segment_of(s.node_id) < 0 || !pipeline::FilterProcessor::accepts(s.imu))
+            continue;
         auto& idx = nodes[{s.subject_id, s.node_id}];
         if (idx.empty() || s.imu.t_us > samples[idx.back()].imu.t_us) idx.push_back(i);
     }

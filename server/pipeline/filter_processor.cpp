@@ -11,6 +11,10 @@ bool finite(const Vec3d& v) {
 
 }  // namespace
 
+bool FilterProcessor::accepts(const ImuSample& s) {
+    return finite(s.gyro_rad_s) && finite(s.accel_m_s2) && (!s.has_mag() || finite(s.mag_ut));
+}
+
 bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
     if (reset_.exchange(false, std::memory_order_relaxed)) filter_->reset();
     if (in.has_node_quat) {
@@ -23,7 +27,7 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
         return true;
     }
     const ImuSample& s = in.imu;
-    if (!finite(s.gyro_rad_s) || !finite(s.accel_m_s2) || (s.has_mag() && !finite(s.mag_ut))) return false;
+    if (!accepts(s)) return false;
     filter_->update(s);
     const math::Quat q = filter_->orientation();
     out.q_earth_sensor_wxyz = {q.w(), q.x(), q.y(), q.z()};

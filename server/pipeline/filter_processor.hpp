@@ -24,6 +24,10 @@ public:
 
     bool process(const SegmentSample& in, SegmentPose& out) override;
 
+    /// Whether a filter may be given these readings: all finite (the field only when present).
+    /// What process() rejects otherwise; the offline replay (daemon/replay.hpp) asks the same.
+    [[nodiscard]] static bool accepts(const ImuSample& s);
+
     /// Any thread: the filter restarts (re-initialises from its next sample).
     void request_reset() { reset_.store(true, std::memory_order_relaxed); }
 
