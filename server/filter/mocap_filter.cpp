@@ -577,6 +577,17 @@ FilterDiagnostics MocapFilter::diagnostics() const {
     return d;
 }
 
+HeadingSplit MocapFilter::heading_split() const {
+    HeadingSplit h;
+    h.q6 = orientation_6d();
+    h.mag_heading_rad = state_.delta_rad;
+    h.has_mag_heading = state_.samples > state_.no_mag_samples;
+    h.mag_trusted = h.has_mag_heading && !(params_.mag_guard && mag_rejected());
+    h.field_norm_ut = state_.mag_norm;
+    h.field_dip_rad = state_.mag_dip_rad;
+    return h;
+}
+
 math::Quat MocapFilter::orientation_6d() const {
     return (state_.q_e6_i * state_.q_i_sensor).normalized();
 }

@@ -288,6 +288,7 @@ public:
     [[nodiscard]] math::Quat orientation() const override;
     [[nodiscard]] math::Vec3 gyro_bias_rad_s() const override { return state_.bias_rad_s; }
     [[nodiscard]] FilterDiagnostics diagnostics() const override;
+    [[nodiscard]] HeadingSplit heading_split() const override;
     void reset() override;
     [[nodiscard]] std::string_view name() const override { return "mocap"; }
     [[nodiscard]] std::uint64_t gaps() const override { return state_.clock.gaps(); }

@@ -27,6 +27,17 @@ struct FilterDiagnostics {
     math::Vec3 mag_offset_ut = math::Vec3::Zero();  ///< field offset fixed to the sensor, µT
 };
 
+/// An estimate split into a 6D part and a heading correction about the vertical, for the
+/// body-aware chain stage (fusion/chain_estimator.hpp), which replaces the correction.
+struct HeadingSplit {
+    math::Quat q6 = math::Quat::Identity();  ///< inclination, and a heading the gyro alone keeps
+    double mag_heading_rad = 0.0;            ///< orientation() = Rz(mag_heading_rad) ⊗ q6
+    bool has_mag_heading = false;            ///< the filter corrects its heading from the field
+    bool mag_trusted = false;                ///< ... and uses the field now (not rejected)
+    double field_norm_ut = 0.0;              ///< the field it sees, filtered (0: unknown)
+    double field_dip_rad = 0.0;              ///< its dip, positive down
+};
+
 class OrientationFilter {
 public:
     virtual ~OrientationFilter() = default;
@@ -45,6 +56,14 @@ public:
 
     /// Disturbance and rest flags of the last update (all false if the filter has none).
     [[nodiscard]] virtual FilterDiagnostics diagnostics() const { return {}; }
+
+    /// The estimate as a 6D part and a magnetometer heading correction. A filter that does not
+    /// separate them reports its whole estimate as q6 (has_mag_heading false).
+    [[nodiscard]] virtual HeadingSplit heading_split() const {
+        HeadingSplit s;
+        s.q6 = orientation();
+        return s;
+    }
 
     /// Returns the filter to its freshly constructed state (Params kept).
     virtual void reset() = 0;
