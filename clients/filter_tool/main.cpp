@@ -2,7 +2,15 @@
 //
 //   mocap-filter --filter NAME [--param k=v]... [--frame enu|ned] --in IN.csv --out OUT.csv
 //                [--eval] [--skip-seconds S] [--trace TRACE.csv | --offline]
+//   mocap-filter --chain CHAIN.toml --out-dir DIR [--filter NAME] [--param k=v]... [--no-mag]
+//                [--heading magnetometer|joints|auto] [--chain-param k=v]... [--eval]
 //   mocap-filter --list        prints every filter name with its parameter keys and defaults
+//
+// --chain runs every segment of a chain recording (chain_file.hpp) through the filter (default
+// "mocap") and the chain stage (chain_run.hpp) and writes DIR/<segment>.csv and DIR/joints.csv;
+// --eval then prints per-segment and per-joint errors as one JSON object. --no-mag ignores
+// every magnetometer column. --chain-param sets a chain-stage parameter (fusion::ChainParams,
+// the keys listed by --help) for studies.
 //
 // Exit codes: 0 success, 1 bad input file / output not writable, 2 bad command line or
 // filter parameters. --eval prints one JSON object (evaluation.hpp) on stdout. --trace writes
@@ -20,6 +28,8 @@
 
 #include "core/guarded_main.hpp"
 #include "filter/filter_factory.hpp"
+#include "filter_tool/chain_param.hpp"
+#include "filter_tool/chain_run.hpp"
 #include "filter_tool/evaluation.hpp"
 #include "filter_tool/filter_run.hpp"
 #include "filter_tool/recording_csv.hpp"
@@ -29,6 +39,31 @@ namespace {
 int fail(int code, const std::string& message) {
     std::cerr << "mocap-filter: " << message << '\n';
     return code;
+}
+
+/// key=value pairs in order; false + *bad (the offending text) for one without '='.
+bool split_params(const std::vector<std::string>& args, mocap::filter::FilterParamList& out, std::string* bad) {
+    for (const std::string& kv : args) {
+        const auto eq = kv.find('=');
+        if (eq == std::string::npos || eq == 0) {
+            *bad = kv;
+            return false;
+        }
+        out.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+    }
+    return true;
+}
+
+int run_chain_mode(const std::string& chain_path, const std::string& out_dir, mocap::tools::ChainRunOptions options,
+                   bool eval) {
+    std::string error;
+    const auto chain = mocap::tools::load_chain(chain_path, &error);
+    if (!chain) return fail(1, error);
+    const auto run = mocap::tools::run_chain(*chain, options, &error);
+    if (!run) return fail(2, error);
+    if (!mocap::tools::write_chain_outputs(out_dir, *chain, *run, &error)) return fail(1, error);
+    if (eval) std::cout << mocap::tools::chain_eval_json(*chain, *run, options) << std::endl;
+    return 0;
 }
 
 }  // namespace
@@ -45,6 +80,20 @@ static int run(int argc, char** argv) {
     bool offline = false;
     double skip_seconds = 0.0;
     bool list = false;
+    std::string chain_path, out_dir, heading = "auto";
+    bool no_mag = false;
+    std::vector<std::string> chain_param_args;
+    app.add_option("--chain", chain_path, "Chain recording (CHAIN.toml: segments, their CSVs, the joints)");
+    app.add_option("--out-dir", out_dir, "With --chain: where <segment>.csv and joints.csv go");
+    app.add_flag("--no-mag", no_mag, "With --chain: ignore every magnetometer column");
+    app.add_option("--heading", heading, "With --chain: heading source, magnetometer | joints | auto")
+        ->check(CLI::IsMember({"magnetometer", "joints", "auto"}))
+        ->capture_default_str();
+    app.add_option(
+           "--chain-param", chain_param_args,
+           "With --chain: chain-stage parameter key=value (repeatable; " + mocap::tools::chain_param_keys() + ")")
+        ->allow_extra_args(false)
+        ->take_all();
     app.add_flag("--list", list, "Print every filter name with its parameters (key=default) and exit");
     app.add_option("--filter", filter_name, "Filter name (see --list)");
     app.add_option("--param", param_args, "Filter parameter key=value (repeatable)")
@@ -76,18 +125,34 @@ static int run(int argc, char** argv) {
         }
         return 0;
     }
+    // key=value pairs in order; a key given twice takes its last value (filter_factory.hpp).
+    mocap::filter::FilterParamList params;
+    std::string bad;
+    if (!split_params(param_args, params, &bad)) return fail(2, "--param '" + bad + "' is not key=value");
+    if (!chain_path.empty()) {
+        if (out_dir.empty()) return fail(2, "--chain needs --out-dir");
+        if (!in_path.empty() || !out_path.empty() || !trace_path.empty() || offline) {
+            return fail(2, "--chain cannot go with --in, --out, --trace or --offline");
+        }
+        mocap::tools::ChainRunOptions options;
+        if (!filter_name.empty()) options.filter = filter_name;
+        options.params = params;
+        options.no_mag = no_mag;
+        options.skip_seconds = skip_seconds;
+        options.chain.mode = *mocap::fusion::parse_heading_mode(heading);
+        mocap::filter::FilterParamList chain_params;
+        if (!split_params(chain_param_args, chain_params, &bad)) {
+            return fail(2, "--chain-param '" + bad + "' is not key=value");
+        }
+        if (const std::string e = mocap::tools::apply_chain_params(chain_params, options.chain); !e.empty()) {
+            return fail(2, e);
+        }
+        return run_chain_mode(chain_path, out_dir, options, eval);
+    }
     if (filter_name.empty() || in_path.empty() || out_path.empty()) {
         return fail(2, "--filter, --in and --out are required (see --help)");
     }
     if (offline && !trace_path.empty()) return fail(2, "--trace describes a causal run; it cannot go with --offline");
-
-    // key=value pairs in order; a key given twice takes its last value (filter_factory.hpp).
-    mocap::filter::FilterParamList params;
-    for (const std::string& kv : param_args) {
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos || eq == 0) return fail(2, "--param '" + kv + "' is not key=value");
-        params.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-    }
 
     std::string error;
     std::unique_ptr<mocap::filter::OrientationFilter> filter = mocap::filter::make_filter(filter_name, params, &error);

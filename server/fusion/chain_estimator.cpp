@@ -1,0 +1,283 @@
+#include "fusion/chain_estimator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "fusion/joint_constraints.hpp"
+
+namespace mocap::fusion {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+Quat rz(double a_rad) {
+    return Quat(std::cos(0.5 * a_rad), 0.0, 0.0, std::sin(0.5 * a_rad));
+}
+
+}  // namespace
+
+std::string_view to_string(JointType t) {
+    switch (t) {
+        case JointType::kHinge:
+            return "hinge";
+        case JointType::kTwoDof:
+            return "2dof";
+        case JointType::kBall:
+            return "ball";
+    }
+    return "?";
+}
+
+std::string_view to_string(HeadingMode m) {
+    switch (m) {
+        case HeadingMode::kMagnetometer:
+            return "magnetometer";
+        case HeadingMode::kJoints:
+            return "joints";
+        case HeadingMode::kAuto:
+            return "auto";
+    }
+    return "?";
+}
+
+std::optional<HeadingMode> parse_heading_mode(std::string_view name) {
+    if (name == "magnetometer") return HeadingMode::kMagnetometer;
+    if (name == "joints") return HeadingMode::kJoints;
+    if (name == "auto") return HeadingMode::kAuto;
+    return std::nullopt;
+}
+
+std::string_view to_string(HeadingSource s) {
+    switch (s) {
+        case HeadingSource::kNone:
+            return "none";
+        case HeadingSource::kMagnetometer:
+            return "magnetometer";
+        case HeadingSource::kJoints:
+            return "joints";
+        case HeadingSource::kGyro:
+            return "gyro";
+    }
+    return "?";
+}
+
+std::string ChainEstimator::check(std::size_t segment_count, std::span<const JointDef> joints) {
+    if (segment_count == 0 || segment_count > kMaxSegments) {
+        return "a chain has 1.." + std::to_string(kMaxSegments) + " segments";
+    }
+    std::array<int, kMaxSegments> parent{};
+    parent.fill(-1);
+    for (std::size_t j = 0; j < joints.size(); ++j) {
+        const JointDef& d = joints[j];
+        const auto in_range = [&](int s) { return s >= 0 && static_cast<std::size_t>(s) < segment_count; };
+        const std::string where = "joint " + std::to_string(j) + ": ";
+        if (!in_range(d.parent) || !in_range(d.child)) return where + "segment index out of range";
+        if (d.parent == d.child) return where + "a segment cannot be its own parent";
+        if (parent[static_cast<std::size_t>(d.child)] >= 0) return where + "the child already has a parent joint";
+        if (d.axes_known && (!d.axis_parent.allFinite() || !d.axis_child.allFinite() || d.axis_parent.norm() < 1e-6 ||
+                             d.axis_child.norm() < 1e-6)) {
+            return where + "axes must be finite and non-zero";
+        }
+        parent[static_cast<std::size_t>(d.child)] = d.parent;
+    }
+    for (std::size_t s = 0; s < segment_count; ++s) {  // walking up from any segment must end
+        int at = static_cast<int>(s);
+        for (std::size_t steps = 0; at >= 0; ++steps) {
+            if (steps > segment_count) return "the joints form a cycle";
+            at = parent[static_cast<std::size_t>(at)];
+        }
+    }
+    return {};
+}
+
+ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointDef> joints, const ChainParams& params)
+    : params_(params), segment_count_(segment_count) {
+    joint_of_child_.fill(-1);
+    joints_.reserve(joints.size());
+    for (const JointDef& d : joints) {
+        Joint j;
+        j.def = d;
+        j.filter = HeadingFilter(params_.filter);
+        if (d.axes_known) {
+            j.def.axis_parent.normalize();
+            j.def.axis_child.normalize();
+        }
+        joint_of_child_[static_cast<std::size_t>(d.child)] = static_cast<int>(joints_.size());
+        joints_.push_back(j);
+    }
+    // Parents before children: repeatedly take the segments whose parent is placed.
+    std::array<bool, kMaxSegments> placed{};
+    std::size_t n = 0;
+    while (n < segment_count_) {
+        for (std::size_t s = 0; s < segment_count_; ++s) {
+            if (placed[s]) continue;
+            const int j = joint_of_child_[s];
+            if (j < 0 || placed[static_cast<std::size_t>(joints_[static_cast<std::size_t>(j)].def.parent)]) {
+                placed[s] = true;
+                order_[n++] = static_cast<int>(s);
+            }
+        }
+    }
+    reset();
+}
+
+void ChainEstimator::reset() {
+    for (Joint& j : joints_) {
+        j.filter.reset();
+        j.last_joint_us = j.last_mag_us = -1;
+        j.stats = JointStatus{};
+    }
+    psi_.fill(0.0);
+    last_us_ = -1;
+}
+
+void ChainEstimator::set_axes(std::size_t joint, const Vec3& axis_parent, const Vec3& axis_child) {
+    JointDef& d = joints_[joint].def;
+    d.axis_parent = axis_parent.normalized();
+    d.axis_child = axis_child.normalized();
+    d.axes_known = true;
+}
+
+bool ChainEstimator::fields_agree(const SegmentInput& p, const SegmentInput& c) const {
+    if (p.field_norm_ut <= 0.0 || c.field_norm_ut <= 0.0) return false;
+    const double rel = std::abs(p.field_norm_ut - c.field_norm_ut) / std::max(p.field_norm_ut, c.field_norm_ut);
+    return rel <= params_.field_norm_agree &&
+           std::abs(p.field_dip_rad - c.field_dip_rad) <= params_.field_dip_agree_deg * kDeg;
+}
+
+bool ChainEstimator::constrain(Joint& j, double dt_s, const SegmentInput& p, const SegmentInput& c) {
+    const JointDef& d = j.def;
+    if (!d.axes_known || d.type == JointType::kBall) return false;
+    // One independent measurement per correlation time (heading_filter.hpp).
+    const double scale = dt_s > 0.0 ? std::max(1.0, params_.correlation_s / dt_s) : 1.0;
+    const Vec3 a = math::rotate(p.q6, d.axis_parent);
+    const Vec3 b = math::rotate(c.q6, d.axis_child);
+    const Vec3 u = math::rotate(p.q6, p.gyro_rad_s);
+    const Vec3 v = math::rotate(c.q6, c.gyro_rad_s);
+    HeadingFilter& f = j.filter;
+    bool taken = false;
+    const auto take = [&](const HeadingMeasurement& m) {
+        if (!m.ok) return;
+        if (!f.initialised()) {
+            // The first informative sample starts the estimate; the variance it gets is the
+            // sample's own, with a floor, since it is the only one so far.
+            f.init(f.delta_rad() + m.residual_rad, std::max(std::sqrt(m.var_rad2), 5.0 * kDeg));
+            taken = true;
+            return;
+        }
+        if (f.update(f.delta_rad() + m.residual_rad, m.var_rad2 * scale, params_.gate_sigma)) {
+            taken = true;
+        } else {
+            ++j.stats.refused;
+        }
+    };
+    if (d.type == JointType::kHinge) {
+        take(pair_measurement(a, b, f.delta_rad(), params_.sigma_axis, params_.min_axis_horizontal));
+        // The angular velocity perpendicular to the axis is the same vector for both segments.
+        const Vec3 up = u - u.dot(a) * a;
+        const Vec3 vp = v - v.dot(b) * b;
+        const double sigma = params_.sigma_rate_rad_s + params_.sigma_rate_rel * 0.5 * (up.norm() + vp.norm());
+        take(pair_measurement(up, vp, f.delta_rad(), sigma, params_.min_rate_horizontal_rad_s));
+    } else if (f.initialised()) {  // 2dof: two scalar constraints, linearised, so they need a start
+        take(scalar_measurement(two_dof_axis_constraint(a, b, d.cos_axis_angle), f.delta_rad(),
+                                params_.sigma_two_dof_axis, 0.05));
+        const double sigma_rate =
+            params_.sigma_two_dof_rate_rad_s + params_.sigma_rate_rel * 0.5 * (u.norm() + v.norm());
+        take(scalar_measurement(two_dof_rate_constraint(a, b, u, v), f.delta_rad(), sigma_rate,
+                                params_.min_rate_horizontal_rad_s * 0.2));
+    }
+    return taken;
+}
+
+void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p,
+                                  const SegmentInput& c) {
+    HeadingFilter& f = j.filter;
+    f.predict(dt_s);
+    if (!p.fresh || !c.fresh) return;
+    if (params_.mode == HeadingMode::kMagnetometer) return;
+    const bool joint_recent =
+        j.last_joint_us >= 0 && static_cast<double>(t_us - j.last_joint_us) * 1e-6 < params_.hold_s;
+    if (constrain(j, dt_s, p, c)) {
+        j.last_joint_us = t_us;
+        ++j.stats.joint_updates;
+    }
+    if (params_.mode != HeadingMode::kAuto || !p.mag_available || !c.mag_available) return;
+    if (!p.mag_trusted || !c.mag_trusted || !fields_agree(p, c)) return;
+    const double z = math::wrap_pi(c.mag_heading_rad - p.mag_heading_rad);
+    if (!f.initialised()) {
+        f.init(z, 20.0 * kDeg);
+        j.last_mag_us = t_us;
+        return;
+    }
+    const double agree = std::max(params_.mag_agree_deg * kDeg, 3.0 * f.sigma_rad());
+    if (joint_recent && std::abs(math::wrap_pi(z - f.delta_rad())) > agree) {
+        ++j.stats.mag_disagreements;
+        return;
+    }
+    const double scale = dt_s > 0.0 ? std::max(1.0, params_.correlation_s / dt_s) : 1.0;
+    const double sm = params_.sigma_mag_deg * kDeg;
+    if (f.update(z, sm * sm * scale, params_.gate_sigma)) {
+        j.last_mag_us = t_us;
+        ++j.stats.mag_updates;
+    } else {
+        ++j.stats.refused;
+    }
+}
+
+HeadingSource ChainEstimator::source_of(const Joint& j, std::int64_t t_us) const {
+    const auto recent = [&](std::int64_t at) {
+        return at >= 0 && static_cast<double>(t_us - at) * 1e-6 < params_.hold_s;
+    };
+    if (recent(j.last_joint_us)) return HeadingSource::kJoints;
+    if (recent(j.last_mag_us)) return HeadingSource::kMagnetometer;
+    return j.filter.initialised() ? HeadingSource::kGyro : HeadingSource::kNone;
+}
+
+void ChainEstimator::update(std::int64_t t_us, std::span<const SegmentInput> in, std::span<SegmentOutput> out) {
+    const double dt_s = last_us_ >= 0 && t_us > last_us_ ? static_cast<double>(t_us - last_us_) * 1e-6 : 0.0;
+    last_us_ = t_us;
+    const bool per_segment = params_.mode == HeadingMode::kMagnetometer;
+    for (Joint& j : joints_) {
+        update_joint(j, t_us, dt_s, in[static_cast<std::size_t>(j.def.parent)],
+                     in[static_cast<std::size_t>(j.def.child)]);
+    }
+    for (std::size_t k = 0; k < segment_count_; ++k) {
+        const auto s = static_cast<std::size_t>(order_[k]);
+        const SegmentInput& x = in[s];
+        const int ji = joint_of_child_[s];
+        HeadingSource source = HeadingSource::kNone;
+        if (per_segment || ji < 0) {
+            // The root (or every segment, per segment): its own magnetometer heading, which the
+            // filter holds on its gyro while it rejects the field.
+            if (x.mag_available) psi_[s] = x.mag_heading_rad;
+            source = x.mag_available && x.mag_trusted ? HeadingSource::kMagnetometer : HeadingSource::kGyro;
+        } else {
+            const Joint& j = joints_[static_cast<std::size_t>(ji)];
+            const auto parent = static_cast<std::size_t>(j.def.parent);
+            if (j.filter.initialised()) {
+                psi_[s] = psi_[parent] + j.filter.delta_rad();
+            } else if (x.mag_available && params_.mode == HeadingMode::kAuto) {
+                psi_[s] = x.mag_heading_rad;  // nothing from the joint yet: the segment's own field
+            } else {
+                psi_[s] = psi_[parent];
+            }
+            source = source_of(j, t_us);
+        }
+        out[s].q_earth_sensor = (rz(psi_[s]) * x.q6).normalized();
+        out[s].source = source;
+    }
+}
+
+JointStatus ChainEstimator::status(std::size_t j) const {
+    const Joint& x = joints_[j];
+    JointStatus s = x.stats;
+    s.delta_rad = x.filter.delta_rad();
+    s.sigma_rad = x.filter.sigma_rad();
+    s.rate_rad_s = x.filter.rate_rad_s();
+    s.initialised = x.filter.initialised();
+    s.source = source_of(x, last_us_);
+    return s;
+}
+
+}  // namespace mocap::fusion

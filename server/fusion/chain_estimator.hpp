@@ -1,0 +1,168 @@
+// chain_estimator.hpp — body-aware heading: one subject's segments as a tree of joints whose
+// kinematics hold the segments' relative headings (docs/fusion.md).
+//
+// Input per step: every segment's 6D orientation q6 (its filter's inclination, with a heading
+// of the sensor's own that only the gyro keeps), its bias-corrected rate, and what its
+// magnetometer says of that heading: q9 = Rz(d) ⊗ q6, and whether the filter trusts the field.
+// Per joint, a HeadingFilter (heading_filter.hpp) estimates δ, the heading that turns the
+// child's 6D frame into the parent's, from the joint's constraints (joint_constraints.hpp):
+//   hinge   the axis and the shared perpendicular angular velocity (two vector pairs);
+//   2dof    the constant angle between its two axes and the rate constraint (two scalars);
+//   ball    nothing per sample: its range of motion bounds δ only through the whole motion;
+//           the magnetometer (auto) or the gyro (held) keeps it.
+// Output: q_earth_sensor = Rz(ψ) ⊗ q6 with ψ_root from the root's magnetometer heading (the
+// filter holds it on the gyro while it rejects the field) and ψ_child = ψ_parent + δ.
+//
+// Heading source (ChainParams::mode):
+//   magnetometer  every segment keeps its own filter's heading (q9; the chain is bypassed);
+//   joints        relative headings from the joints only; the magnetometer is used for the
+//                 root's absolute heading alone (and nowhere with --no-mag: d = 0);
+//   auto          joints, plus each joint's magnetometer difference d_c − d_p where both
+//                 filters trust their fields, the fields agree with each other (norm and
+//                 dip), and the difference agrees with what the joint says. Where a joint
+//                 cannot see δ (vertical hinge axis, a ball joint), agreeing fields alone
+//                 carry it.
+// Each segment reports where its heading came from (HeadingSource): the magnetometer, the
+// joints, or the gyroscope alone (nothing observed it for hold_s).
+//
+// Joint axes are in the sensors' frames. A joint whose axes are not known (yet) uses the
+// magnetometer difference (auto) or holds δ; set_axes() gives them later (calibration, an
+// axis estimate).
+//
+// Fixed capacity (kMaxSegments segments, one joint per non-root segment), nothing allocated
+// after construction; not thread-safe (one per subject, on the assembler thread).
+// Cost per step: O(joints), ~0.1 µs per joint (docs/performance.md).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/frame.hpp"
+#include "fusion/heading_filter.hpp"
+#include "math/quaternion.hpp"
+
+namespace mocap::fusion {
+
+using math::Quat;
+using math::Vec3;
+
+enum class JointType : std::uint8_t { kHinge, kTwoDof, kBall };
+enum class HeadingMode : std::uint8_t { kMagnetometer, kJoints, kAuto };
+enum class HeadingSource : std::uint8_t { kNone, kMagnetometer, kJoints, kGyro };
+
+std::string_view to_string(JointType t);      ///< "hinge", "2dof", "ball"
+std::string_view to_string(HeadingMode m);    ///< "magnetometer", "joints", "auto"
+std::string_view to_string(HeadingSource s);  ///< "none", "magnetometer", "joints", "gyro"
+/// "magnetometer" | "joints" | "auto" -> mode; nullopt for anything else.
+std::optional<HeadingMode> parse_heading_mode(std::string_view name);
+
+struct JointDef {
+    int parent = -1;  ///< segment index
+    int child = -1;   ///< segment index; each segment is the child of at most one joint
+    JointType type = JointType::kHinge;
+    bool axes_known = false;
+    Vec3 axis_parent = Vec3::UnitX();  ///< unit, parent sensor frame (2dof: the axis fixed in the parent)
+    Vec3 axis_child = Vec3::UnitX();   ///< unit, child sensor frame (2dof: the axis fixed in the child)
+    double cos_axis_angle = 0.0;       ///< 2dof: cosine of the constant angle between the axes
+};
+
+struct ChainParams {
+    HeadingMode mode = HeadingMode::kAuto;
+    HeadingFilterParams filter{};
+    double correlation_s = 1.0;      ///< time over which one constraint's errors are correlated, s
+    double sigma_axis = 0.035;       ///< error of an axis direction in the earth frame (inclination, axis), unit vector
+    double sigma_rate_rad_s = 0.02;  ///< error of a shared angular velocity, rad/s ...
+    double sigma_rate_rel = 0.05;    ///< ... plus this fraction of its size
+    double min_axis_horizontal = 0.2;        ///< a pair whose horizontal part is shorter says nothing
+    double min_rate_horizontal_rad_s = 0.3;  ///< same for the shared angular velocity, rad/s
+    double sigma_two_dof_axis = 0.035;       ///< 2dof axis-angle constraint noise (cosine units)
+    double sigma_two_dof_rate_rad_s = 0.05;  ///< 2dof rate constraint noise, rad/s
+    double gate_sigma = 5.0;                 ///< innovations beyond this many σ are refused
+    double sigma_mag_deg = 3.0;              ///< a magnetometer difference's error where fields agree, °
+    double mag_agree_deg = 10.0;             ///< ... and how far it may be from the joint's estimate, °
+    double field_norm_agree = 0.06;          ///< two fields agree within this relative norm difference
+    double field_dip_agree_deg = 4.0;        ///< ... and this dip difference, °
+    double hold_s = 5.0;                     ///< no constraint for this long: the source is the gyro
+};
+
+/// One segment's filter output for this step.
+struct SegmentInput {
+    bool fresh = false;              ///< a new sample this step (false: hold, stale)
+    Quat q6 = Quat::Identity();      ///< 6D orientation: filter inclination, own heading frame
+    Vec3 gyro_rad_s = Vec3::Zero();  ///< bias-corrected rate, sensor frame
+    bool mag_available = false;      ///< the filter has a magnetometer heading
+    double mag_heading_rad = 0.0;    ///< d: the filter's own output is Rz(d) ⊗ q6
+    bool mag_trusted = false;        ///< the filter uses the field now (not rejected)
+    double field_norm_ut = 0.0;      ///< the field the filter sees (0: unknown)
+    double field_dip_rad = 0.0;
+};
+
+struct SegmentOutput {
+    Quat q_earth_sensor = Quat::Identity();
+    HeadingSource source = HeadingSource::kNone;
+};
+
+/// What one joint's estimator knows (for tests, stats and the trace).
+struct JointStatus {
+    double delta_rad = 0.0;
+    double sigma_rad = 0.0;
+    double rate_rad_s = 0.0;
+    bool initialised = false;
+    HeadingSource source = HeadingSource::kNone;
+    std::uint64_t joint_updates = 0;      ///< constraint measurements taken
+    std::uint64_t mag_updates = 0;        ///< magnetometer differences taken
+    std::uint64_t mag_disagreements = 0;  ///< differences refused: fields or joint disagree
+    std::uint64_t refused = 0;            ///< outliers refused by the filter's gate
+};
+
+class ChainEstimator {
+public:
+    /// segment_count <= kMaxSegments; joints: at most one per child, parent and child in range
+    /// and different, no cycles. Returns an error text for a bad chain (empty = valid).
+    static std::string check(std::size_t segment_count, std::span<const JointDef> joints);
+
+    /// Requires check() to pass.
+    ChainEstimator(std::size_t segment_count, std::span<const JointDef> joints, const ChainParams& params);
+
+    void reset();
+    /// Gives joint j its axes (sensor frames, normalised here); the estimate keeps its δ.
+    void set_axes(std::size_t joint, const Vec3& axis_parent, const Vec3& axis_child);
+
+    /// One step at t_us (not decreasing). in and out have segment_count entries.
+    void update(std::int64_t t_us, std::span<const SegmentInput> in, std::span<SegmentOutput> out);
+
+    [[nodiscard]] std::size_t segment_count() const { return segment_count_; }
+    [[nodiscard]] std::size_t joint_count() const { return joints_.size(); }
+    [[nodiscard]] const JointDef& joint(std::size_t j) const { return joints_[j].def; }
+    [[nodiscard]] JointStatus status(std::size_t j) const;
+    [[nodiscard]] const ChainParams& params() const { return params_; }
+
+private:
+    struct Joint {
+        JointDef def;
+        HeadingFilter filter;
+        std::int64_t last_joint_us = -1;  // last constraint measurement taken
+        std::int64_t last_mag_us = -1;    // last magnetometer difference taken
+        JointStatus stats;
+    };
+    void update_joint(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c);
+    /// Constraint measurements of one step; true if one was taken.
+    bool constrain(Joint& j, double dt_s, const SegmentInput& p, const SegmentInput& c);
+    [[nodiscard]] bool fields_agree(const SegmentInput& p, const SegmentInput& c) const;
+    [[nodiscard]] HeadingSource source_of(const Joint& j, std::int64_t t_us) const;
+
+    ChainParams params_;
+    std::size_t segment_count_ = 0;
+    std::vector<Joint> joints_;
+    std::array<int, kMaxSegments> joint_of_child_{};  // joint index per segment, -1 = a root
+    std::array<int, kMaxSegments> order_{};           // segments, parents before children
+    std::array<double, kMaxSegments> psi_{};          // heading applied to each segment's q6
+    std::int64_t last_us_ = -1;
+};
+
+}  // namespace mocap::fusion
