@@ -96,15 +96,18 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
     joint_of_child_.fill(-1);
     joints_.reserve(joints.size());
     for (const JointDef& d : joints) {
-        Joint j;
+        Joint& j = joints_.emplace_back();
         j.def = d;
         j.filter = HeadingFilter(params_.filter);
         if (d.axes_known) {
             j.def.axis_parent.normalize();
             j.def.axis_child.normalize();
         }
-        joint_of_child_[static_cast<std::size_t>(d.child)] = static_cast<int>(joints_.size());
-        joints_.push_back(j);
+        if (d.type == JointType::kHinge && (d.estimate_axes || !d.axes_known)) {
+            j.def.estimate_axes = true;
+            j.axis = std::make_unique<HingeAxisEstimator>(params_.axis);
+        }
+        joint_of_child_[static_cast<std::size_t>(d.child)] = static_cast<int>(joints_.size()) - 1;
     }
     // Parents before children: repeatedly take the segments whose parent is placed.
     std::array<bool, kMaxSegments> placed{};
@@ -125,18 +128,42 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
 void ChainEstimator::reset() {
     for (Joint& j : joints_) {
         j.filter.reset();
-        j.last_joint_us = j.last_mag_us = -1;
+        j.last_joint_us = j.last_mag_us = j.refused_since_us = -1;
         j.stats = JointStatus{};
+        if (j.axis) j.axis->reset();
+        if (j.axes_estimated) j.def.axes_known = false;  // learned in the run that is forgotten
+        j.axes_estimated = false;
     }
     psi_.fill(0.0);
     last_us_ = -1;
 }
 
 void ChainEstimator::set_axes(std::size_t joint, const Vec3& axis_parent, const Vec3& axis_child) {
-    JointDef& d = joints_[joint].def;
-    d.axis_parent = axis_parent.normalized();
-    d.axis_child = axis_child.normalized();
-    d.axes_known = true;
+    Joint& j = joints_[joint];
+    j.def.axis_parent = axis_parent.normalized();
+    j.def.axis_child = axis_child.normalized();
+    j.def.axes_known = true;
+    j.axes_estimated = false;
+    // Other axes make another δ: the constraints start it again.
+    j.filter.reset();
+    ++j.stats.restarts;
+}
+
+void ChainEstimator::learn_axes(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c) {
+    if (!j.axis || !j.axis->add(t_us, p.gyro_rad_s, c.gyro_rad_s, p.q6, c.q6) || !j.axis->ready()) return;
+    const Vec3& ap = j.axis->axis_parent();
+    const Vec3& ac = j.axis->axis_child();
+    // A change below ~1° is the estimate's own noise: keep the axes (and δ) as they are.
+    constexpr double kSame = 0.9998;
+    if (j.def.axes_known && ap.dot(j.def.axis_parent) > kSame && ac.dot(j.def.axis_child) > kSame) return;
+    const bool was_known = j.def.axes_known;
+    j.def.axis_parent = ap;
+    j.def.axis_child = ac;
+    j.def.axes_known = true;
+    j.axes_estimated = true;
+    if (!was_known) return;  // δ (from the magnetometer, or none) is kept as the start
+    j.filter.reset();
+    ++j.stats.restarts;
 }
 
 bool ChainEstimator::fields_agree(const SegmentInput& p, const SegmentInput& c) const {
@@ -146,7 +173,7 @@ bool ChainEstimator::fields_agree(const SegmentInput& p, const SegmentInput& c) 
            std::abs(p.field_dip_rad - c.field_dip_rad) <= params_.field_dip_agree_deg * kDeg;
 }
 
-bool ChainEstimator::constrain(Joint& j, double dt_s, const SegmentInput& p, const SegmentInput& c) {
+bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c) {
     const JointDef& d = j.def;
     if (!d.axes_known || d.type == JointType::kBall) return false;
     // One independent measurement per correlation time (heading_filter.hpp).
@@ -157,19 +184,27 @@ bool ChainEstimator::constrain(Joint& j, double dt_s, const SegmentInput& p, con
     const Vec3 v = math::rotate(c.q6, c.gyro_rad_s);
     HeadingFilter& f = j.filter;
     bool taken = false;
+    const auto lost_us = static_cast<std::int64_t>(params_.lost_s * 1e6);
     const auto take = [&](const HeadingMeasurement& m) {
         if (!m.ok) return;
-        if (!f.initialised()) {
-            // The first informative sample starts the estimate; the variance it gets is the
-            // sample's own, with a floor, since it is the only one so far.
+        // The first informative sample starts the estimate (its variance is the sample's own,
+        // with a floor, as it is the only one so far); so does a constraint after the gate has
+        // refused every one for lost_s: the estimate, not the joint, is wrong then (a start
+        // from a disturbed field, axes that changed).
+        const bool lost = j.refused_since_us >= 0 && t_us - j.refused_since_us >= lost_us;
+        if (!f.initialised() || lost) {
+            if (lost) ++j.stats.restarts;
             f.init(f.delta_rad() + m.residual_rad, std::max(std::sqrt(m.var_rad2), 5.0 * kDeg));
+            j.refused_since_us = -1;
             taken = true;
             return;
         }
         if (f.update(f.delta_rad() + m.residual_rad, m.var_rad2 * scale, params_.gate_sigma)) {
+            j.refused_since_us = -1;
             taken = true;
         } else {
             ++j.stats.refused;
+            if (j.refused_since_us < 0) j.refused_since_us = t_us;
         }
     };
     if (d.type == JointType::kHinge) {
@@ -196,9 +231,10 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
     f.predict(dt_s);
     if (!p.fresh || !c.fresh) return;
     if (params_.mode == HeadingMode::kMagnetometer) return;
+    learn_axes(j, t_us, p, c);
     const bool joint_recent =
         j.last_joint_us >= 0 && static_cast<double>(t_us - j.last_joint_us) * 1e-6 < params_.hold_s;
-    if (constrain(j, dt_s, p, c)) {
+    if (constrain(j, t_us, dt_s, p, c)) {
         j.last_joint_us = t_us;
         ++j.stats.joint_updates;
     }
@@ -277,6 +313,10 @@ JointStatus ChainEstimator::status(std::size_t j) const {
     s.rate_rad_s = x.filter.rate_rad_s();
     s.initialised = x.filter.initialised();
     s.source = source_of(x, last_us_);
+    s.axes_known = x.def.axes_known;
+    s.axes_estimated = x.axes_estimated;
+    s.axis_parent = x.def.axis_parent;
+    s.axis_child = x.def.axis_child;
     return s;
 }
 

@@ -36,6 +36,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -44,6 +45,7 @@
 
 #include "core/frame.hpp"
 #include "fusion/heading_filter.hpp"
+#include "fusion/hinge_axis_estimator.hpp"
 #include "math/quaternion.hpp"
 
 namespace mocap::fusion {
@@ -66,6 +68,8 @@ struct JointDef {
     int child = -1;   ///< segment index; each segment is the child of at most one joint
     JointType type = JointType::kHinge;
     bool axes_known = false;
+    bool estimate_axes = false;        ///< hinge: learn the axes from the motion (hinge_axis_estimator.hpp),
+                                       ///< replacing the given ones once the estimate is ready
     Vec3 axis_parent = Vec3::UnitX();  ///< unit, parent sensor frame (2dof: the axis fixed in the parent)
     Vec3 axis_child = Vec3::UnitX();   ///< unit, child sensor frame (2dof: the axis fixed in the child)
     double cos_axis_angle = 0.0;       ///< 2dof: cosine of the constant angle between the axes
@@ -88,6 +92,8 @@ struct ChainParams {
     double field_norm_agree = 0.06;          ///< two fields agree within this relative norm difference
     double field_dip_agree_deg = 4.0;        ///< ... and this dip difference, °
     double hold_s = 5.0;                     ///< no constraint for this long: the source is the gyro
+    double lost_s = 3.0;                     ///< the gate refused every constraint for this long: restart δ
+    HingeAxisParams axis{};                  ///< axes learned from the motion
 };
 
 /// One segment's filter output for this step.
@@ -118,6 +124,10 @@ struct JointStatus {
     std::uint64_t mag_updates = 0;        ///< magnetometer differences taken
     std::uint64_t mag_disagreements = 0;  ///< differences refused: fields or joint disagree
     std::uint64_t refused = 0;            ///< outliers refused by the filter's gate
+    std::uint64_t restarts = 0;           ///< δ restarted from the constraints (lost, or new axes)
+    bool axes_known = false;
+    bool axes_estimated = false;  ///< the axes in use were learned from the motion
+    Vec3 axis_parent = Vec3::UnitX(), axis_child = Vec3::UnitX();
 };
 
 class ChainEstimator {
@@ -128,6 +138,8 @@ public:
 
     /// Requires check() to pass.
     ChainEstimator(std::size_t segment_count, std::span<const JointDef> joints, const ChainParams& params);
+    ChainEstimator(ChainEstimator&&) noexcept = default;
+    ChainEstimator& operator=(ChainEstimator&&) noexcept = default;
 
     void reset();
     /// Gives joint j its axes (sensor frames, normalised here); the estimate keeps its δ.
@@ -146,13 +158,17 @@ private:
     struct Joint {
         JointDef def;
         HeadingFilter filter;
-        std::int64_t last_joint_us = -1;  // last constraint measurement taken
-        std::int64_t last_mag_us = -1;    // last magnetometer difference taken
+        std::int64_t last_joint_us = -1;           // last constraint measurement taken
+        std::int64_t last_mag_us = -1;             // last magnetometer difference taken
+        std::int64_t refused_since_us = -1;        // first of the refusals in a row (-1: none)
+        std::unique_ptr<HingeAxisEstimator> axis;  // estimate_axes hinges only
+        bool axes_estimated = false;
         JointStatus stats;
     };
     void update_joint(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c);
     /// Constraint measurements of one step; true if one was taken.
-    bool constrain(Joint& j, double dt_s, const SegmentInput& p, const SegmentInput& c);
+    bool constrain(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c);
+    void learn_axes(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c);
     [[nodiscard]] bool fields_agree(const SegmentInput& p, const SegmentInput& c) const;
     [[nodiscard]] HeadingSource source_of(const Joint& j, std::int64_t t_us) const;
 
