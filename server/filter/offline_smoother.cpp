@@ -110,6 +110,33 @@ void residual_variances(std::span<const ImuSample> samples, const PassOutput& fw
     }
 }
 
+/// The rotation about the vertical that turns the backward pass's heading frame into the
+/// forward pass's, when neither pass had a magnetometer to fix it: each pass then keeps the
+/// heading of its own first sample, and the two frames are unrelated (up to 180° apart).
+/// Both passes integrate the same gyro, so their difference is nearly constant; its circular
+/// mean over the samples where both have run past their start-up (all samples, weighted by
+/// the shorter run, if the take is too short for that) aligns them.
+double backward_heading_offset(const PassOutput& fwd, const PassOutput& bwd, double settled_s) {
+    double c = 0.0, s = 0.0, c_all = 0.0, s_all = 0.0;
+    for (std::size_t i = 0; i < fwd.q.size(); ++i) {
+        const math::Quat d = fwd.q[i] * bwd.q[i].conjugate();
+        const double a = 2.0 * std::atan2(d.z(), d.w());  // the part of d about the vertical
+        const double w = std::min(fwd.run_s[i], bwd.run_s[i]);
+        c_all += w * std::cos(a);
+        s_all += w * std::sin(a);
+        if (w >= settled_s) {
+            c += std::cos(a);
+            s += std::sin(a);
+        }
+    }
+    if (c == 0.0 && s == 0.0) return std::atan2(s_all, c_all);
+    return std::atan2(s, c);
+}
+
+bool used_field(const PassOutput& pass) {
+    return std::any_of(pass.mag_used.begin(), pass.mag_used.end(), [](char u) { return u != 0; });
+}
+
 }  // namespace
 
 OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const ImuSample> samples) const {
@@ -119,7 +146,14 @@ OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const
     const std::vector<ImuSample> aligned = advance_mag(samples, result.mag_delay_s);
 
     const PassOutput fwd = run_pass(filter, aligned, true);
-    const PassOutput bwd = run_pass(filter, aligned, false);
+    PassOutput bwd = run_pass(filter, aligned, false);
+    if (!used_field(fwd) && !used_field(bwd)) {
+        result.backward_heading_offset_rad = backward_heading_offset(fwd, bwd, 2.0 * params_.converge_tau_s);
+        const double h = 0.5 * result.backward_heading_offset_rad;
+        const math::Quat rz(std::cos(h), 0.0, 0.0, std::sin(h));
+        for (math::Quat& q : bwd.q)
+            q = (rz * q).normalized();
+    }
     std::vector<double> resid_fwd, resid_bwd;
     residual_variances(aligned, fwd, bwd, params_.residual_window_s, resid_fwd, resid_bwd);
 
@@ -132,11 +166,13 @@ OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const
     const std::size_t n = aligned.size();
     result.orientation.resize(n);
     result.forward_weight.resize(n);
+    result.mag_used.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
         const double wf = 1.0 / variance(fwd.run_s[i], resid_fwd[i]);
         const double wb = 1.0 / variance(bwd.run_s[i], resid_bwd[i]);
         result.forward_weight[i] = wf / (wf + wb);
         result.orientation[i] = math::average_two(fwd.q[i], wf, bwd.q[i], wb);
+        result.mag_used[i] = static_cast<char>(fwd.mag_used[i] || bwd.mag_used[i]);
     }
     return result;
 }

@@ -12,6 +12,11 @@
 //     accelerometer and magnetometer as they are): estimate b_i. Each pass lags the truth
 //     from its own side (heading corrections, bias learning, start-up), so their errors
 //     differ in sign where it matters.
+//     Without a magnetometer the two passes' headings are unrelated (each keeps its first
+//     sample's): the backward pass is turned about the vertical into the forward pass's frame
+//     first, by the circular mean of their heading difference once both have settled (both
+//     integrate the same gyro, so the difference hardly changes); with one, the field gives
+//     both the same frame.
 //  4. Blend: q_i = Markley average of f_i and b_i with weights 1/σ² (math::average_two).
 //     A pass's σ² at sample i is
 //        sigma_floor² + sigma_start²·exp(−2 s/converge_tau_s) + e²
@@ -74,7 +79,11 @@ struct OfflineSmootherParams {
 struct OfflineResult {
     std::vector<math::Quat> orientation;  ///< q_earth_sensor (ENU) per sample, unit norm
     std::vector<double> forward_weight;   ///< share of the forward pass in each estimate, 0..1
+    std::vector<char> mag_used;           ///< either pass used the field for heading at the sample
     double mag_delay_s = 0.0;             ///< magnetometer lag removed before the passes, s
+    /// Without a field in either pass: the heading turn applied to the backward pass to bring
+    /// it into the forward pass's frame (0 when a field fixed both), rad.
+    double backward_heading_offset_rad = 0.0;
 };
 
 class OfflineSmoother {
