@@ -18,9 +18,11 @@
 
 #include "core/parse_number.hpp"
 #include "mocap_wire/mw_can.h"
+#include "sim/magnetic_env.hpp"
 #include "sim/sim_rng.hpp"
 #include "sim/stream_motion.hpp"
 #include "sim/stream_node.hpp"
+#include "sim/stream_truth.hpp"
 #include "sim/stream_uplink.hpp"
 #include "sink_node/sink_node.h"
 #include "skeleton/body_model.hpp"
@@ -57,10 +59,13 @@ double cpu_seconds() {
 struct Shared {
     const StreamCommandOptions* options = nullptr;
     const StreamMotion* motion = nullptr;
+    const MagneticEnv* env = nullptr;
     std::vector<NodeDropout> dropouts;
+    std::vector<std::pair<int, double>> magnets;  // (segment index, µT)
     bool attitude = false;
     double dt_s = 0.01;
-    std::FILE* truth = nullptr;
+    std::FILE* truth_angles = nullptr;
+    std::FILE* truth_poses = nullptr;
 };
 
 struct PendingFrame {
@@ -76,7 +81,8 @@ public:
           subject_(subject),
           host_count_(hosts.size()),
           uplink_(hosts),
-          rng_(shared.options->seed, 1000u + static_cast<unsigned>(subject)) {
+          rng_(shared.options->seed, 1000u + static_cast<unsigned>(subject)),
+          truth_angles_(shared.motion->model()) {
         const StreamCommandOptions& o = *shared.options;
         SimRng placement(o.seed, 2000u + static_cast<unsigned>(subject));
         heading_rad_ = placement.uniform(-std::numbers::pi, std::numbers::pi);
@@ -88,6 +94,13 @@ public:
             nodes_.emplace_back(static_cast<std::uint8_t>(seg.node_id), seg.parent < 0, o.seed,
                                 static_cast<std::uint64_t>(subject) * 64u + static_cast<std::uint64_t>(seg.node_id),
                                 noise);
+            for (const auto& [segment, field_ut] : shared.magnets) {
+                if (segment != j) continue;
+                SimRng magnet(o.seed, 0x4D41474E00000000ull ^ (static_cast<std::uint64_t>(subject) * 64u +
+                                                               static_cast<std::uint64_t>(seg.node_id)));
+                Vec3 dir(magnet.normal(), magnet.normal(), magnet.normal());
+                nodes_.back().set_hard_iron_ut(field_ut * dir.normalized());
+            }
         }
         last_sample_.resize(nodes_.size());
         pending_.resize(static_cast<std::size_t>(o.nodes) * 3u * 8u);
@@ -199,11 +212,20 @@ private:
         const BodyPose& next = next_;
         const double inv_dt2 = 1.0 / (shared_.dt_s * shared_.dt_s);
         const StreamCommandOptions& o = *shared_.options;
+        const std::uint64_t sync = sync_.extend(counter);
+        if (shared_.truth_angles != nullptr) {
+            angles_row_.clear();
+            truth_angles_.append_row(static_cast<std::uint32_t>(subject_), sync, static_cast<std::int64_t>(now),
+                                     std::span<const Quat>(cur.q_earth_segment.data(), shared_.motion->model().size()),
+                                     angles_row_);
+            (void)std::fwrite(angles_row_.data(), 1, angles_row_.size(), shared_.truth_angles);  // checked at the end
+        }
+        const MagneticEnv& env = *shared_.env;
         mw_can_frame frames[3];
         for (std::size_t j = 0; j < nodes_.size(); ++j) {
             SimulatedNode& node = nodes_[j];
-            if (shared_.truth != nullptr)
-                write_truth(now, counter, j, cur.q_earth_segment[j] * node.q_segment_sensor());
+            if (shared_.truth_poses != nullptr)
+                write_truth_pose(now, counter, j, cur.q_earth_segment[j] * node.q_segment_sensor());
             if (dropped_out(node.node_id(), t_s)) {
                 ++stats_.dropout_samples;
                 continue;
@@ -214,9 +236,10 @@ private:
             const bool have_last = last.valid && t_s > last.t_s;
             const int n = shared_.attitude
                               ? node.attitude_frame(cur.q_earth_segment[j], counter, frames)
-                              : node.raw_frames(have_last ? last.q_earth_segment : prev.q_earth_segment[j],
-                                                cur.q_earth_segment[j], have_last ? t_s - last.t_s : shared_.dt_s,
-                                                lin_acc, counter, frames);
+                              : node.raw_frames(
+                                    have_last ? last.q_earth_segment : prev.q_earth_segment[j], cur.q_earth_segment[j],
+                                    have_last ? t_s - last.t_s : shared_.dt_s, lin_acc, counter, frames,
+                                    env.uniform() ? env.earth_field_ut() : env.field_ut(cur.sensor_position_m[j]));
             last = {true, t_s, cur.q_earth_segment[j]};
             const std::uint64_t release =
                 now + (o.jitter_us > 0.0 ? static_cast<std::uint64_t>(rng_.uniform(0.0, o.jitter_us)) : 0u);
@@ -238,10 +261,10 @@ private:
         return false;
     }
 
-    void write_truth(std::uint64_t t_us, std::uint32_t counter, std::size_t j, const Quat& q_sensor) const {
+    void write_truth_pose(std::uint64_t t_us, std::uint32_t counter, std::size_t j, const Quat& q_sensor) const {
         const Quat& q = cur_.q_earth_segment[j];
         const auto& seg = shared_.motion->model().segments[j];
-        std::fprintf(shared_.truth, "%llu,%d,%s,%d,%u,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n",
+        std::fprintf(shared_.truth_poses, "%llu,%d,%s,%d,%u,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n",
                      static_cast<unsigned long long>(t_us), subject_, seg.name.c_str(), seg.node_id, counter, q.w(),
                      q.x(), q.y(), q.z(), q_sensor.w(), q_sensor.x(), q_sensor.y(), q_sensor.z());
     }
@@ -263,6 +286,9 @@ private:
     std::vector<LastSample> last_sample_;
     bool motion_started_ = false;
     std::uint64_t start_us_ = 0;
+    SyncExtender sync_;
+    TruthAngles truth_angles_;
+    std::string angles_row_;
     std::vector<PendingFrame> pending_;
     std::size_t head_ = 0, count_ = 0;
     std::uint32_t rx_overflows_ = 0;
@@ -332,6 +358,20 @@ bool parse_dropout(const std::string& text, NodeDropout* out, std::string* error
     return true;
 }
 
+bool parse_magnet(const std::string& text, SegmentMagnet* out, std::string* error) {
+    SegmentMagnet m;
+    const auto f = core::split_fields(text, ':');
+    bool ok = !f.empty() && f.size() <= 2 && !f[0].empty();
+    if (ok) m.segment = std::string(f[0]);
+    if (ok && f.size() == 2) ok = core::parse_number(f[1], m.field_ut) && m.field_ut > 0.0 && m.field_ut <= 2000.0;
+    if (!ok) {
+        *error = "--magnet expects SEGMENT[:UT] with 0 < UT <= 2000, got '" + text + "'";
+        return false;
+    }
+    *out = m;
+    return true;
+}
+
 CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
     CLI::App* cmd =
         app.add_subcommand("stream", "Act as K sink nodes with simulated sensor nodes, streaming to mocapd");
@@ -360,7 +400,10 @@ CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
         ->check(CLI::Range(0.0, 1.0))
         ->capture_default_str();
     cmd->add_option("--seed", o.seed, "Random seed (mounting, noise, loss, headings)")->capture_default_str();
-    cmd->add_option("--truth", o.truth_path, "Write the truth CSV here");
+    cmd->add_option("--truth", o.truth_path,
+                    "Write the true joint angles here, in mocap-client angles' CSV format (join on sync)");
+    cmd->add_option("--truth-poses", o.truth_poses_path,
+                    "Write every segment's and sensor's true orientation here (CSV, one row per segment and SYNC)");
     cmd->add_option("--dropout", o.dropouts, "NODE:START_S:END_S: node silent in that window (repeatable)");
     cmd->add_option("--jitter-us", o.jitter_us, "Node answer delay drawn in [0, J] us")
         ->check(CLI::NonNegativeNumber)
@@ -371,6 +414,12 @@ CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& o) {
     cmd->add_option("--noise-scale", o.noise_scale, "Multiply every sensor noise sigma and the gyro bias (0 = ideal)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
+    cmd->add_option("--magnetic-env", o.magnetic_env,
+                    "Field the magnetometers read at their position: clean | lab | steel-floor | FILE.toml")
+        ->capture_default_str();
+    cmd->add_option("--magnet", o.magnets,
+                    "SEGMENT[:UT]: a magnet on that segment adds UT uT (default 30), fixed in its sensor's frame "
+                    "(repeatable)");
     cmd->add_option("--first-counter", o.first_counter, "SYNC counter of the first instant (test the 2^32 wrap)")
         ->capture_default_str();
     cmd->add_flag("--sink-rate-stats", o.sink_rate_stats, "Print one JSON line of sent/dropped counts at the end");
@@ -419,19 +468,51 @@ int run_stream_command(const StreamCommandOptions& o) {
         }
     }
     shared.motion = &*motion;
-    std::unique_ptr<std::FILE, int (*)(std::FILE*)> truth(nullptr, &std::fclose);
-    static char truth_buffer[1 << 20];
-    if (!o.truth_path.empty()) {
-        truth.reset(std::fopen(o.truth_path.c_str(), "w"));
-        if (!truth) {
-            std::fprintf(stderr, "mocap-sim stream: cannot write %s\n", o.truth_path.c_str());
+    const auto env = MagneticEnv::load(o.magnetic_env, o.seed, &error);
+    if (!env) {
+        std::fprintf(stderr, "mocap-sim stream: %s\n", error.c_str());
+        return 2;
+    }
+    shared.env = &*env;
+    for (const std::string& text : o.magnets) {
+        SegmentMagnet m;
+        if (!parse_magnet(text, &m, &error)) {
+            std::fprintf(stderr, "mocap-sim stream: %s\n", error.c_str());
             return 2;
         }
-        (void)std::setvbuf(truth.get(), truth_buffer, _IOFBF, sizeof truth_buffer);  // else default buffering
-        std::fprintf(truth.get(),
+        const int segment = model.index_of(m.segment);
+        if (segment < 0 || segment >= o.nodes) {
+            std::fprintf(stderr, "mocap-sim stream: --magnet: '%s' is not one of the %d segments with a node\n",
+                         m.segment.c_str(), o.nodes);
+            return 2;
+        }
+        shared.magnets.emplace_back(segment, m.field_ut);
+    }
+
+    using File = std::unique_ptr<std::FILE, int (*)(std::FILE*)>;
+    auto open_truth = [](const std::string& path, char* buffer, std::size_t size, File& file) {
+        file.reset(std::fopen(path.c_str(), "w"));
+        if (!file) {
+            std::fprintf(stderr, "mocap-sim stream: cannot write %s\n", path.c_str());
+            return false;
+        }
+        (void)std::setvbuf(file.get(), buffer, _IOFBF, size);  // else default buffering
+        return true;
+    };
+    File truth_angles(nullptr, &std::fclose), truth_poses(nullptr, &std::fclose);
+    static char angles_buffer[1 << 20], poses_buffer[1 << 20];
+    if (!o.truth_path.empty()) {
+        if (!open_truth(o.truth_path, angles_buffer, sizeof angles_buffer, truth_angles)) return 2;
+        const std::string header = TruthAngles(model).header();
+        (void)std::fwrite(header.data(), 1, header.size(), truth_angles.get());  // checked at the end
+        shared.truth_angles = truth_angles.get();
+    }
+    if (!o.truth_poses_path.empty()) {
+        if (!open_truth(o.truth_poses_path, poses_buffer, sizeof poses_buffer, truth_poses)) return 2;
+        std::fprintf(truth_poses.get(),
                      "t_us,subject,segment,node,counter,seg_qw,seg_qx,seg_qy,seg_qz,sensor_qw,sensor_qx,"
                      "sensor_qy,sensor_qz\n");
-        shared.truth = truth.get();
+        shared.truth_poses = truth_poses.get();
     }
 
     std::vector<std::unique_ptr<SimSink>> sinks;
@@ -487,6 +568,13 @@ int run_stream_command(const StreamCommandOptions& o) {
         }
     }
     if (o.sink_rate_stats) print_stats(sinks, o, elapsed_s, cpu_s);
+    for (const auto& [file, path] :
+         {std::pair{truth_angles.get(), &o.truth_path}, {truth_poses.get(), &o.truth_poses_path}}) {
+        if (file != nullptr && (std::fflush(file) != 0 || std::ferror(file) != 0)) {
+            std::fprintf(stderr, "mocap-sim stream: write to %s failed\n", path->c_str());
+            rc = rc == 0 ? 1 : rc;
+        }
+    }
     return rc;
 }
 

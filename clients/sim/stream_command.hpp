@@ -3,9 +3,11 @@
 //
 //   mocap-sim stream --connect HOST:PORT[,HOST:PORT...] [--subjects K] [--nodes N] [--rate HZ]
 //                    [--mode raw|quat] [--duration S] [--motion walk|FILE.bvh] [--loss P]
-//                    [--seed N] [--truth FILE.csv] [--dropout NODE:START_S:END_S]...
-//                    [--jitter-us J] [--calibrate-s S] [--noise-scale X] [--sink-rate-stats]
-//                    [--no-early-close] [--first-counter C]
+//                    [--seed N] [--truth FILE.csv] [--truth-poses FILE.csv]
+//                    [--dropout NODE:START_S:END_S]... [--jitter-us J] [--calibrate-s S]
+//                    [--noise-scale X] [--magnetic-env clean|lab|steel-floor|FILE.toml]
+//                    [--magnet SEGMENT[:UT]]... [--sink-rate-stats] [--no-early-close]
+//                    [--first-counter C]
 //
 // Each subject k (1..K) is one sink_node (the real sink core, firmware/sink_node) with sink
 // id k and its own TCP connection, and N sensor nodes on the first N segments of the default
@@ -31,7 +33,22 @@
 // --duration bounds everything (a peer that never accepts is retried with the core's
 // back-off until then). SIGINT/SIGTERM stop it early.
 //
-// --truth writes one CSV row per subject, segment and SYNC: t_us (the SYNC's send time),
+// Magnetometers (raw mode) read the field of --magnetic-env at their own position
+// (magnetic_env.hpp; default clean: the uniform 50 µT at 60° dip everywhere, as before); the
+// environment's floor is seeded from --seed. --magnet SEGMENT[:UT] (repeatable) adds a
+// constant field of UT µT (default 30), in a seeded direction fixed in the sensor frame, to
+// the magnetometer of that segment's node in every subject: a magnet or a phone carried on it.
+//
+// --truth writes the true joint angles in exactly the format of `mocap-client angles`
+// (serve/angles_csv.hpp): subject,sync,t_s,<joint>.<axis>_deg,... one row per subject and
+// SYNC, computed from the true segment orientations by the daemon's own joint-angle code
+// (skeleton/joint_angles.hpp, default_joint_specs of the default body). `sync` is the value
+// mocapd gives that instant for a sink's first connection: 2^32 + the SYNC counter the sink
+// sent, plus 2^32 per wrap of the counter (frame_reassembler.hpp), so rows join the daemon's
+// output on sync; t_s is the simulator's clock at the SYNC (CLOCK_REALTIME, within a few µs of
+// the sink's stamp, which is the daemon's t_s); subject is the sink id (the daemon's subject
+// with subject_id_base = 0).
+// --truth-poses writes one CSV row per subject, segment and SYNC: t_us (the SYNC's send time),
 // subject, segment (name), node, counter, seg_qw..seg_qz = q_earth_segment (what the
 // daemon's calibrated output should match), sensor_qw..sensor_qz = q_earth_sensor (what a
 // filter's raw output should match). ENU. Rows of dropped-out nodes are written as well.
@@ -41,7 +58,8 @@
 // --first-counter starts every sink's SYNC counter at C (e.g. near 2^32 to cross the wrap);
 // the motion and the truth still start at the first instant.
 // --sink-rate-stats prints one JSON line at the end on stdout (see run_stream_command).
-// Exit code: 0, or 1 if a subject never connected, 2 for bad arguments.
+// Exit code: 0, or 1 if a subject never connected or a truth file could not be written, 2 for
+// bad arguments.
 #pragma once
 
 #include <cstdint>
@@ -63,11 +81,14 @@ struct StreamCommandOptions {
     std::string motion = "walk";
     double loss = 0.0;
     std::uint64_t seed = 1;
-    std::string truth_path;
+    std::string truth_path;        ///< --truth: joint angles, mocap-client angles' format
+    std::string truth_poses_path;  ///< --truth-poses: every segment's and sensor's orientation
     std::vector<std::string> dropouts;
     double jitter_us = 0.0;
     double calibrate_s = 2.0;
     double noise_scale = 1.0;
+    std::string magnetic_env = "clean";
+    std::vector<std::string> magnets;
     bool sink_rate_stats = false;
     bool early_close = true;          ///< the sink core's early batch close (--no-early-close: off)
     std::uint32_t first_counter = 0;  ///< SYNC counter of the first instant (--first-counter)
@@ -81,6 +102,15 @@ struct NodeDropout {
 };
 /// "NODE:START_S:END_S" with START < END; false with *error otherwise.
 bool parse_dropout(const std::string& text, NodeDropout* out, std::string* error);
+
+/// A parsed --magnet.
+struct SegmentMagnet {
+    std::string segment;
+    double field_ut = 30.0;
+};
+/// "SEGMENT[:UT]" with UT in (0, 2000]; false with *error otherwise (the segment name is
+/// checked against the body by the caller).
+bool parse_magnet(const std::string& text, SegmentMagnet* out, std::string* error);
 
 CLI::App* add_stream_command(CLI::App& app, StreamCommandOptions& options);
 

@@ -51,12 +51,13 @@ NodeSensorNoise stream_node_noise(double scale) {
     return n;
 }
 
-SensorReading ideal_reading(const Quat& q_prev, const Quat& q, double dt_s, const Vec3& lin_acc_earth_m_s2) {
+SensorReading ideal_reading(const Quat& q_prev, const Quat& q, double dt_s, const Vec3& lin_acc_earth_m_s2,
+                            const Vec3& mag_earth_ut) {
     SensorReading r;
     r.gyro_rad_s = 2.0 * math::quat_log(math::canonical(math::conj(q_prev) * q)) / dt_s;
     const Quat q_sensor_earth = math::conj(q);
     r.accel_m_s2 = math::rotate(q_sensor_earth, lin_acc_earth_m_s2 + Vec3(0.0, 0.0, MW_STANDARD_GRAVITY_M_S2));
-    r.mag_ut = math::rotate(q_sensor_earth, stream_mag_earth_ut());
+    r.mag_ut = math::rotate(q_sensor_earth, mag_earth_ut);
     return r;
 }
 
@@ -82,9 +83,10 @@ Vec3 SimulatedNode::noise(double sigma) {
 }
 
 int SimulatedNode::raw_frames(const Quat& q_earth_segment_prev, const Quat& q_earth_segment, double dt_s,
-                              const Vec3& lin_acc_earth_m_s2, std::uint32_t counter, mw_can_frame out[3]) {
+                              const Vec3& lin_acc_earth_m_s2, std::uint32_t counter, mw_can_frame out[3],
+                              const Vec3& mag_earth_ut) {
     const SensorReading r = ideal_reading(q_earth_segment_prev * q_segment_sensor_, q_earth_segment * q_segment_sensor_,
-                                          dt_s, lin_acc_earth_m_s2);
+                                          dt_s, lin_acc_earth_m_s2, mag_earth_ut);
     float v[3];
     std::int16_t counts[3];
     to_floats(r.accel_m_s2 + noise(noise_.accel_m_s2), v);
@@ -93,7 +95,7 @@ int SimulatedNode::raw_frames(const Quat& q_earth_segment_prev, const Quat& q_ea
     to_floats(r.gyro_rad_s + gyro_bias_rad_s_ + noise(noise_.gyro_rad_s), v);
     (void)mw_gyro_from_rad_s(v, kGyroRange, counts);
     encode_raw(MW_FN_GYRO, node_id_, counts, counter, out[1]);
-    to_floats(r.mag_ut + noise(noise_.mag_ut), v);
+    to_floats(r.mag_ut + hard_iron_ut_ + noise(noise_.mag_ut), v);
     (void)mw_mag_from_ut(v, counts);
     encode_raw(MW_FN_MAG, node_id_, counts, counter, out[2]);
     return 3;

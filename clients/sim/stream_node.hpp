@@ -11,7 +11,10 @@
 //         bias (up to 2 °/s per axis) + white noise;
 //   accel f = R(q)ᵀ (a_lin + [0, 0, g]), a_lin the earth-frame linear acceleration of the
 //         sensor (the caller's finite difference), + white noise;
-//   mag   m = R(q)ᵀ m_earth, m_earth = 50 µT at 60° dip (north and down), + white noise;
+//   mag   m = R(q)ᵀ m_earth + h, m_earth the field at the sensor (the caller's: a magnetic
+//         environment, magnetic_env.hpp; by default 50 µT at 60° dip, north and down), h a
+//         hard-iron offset fixed in the sensor frame (set_hard_iron_ut: a magnet carried by
+//         the segment; zero by default), + white noise;
 //   noise σ: the "realistic" scenario's MEMS figures (scenario_spec).
 // Quantisation through the wire library (mw_*_from_*), ranges ±16 g / ±2000 °/s, so the
 // daemon decodes exactly what a real node would send. Attitude mode sends q_earth_sensor
@@ -53,8 +56,9 @@ struct SensorReading {
 };
 
 /// The ideal reading of a sensor whose orientation went from q_prev to q over dt_s, with
-/// earth-frame linear acceleration lin_acc_earth.
-SensorReading ideal_reading(const Quat& q_prev, const Quat& q, double dt_s, const Vec3& lin_acc_earth_m_s2);
+/// earth-frame linear acceleration lin_acc_earth, in the earth-frame field mag_earth_ut.
+SensorReading ideal_reading(const Quat& q_prev, const Quat& q, double dt_s, const Vec3& lin_acc_earth_m_s2,
+                            const Vec3& mag_earth_ut = stream_mag_earth_ut());
 
 class SimulatedNode {
 public:
@@ -65,10 +69,15 @@ public:
     [[nodiscard]] std::uint8_t node_id() const { return node_id_; }
     [[nodiscard]] const Quat& q_segment_sensor() const { return q_segment_sensor_; }
     [[nodiscard]] const Vec3& gyro_bias_rad_s() const { return gyro_bias_rad_s_; }
+    /// A constant field added to every magnetometer reading, sensor frame, µT.
+    void set_hard_iron_ut(const Vec3& offset_ut) { hard_iron_ut_ = offset_ut; }
+    [[nodiscard]] const Vec3& hard_iron_ut() const { return hard_iron_ut_; }
 
-    /// The three raw frames (ACCEL, GYRO, MAG) for SYNC `counter`. Returns 3.
+    /// The three raw frames (ACCEL, GYRO, MAG) for SYNC `counter`, in the earth-frame field
+    /// mag_earth_ut at the sensor. Returns 3.
     int raw_frames(const Quat& q_earth_segment_prev, const Quat& q_earth_segment, double dt_s,
-                   const Vec3& lin_acc_earth_m_s2, std::uint32_t counter, mw_can_frame out[3]);
+                   const Vec3& lin_acc_earth_m_s2, std::uint32_t counter, mw_can_frame out[3],
+                   const Vec3& mag_earth_ut = stream_mag_earth_ut());
     /// The ATT frame for SYNC `counter`. Returns 1.
     int attitude_frame(const Quat& q_earth_segment, std::uint32_t counter, mw_can_frame out[1]);
 
@@ -78,6 +87,7 @@ private:
     std::uint8_t node_id_;
     Quat q_segment_sensor_;
     Vec3 gyro_bias_rad_s_ = Vec3::Zero();
+    Vec3 hard_iron_ut_ = Vec3::Zero();
     NodeSensorNoise noise_;
     SimRng rng_;
 };

@@ -28,6 +28,8 @@
 #include "harness.hpp"
 #include "mocap_wire/mw_can.h"
 #include "mocap_wire/mw_packet.h"
+#include "skeleton/body_model.hpp"
+#include "skeleton/joint_angles.hpp"
 
 namespace {
 
@@ -180,9 +182,11 @@ TEST_F(StreamEndToEnd, APeerThatNeverAcceptsEndsAtTheDuration) {
     EXPECT_NE(stats.find("\"packets\":0"), std::string::npos) << stats;
 }
 
-// The truth file says what went on the wire: a plain listener decodes the stream with the wire
-// library, and every ATT quaternion (noiseless quat mode) equals the truth's q_earth_sensor of
-// its subject, node and counter within the ATT resolution.
+// The truth files say what went on the wire: a plain listener decodes the stream with the wire
+// library, and every ATT quaternion (noiseless quat mode) equals the --truth-poses file's
+// q_earth_sensor of its subject, node and counter within the ATT resolution; the --truth file
+// holds, for every SYNC, the joint angles of those segment orientations under the daemon's
+// sync value (2^32 + counter).
 TEST_F(StreamEndToEnd, TruthFileMatchesTheFramesOnTheWire) {
     const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
     sockaddr_in a{};
@@ -194,10 +198,10 @@ TEST_F(StreamEndToEnd, TruthFileMatchesTheFramesOnTheWire) {
     ASSERT_EQ(::listen(listener, 4), 0);
     const int port = ntohs(a.sin_port);
     const fs::path truth = dir_ / "truth.csv";
-    const pid_t sim =
-        spawn({MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(port), "--subjects", "1", "--mode",
-               "quat", "--noise-scale", "0", "--calibrate-s", "0.5", "--duration", "1.5", "--truth", truth.string()},
-              dir_ / "sim.out", dir_ / "sim.err");
+    const pid_t sim = spawn({MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(port), "--subjects",
+                             "1", "--mode", "quat", "--noise-scale", "0", "--calibrate-s", "0.5", "--duration", "1.5",
+                             "--truth-poses", truth.string(), "--truth", (dir_ / "angles.csv").string()},
+                            dir_ / "sim.out", dir_ / "sim.err");
     const int conn = ::accept(listener, nullptr, nullptr);
     ASSERT_GE(conn, 0);
     std::vector<std::uint8_t> bytes;
@@ -210,6 +214,7 @@ TEST_F(StreamEndToEnd, TruthFileMatchesTheFramesOnTheWire) {
 
     // (node, counter low 14 bits) -> q_earth_sensor from the truth file (1.5 s < 2^14 counters).
     std::map<std::pair<int, int>, std::array<double, 4>> expected;
+    std::map<std::uint32_t, std::array<mocap::skeleton::Quat, 15>> segments;  // counter -> q_earth_segment
     std::istringstream rows(slurp(truth));
     std::string row;
     std::getline(rows, row);
@@ -224,8 +229,42 @@ TEST_F(StreamEndToEnd, TruthFileMatchesTheFramesOnTheWire) {
         EXPECT_EQ(c[1], "1");
         expected[{std::stoi(c[3]), std::stoi(c[4]) & 0x3FFF}] = {std::stod(c[9]), std::stod(c[10]), std::stod(c[11]),
                                                                  std::stod(c[12])};
+        segments[static_cast<std::uint32_t>(std::stoul(c[4]))][static_cast<std::size_t>(std::stoi(c[3]) - 1)] =
+            mocap::skeleton::Quat(std::stod(c[5]), std::stod(c[6]), std::stod(c[7]), std::stod(c[8])).normalized();
     }
     EXPECT_GT(expected.size(), 15u * 100u);
+
+    // The joint angles of the same instants, in mocap-client angles' columns.
+    const auto model = mocap::skeleton::default_body_model();
+    const auto joints = mocap::skeleton::default_joint_specs(model);
+    std::istringstream angle_rows(slurp(dir_ / "angles.csv"));
+    std::getline(angle_rows, row);
+    EXPECT_EQ(row.rfind("subject,sync,t_s,left_hip.flexion_deg,", 0), 0u) << row;
+    std::size_t angle_count = 0;
+    double worst_deg = 0.0;
+    while (std::getline(angle_rows, row)) {
+        std::vector<std::string> c;
+        std::stringstream cells(row);
+        for (std::string cell; std::getline(cells, cell, ',');)
+            c.push_back(cell);
+        ASSERT_EQ(c.size(), 3u + 3u * joints.size()) << row;
+        const std::uint64_t sync = std::stoull(c[1]);
+        ASSERT_EQ(sync >> 32, 1u) << "the daemon's first stream starts at 2^32 + counter";
+        const auto it = segments.find(static_cast<std::uint32_t>(sync & 0xFFFFFFFFu));
+        ASSERT_NE(it, segments.end()) << row;
+        for (std::size_t j = 0; j < joints.size(); ++j) {
+            const auto& spec = joints[j];
+            const auto angles = mocap::skeleton::joint_angles(spec.kind, spec.side, it->second[spec.parent_segment],
+                                                              it->second[spec.child_segment]);
+            const double deg = 180.0 / M_PI;
+            worst_deg = std::max({worst_deg, std::abs(std::stod(c[3 + 3 * j]) - angles.flexion_rad * deg),
+                                  std::abs(std::stod(c[4 + 3 * j]) - angles.abduction_rad * deg),
+                                  std::abs(std::stod(c[5 + 3 * j]) - angles.rotation_rad * deg)});
+        }
+        ++angle_count;
+    }
+    EXPECT_EQ(angle_count, segments.size()) << "one row per SYNC";
+    EXPECT_LT(worst_deg, 0.01) << "the poses file has 6 decimals, the angles 3";
 
     mw_stream_decoder decoder;
     mw_stream_decoder_init(&decoder);

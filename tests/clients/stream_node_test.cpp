@@ -111,6 +111,29 @@ TEST(StreamNode, RawFramesDecodeToTheTruthWithinQuantisation) {
     EXPECT_GT(truth.gyro_rad_s.norm(), 1.0) << "the test moved the sensor";
 }
 
+TEST(StreamNode, MagnetometerReadsTheFieldAtItsPositionPlusItsMagnet) {
+    // --magnetic-env: the caller's field at the sensor; --magnet: a constant offset in the
+    // sensor frame, whatever the orientation.
+    SimulatedNode node(5, false, 42, 5, stream_node_noise(0.0));
+    const Vec3 hard_iron(12.0, -20.0, 5.0);
+    node.set_hard_iron_ut(hard_iron);
+    const Vec3 field(8.0, 19.0, -41.0);  // a disturbed field, ENU
+    for (const Vec3& rv : {Vec3(0.3, 0.2, -0.5), Vec3(-1.2, 0.7, 2.1)}) {
+        const Quat q = math::quat_from_rotvec(rv);
+        mw_can_frame frames[3];
+        ASSERT_EQ(node.raw_frames(q, q, 0.01, Vec3::Zero(), 9u, frames, field), 3);
+        mw_message msg{};
+        float v[3];
+        ASSERT_EQ(mw_can_decode(&frames[2], &msg), MW_OK);
+        ASSERT_EQ(mw_mag_to_ut(msg.u.raw.xyz, v), MW_OK);
+        const Vec3 expected = math::rotate(math::conj(q * node.q_segment_sensor()), field) + hard_iron;
+        for (int i = 0; i < 3; ++i)
+            EXPECT_NEAR(v[i], expected[i], 0.51 * MW_MAG_UT_PER_LSB);
+    }
+    const SensorReading r = ideal_reading(Quat::Identity(), Quat::Identity(), 0.01, Vec3::Zero(), field);
+    EXPECT_LT((r.mag_ut - field).norm(), 1e-12);
+}
+
 TEST(StreamNode, AttitudeFrameDecodesToTheSensorOrientation) {
     SimulatedNode node(3, false, 42, 3, stream_node_noise(0.0));
     const Quat q = math::quat_from_rotvec(Vec3(-0.7, 0.4, 1.9));
@@ -159,6 +182,21 @@ TEST(StreamCommand, ParsesDropouts) {
     EXPECT_FALSE(parse_dropout(" 4:1:2", &d, &error));
     EXPECT_FALSE(parse_dropout("4:nan:2", &d, &error));
     EXPECT_NE(error.find("NODE:START_S:END_S"), std::string::npos);
+}
+
+TEST(StreamCommand, ParsesMagnets) {
+    SegmentMagnet m;
+    std::string error;
+    ASSERT_TRUE(parse_magnet("left_hand", &m, &error)) << error;
+    EXPECT_EQ(m.segment, "left_hand");
+    EXPECT_DOUBLE_EQ(m.field_ut, 30.0) << "the default";
+    ASSERT_TRUE(parse_magnet("trunk:45.5", &m, &error)) << error;
+    EXPECT_EQ(m.segment, "trunk");
+    EXPECT_DOUBLE_EQ(m.field_ut, 45.5);
+    for (const char* bad : {"", ":10", "trunk:", "trunk:0", "trunk:-5", "trunk:x", "trunk:10:2", "trunk:5000"}) {
+        EXPECT_FALSE(parse_magnet(bad, &m, &error)) << bad;
+        EXPECT_NE(error.find("SEGMENT[:UT]"), std::string::npos);
+    }
 }
 
 }  // namespace

@@ -77,7 +77,7 @@ protected:
             std::vector<std::string>{MOCAP_SIM_BIN, "stream", "--connect", "127.0.0.1:" + std::to_string(h.sink_port),
                                      "--rate", std::to_string(kRateHz), "--subjects", "1", "--nodes", "15",
                                      "--duration", std::to_string(seconds), "--calibrate-s", "4", "--seed", "11",
-                                     "--truth", truth},
+                                     "--truth-poses", truth},
             h.dir->file("sim.log"));
     }
 

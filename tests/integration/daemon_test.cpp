@@ -139,7 +139,7 @@ TEST_F(Daemon, PosesMatchSimulatorTruthAfterCalibration) {
     }();
     ASSERT_EQ(names.size(), 15u);
     auto s = sim({"--subjects", "1", "--nodes", "15", "--duration", "14", "--calibrate-s", "4", "--seed", "11",
-                  "--truth", dir_.file("truth.csv")});
+                  "--truth-poses", dir_.file("truth.csv")});
 
     // Frames flow before calibration (raw sensor orientations), then calibrate in the T-pose.
     auto first = collect(c, 10s, [](const auto& v) { return v.size() >= 100; });

@@ -7,7 +7,8 @@
 # driven by the CMU walk clip, with a T-pose still period in which the subject is
 # calibrated by the control request. Then:
 #   1. `mocap-client record` (live BVH port) and the daemon's recorder (record-start/stop)
-#      write BVH files; `mocap-client angles` writes the joint-angle CSV;
+#      write BVH files; `mocap-client angles` writes the joint-angle CSV, which has the columns
+#      of the simulator's true joint angles (`mocap-sim stream --truth`) and joins them on sync;
 #   2. every BVH: each MOTION line's value count == the CHANNELS total; assimp (dump) loads it
 #      with 15 animated joints and the header's frame count; three.js BVHLoader parses it
 #      with 15 joints and that frame count; Blender's importer too when blender is installed
@@ -112,7 +113,7 @@ SINK=$(free_port) POSE=$(free_port) BVH=$(free_port)
 write_config "$DIR/mocapd.toml" "$DIR" mocap
 start_daemon "$DIR/mocapd.toml" "$DIR/daemon.log"
 "$SIM" stream --connect "127.0.0.1:$SINK" --duration 7 --motion "$CLIP" --calibrate-s 2.5 \
-  --truth "$DIR/truth.csv" > "$DIR/sim.log" 2>&1 &
+  --truth-poses "$DIR/truth.csv" --truth "$DIR/truth_angles.csv" > "$DIR/sim.log" 2>&1 &
 SIMPID=$!
 PIDS+=("$SIMPID")
 sleep 0.6
@@ -131,6 +132,11 @@ wait "$SIMPID" || true
 kill -TERM "$DAEMON"; wait "$DAEMON" || fail "mocapd exit status"
 grep -q "subject 1: calibrated" "$DIR/daemon.log" || fail "live calibration did not succeed"
 [[ $(wc -l < "$DIR/client.csv") -eq 301 ]] || fail "client.csv rows"
+[[ "$(head -1 "$DIR/client.csv")" == "$(head -1 "$DIR/truth_angles.csv")" ]] || fail "truth angles columns differ"
+JOINED=$(awk -F, 'NR == FNR { if (FNR > 1) truth[$1 "," $2] = 1; next } FNR > 1 && ($1 "," $2) in truth { n++ }
+  END { print n + 0 }' "$DIR/truth_angles.csv" "$DIR/client.csv")
+[[ $JOINED -eq 300 ]] || fail "only $JOINED of 300 client rows join the truth angles on subject,sync"
+echo "ok truth angles: same columns as mocap-client angles, every row joins on sync"
 
 for f in "$DIR/client.bvh" "$DIR/daemon.bvh"; do check_bvh "$f"; done
 
@@ -162,7 +168,7 @@ check_bvh "$DIR/replay_madgwick.bvh"
 # 50-57 Hz of 100, docs/outputs.md). Below 50 Hz the frames get too few to judge.
 SYNC_RATE=$(awk -F, '$3 == "pelvis" && $2 == 1 { if (!n) t0 = $1; t1 = $1; n++ }
   END { if (n > 1) printf "%.1f", (n - 1) / ((t1 - t0) / 1e6); else print 0 }' "$DIR/truth.csv")
-RT=$("$ROUNDTRIP" --truth "$DIR/truth.csv" --bvh "$DIR/replay1.bvh" --angles "$DIR/replay1.csv" \
+RT=$("$ROUNDTRIP" --truth-poses "$DIR/truth.csv" --bvh "$DIR/replay1.bvh" --angles "$DIR/replay1.csv" \
   --skip-s 3 --exclude right_hand --max-rms-deg 8) && RT_OK=1 || RT_OK=0
 echo "round trip (mocap filter, SYNCs at $SYNC_RATE Hz of 100): $RT"
 if awk -v r="$SYNC_RATE" 'BEGIN { exit !(r >= 50) }'; then

@@ -1,7 +1,7 @@
 // outputs_roundtrip_check — how well a BVH written by mocapd reproduces the motion that
-// drove the sensors (the CMU clip, through `mocap-sim stream --truth`).
+// drove the sensors (the CMU clip, through `mocap-sim stream --truth-poses`).
 //
-//   outputs_roundtrip_check --truth TRUTH.csv --bvh OUT.bvh --angles OUT.csv
+//   outputs_roundtrip_check --truth-poses TRUTH.csv --bvh OUT.bvh --angles OUT.csv
 //                           [--subject 1] [--skip-s S] [--max-rms-deg D] [--exclude SEGMENT]...
 //
 // BVH frame i is matched to row i of the joint-angle CSV written by the same run (same
@@ -62,7 +62,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> excluded;
     for (int i = 1; i + 1 < argc; i += 2) {
         const std::string k = argv[i], v = argv[i + 1];
-        if (k == "--truth")
+        if (k == "--truth-poses")
             truth_path = v;
         else if (k == "--bvh")
             bvh_path = v;

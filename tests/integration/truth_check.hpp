@@ -1,4 +1,4 @@
-// truth_check.hpp — calibrated poses against mocap-sim's own truth file (`stream --truth`):
+// truth_check.hpp — calibrated poses against mocap-sim's own truth file (`stream --truth-poses`):
 // the orientation check of the calibration tests (daemon_test.cpp, calibration_kv_test.cpp).
 #pragma once
 
