@@ -21,10 +21,16 @@ std::vector<std::pair<std::string_view, double fusion::ChainParams::*>> numeric_
             {"sigma_two_dof_rate_rad_s", &P::sigma_two_dof_rate_rad_s},
             {"gate_sigma", &P::gate_sigma},
             {"sigma_mag_deg", &P::sigma_mag_deg},
+            {"mag_correlation_s", &P::mag_correlation_s},
             {"mag_agree_deg", &P::mag_agree_deg},
             {"field_norm_agree", &P::field_norm_agree},
             {"field_dip_agree_deg", &P::field_dip_agree_deg},
-            {"hold_s", &P::hold_s}};
+            {"hold_s", &P::hold_s},
+            {"search_s", &P::search_s},
+            {"search_margin", &P::search_margin},
+            {"lost_s", &P::lost_s},
+            {"noise_tau_s", &P::noise_tau_s},
+            {"min_noise_ratio", &P::min_noise_ratio}};
 }
 
 std::vector<std::pair<std::string_view, double fusion::HeadingFilterParams::*>> filter_keys() {

@@ -32,6 +32,7 @@ struct ChainRunOptions {
     filter::FilterParamList params;
     fusion::ChainParams chain;
     bool no_mag = false;
+    bool offline = false;         ///< run_chain_offline (informational: the JSON names it)
     double skip_seconds = 0.0;    ///< per-segment metrics: first seconds not evaluated
     double joint_skip_s = 5.0;    ///< joint mean: first seconds not counted
     double last_window_s = 30.0;  ///< joint drift: the mean over this many final seconds
@@ -50,6 +51,13 @@ struct ChainRunOutput {
 /// Runs the chain; nullopt + *error when the filter cannot be made.
 std::optional<ChainRunOutput> run_chain(const ChainRecording& chain, const ChainRunOptions& options,
                                         std::string* error);
+
+/// The non-causal re-solve (--offline): every segment's 6D orientation and magnetometer
+/// heading re-solved over the whole take by the offline smoother (filter/offline_smoother.hpp;
+/// once without the field for q6, once with it for d), a constant gyro bias per segment from
+/// the re-solved motion, then the chain smoother (fusion/chain_smoother.hpp).
+std::optional<ChainRunOutput> run_chain_offline(const ChainRecording& chain, const ChainRunOptions& options,
+                                                std::string* error);
 
 struct JointError {
     std::size_t samples = 0;

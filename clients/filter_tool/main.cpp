@@ -2,15 +2,15 @@
 //
 //   mocap-filter --filter NAME [--param k=v]... [--frame enu|ned] --in IN.csv --out OUT.csv
 //                [--eval] [--skip-seconds S] [--trace TRACE.csv | --offline]
-//   mocap-filter --chain CHAIN.toml --out-dir DIR [--filter NAME] [--param k=v]... [--no-mag]
+//   mocap-filter --chain CHAIN.toml --out-dir DIR [--filter NAME] [--param k=v]... [--no-mag] [--offline]
 //                [--heading magnetometer|joints|auto] [--chain-param k=v]... [--eval]
 //   mocap-filter --list        prints every filter name with its parameter keys and defaults
 //
 // --chain runs every segment of a chain recording (chain_file.hpp) through the filter (default
 // "mocap") and the chain stage (chain_run.hpp) and writes DIR/<segment>.csv and DIR/joints.csv;
 // --eval then prints per-segment and per-joint errors as one JSON object. --no-mag ignores
-// every magnetometer column. --chain-param sets a chain-stage parameter (fusion::ChainParams,
-// the keys listed by --help) for studies.
+// every magnetometer column; --offline re-solves the take non-causally (chain_run.hpp). --chain-param sets a
+// chain-stage parameter (fusion::ChainParams, the keys listed by --help) for studies.
 //
 // Exit codes: 0 success, 1 bad input file / output not writable, 2 bad command line or
 // filter parameters. --eval prints one JSON object (evaluation.hpp) on stdout. --trace writes
@@ -59,7 +59,8 @@ int run_chain_mode(const std::string& chain_path, const std::string& out_dir, mo
     std::string error;
     const auto chain = mocap::tools::load_chain(chain_path, &error);
     if (!chain) return fail(1, error);
-    const auto run = mocap::tools::run_chain(*chain, options, &error);
+    const auto run = options.offline ? mocap::tools::run_chain_offline(*chain, options, &error)
+                                     : mocap::tools::run_chain(*chain, options, &error);
     if (!run) return fail(2, error);
     if (!mocap::tools::write_chain_outputs(out_dir, *chain, *run, &error)) return fail(1, error);
     if (eval) std::cout << mocap::tools::chain_eval_json(*chain, *run, options) << std::endl;
@@ -131,13 +132,14 @@ static int run(int argc, char** argv) {
     if (!split_params(param_args, params, &bad)) return fail(2, "--param '" + bad + "' is not key=value");
     if (!chain_path.empty()) {
         if (out_dir.empty()) return fail(2, "--chain needs --out-dir");
-        if (!in_path.empty() || !out_path.empty() || !trace_path.empty() || offline) {
-            return fail(2, "--chain cannot go with --in, --out, --trace or --offline");
+        if (!in_path.empty() || !out_path.empty() || !trace_path.empty()) {
+            return fail(2, "--chain cannot go with --in, --out or --trace");
         }
         mocap::tools::ChainRunOptions options;
         if (!filter_name.empty()) options.filter = filter_name;
         options.params = params;
         options.no_mag = no_mag;
+        options.offline = offline;
         options.skip_seconds = skip_seconds;
         options.chain.mode = *mocap::fusion::parse_heading_mode(heading);
         mocap::filter::FilterParamList chain_params;

@@ -128,6 +128,8 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
 void ChainEstimator::reset() {
     for (Joint& j : joints_) {
         j.filter.reset();
+        j.search = TrigQuad{};
+        j.noise_ratio.fill(1.0);
         j.last_joint_us = j.last_mag_us = j.refused_since_us = -1;
         j.stats = JointStatus{};
         if (j.axis) j.axis->reset();
@@ -185,21 +187,22 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
     HeadingFilter& f = j.filter;
     bool taken = false;
     const auto lost_us = static_cast<std::int64_t>(params_.lost_s * 1e6);
-    const auto take = [&](const HeadingMeasurement& m) {
+    const auto take = [&](const HeadingMeasurement& m, Stream stream) {
         if (!m.ok) return;
         // The first informative sample starts the estimate (its variance is the sample's own,
         // with a floor, as it is the only one so far); so does a constraint after the gate has
         // refused every one for lost_s: the estimate, not the joint, is wrong then (a start
         // from a disturbed field, axes that changed).
         const bool lost = j.refused_since_us >= 0 && t_us - j.refused_since_us >= lost_us;
-        if (!f.initialised() || lost) {
+        if (!f.initialised() || (lost && d.type == JointType::kHinge)) {
             if (lost) ++j.stats.restarts;
             f.init(f.delta_rad() + m.residual_rad, std::max(std::sqrt(m.var_rad2), 5.0 * kDeg));
             j.refused_since_us = -1;
             taken = true;
             return;
         }
-        if (f.update(f.delta_rad() + m.residual_rad, m.var_rad2 * scale, params_.gate_sigma)) {
+        const double ratio = learn_noise(j, stream, m.residual_rad, m.var_rad2, dt_s);
+        if (f.update(f.delta_rad() + m.residual_rad, m.var_rad2 * ratio * scale, params_.gate_sigma)) {
             j.refused_since_us = -1;
             taken = true;
         } else {
@@ -208,19 +211,39 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
         }
     };
     if (d.type == JointType::kHinge) {
-        take(pair_measurement(a, b, f.delta_rad(), params_.sigma_axis, params_.min_axis_horizontal));
+        take(pair_measurement(a, b, f.delta_rad(), params_.sigma_axis, params_.min_axis_horizontal), kAxisPair);
         // The angular velocity perpendicular to the axis is the same vector for both segments.
         const Vec3 up = u - u.dot(a) * a;
         const Vec3 vp = v - v.dot(b) * b;
         const double sigma = params_.sigma_rate_rad_s + params_.sigma_rate_rel * 0.5 * (up.norm() + vp.norm());
-        take(pair_measurement(up, vp, f.delta_rad(), sigma, params_.min_rate_horizontal_rad_s));
-    } else if (f.initialised()) {  // 2dof: two scalar constraints, linearised, so they need a start
-        take(scalar_measurement(two_dof_axis_constraint(a, b, d.cos_axis_angle), f.delta_rad(),
-                                params_.sigma_two_dof_axis, 0.05));
+        take(pair_measurement(up, vp, f.delta_rad(), sigma, params_.min_rate_horizontal_rad_s), kRatePair);
+    } else {  // 2dof: two scalar constraints
+        const TrigLinear g_axis = two_dof_axis_constraint(a, b, d.cos_axis_angle);
+        const TrigLinear g_rate = two_dof_rate_constraint(a, b, u, v);
         const double sigma_rate =
             params_.sigma_two_dof_rate_rad_s + params_.sigma_rate_rel * 0.5 * (u.norm() + v.norm());
-        take(scalar_measurement(two_dof_rate_constraint(a, b, u, v), f.delta_rad(), sigma_rate,
-                                params_.min_rate_horizontal_rad_s * 0.2));
+        // Each sample has two roots in δ; their sum over the last search_s has one, once the
+        // motion is rich enough: that starts (and restarts) δ without a magnetometer.
+        j.search.shift(f.initialised() ? f.rate_rad_s() * dt_s : 0.0);
+        j.search.scale(dt_s > 0.0 ? std::exp(-dt_s / params_.search_s) : 1.0);
+        const double sa = params_.sigma_two_dof_axis, sr = sigma_rate;
+        j.search.add(g_axis, 1.0 / (sa * sa * scale));
+        j.search.add(g_rate, 1.0 / (sr * sr * scale));
+        const bool lost = j.refused_since_us >= 0 && t_us - j.refused_since_us >= lost_us;
+        if (!f.initialised() || lost) {
+            const TrigQuad::Minimum m = j.search.minimum();
+            // Chi-square units: the runner-up clearly worse, the minimum sharp within ~10°.
+            const double sigma = m.curvature > 0.0 ? std::sqrt(2.0 / m.curvature) : 1e9;
+            if (m.runner_up - m.value > params_.search_margin && sigma < 10.0 * kDeg) {
+                if (lost) ++j.stats.restarts;
+                f.init(m.delta_rad, std::max(sigma, 2.0 * kDeg));
+                j.refused_since_us = -1;
+                taken = true;
+            }
+            return taken;
+        }
+        take(scalar_measurement(g_axis, f.delta_rad(), sa, 0.05), kTwoDofAxis);
+        take(scalar_measurement(g_rate, f.delta_rad(), sr, params_.min_rate_horizontal_rad_s * 0.2), kTwoDofRate);
     }
     return taken;
 }
@@ -251,14 +274,33 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
         ++j.stats.mag_disagreements;
         return;
     }
-    const double scale = dt_s > 0.0 ? std::max(1.0, params_.correlation_s / dt_s) : 1.0;
+    // A field's error depends on where the segments are, so it stays while they stay: one
+    // independent difference per mag_correlation_s.
+    const double scale = dt_s > 0.0 ? std::max(1.0, params_.mag_correlation_s / dt_s) : 1.0;
     const double sm = params_.sigma_mag_deg * kDeg;
-    if (f.update(z, sm * sm * scale, params_.gate_sigma)) {
+    const double ratio = learn_noise(j, kMag, math::wrap_pi(z - f.delta_rad()), sm * sm, dt_s);
+    if (f.update(z, sm * sm * ratio * scale, params_.gate_sigma)) {
         j.last_mag_us = t_us;
         ++j.stats.mag_updates;
     } else {
         ++j.stats.refused;
     }
+}
+
+// What a stream's errors really are: its innovations against the estimate, relative to the
+// variance its model gives, averaged over noise_tau_s of sample time. A joint that is only
+// nearly a hinge (an axis that wanders), a field that varies from place to place, an axis
+// slightly off: each shows as a larger ratio, and that stream then counts for less against
+// the others of the same joint; a stream better than its model (an exact hinge, a clean
+// field) counts for more. Bounded to [min_noise_ratio, 100]: a stream that agrees with the
+// estimate because it made it never becomes infinitely sure.
+double ChainEstimator::learn_noise(Joint& j, Stream stream, double innovation_rad, double model_var,
+                                   double dt_s) const {
+    double& r = j.noise_ratio[stream];
+    const double x = std::min(innovation_rad * innovation_rad / model_var, 100.0);
+    const double k = dt_s > 0.0 ? 1.0 - std::exp(-dt_s / params_.noise_tau_s) : 0.0;
+    r += k * (x - r);
+    return std::max(params_.min_noise_ratio, r);
 }
 
 HeadingSource ChainEstimator::source_of(const Joint& j, std::int64_t t_us) const {
@@ -273,11 +315,19 @@ HeadingSource ChainEstimator::source_of(const Joint& j, std::int64_t t_us) const
 void ChainEstimator::update(std::int64_t t_us, std::span<const SegmentInput> in, std::span<SegmentOutput> out) {
     const double dt_s = last_us_ >= 0 && t_us > last_us_ ? static_cast<double>(t_us - last_us_) * 1e-6 : 0.0;
     last_us_ = t_us;
-    const bool per_segment = params_.mode == HeadingMode::kMagnetometer;
-    for (Joint& j : joints_) {
+    std::array<JointHeading, kMaxSegments> headings{};
+    for (std::size_t i = 0; i < joints_.size(); ++i) {
+        Joint& j = joints_[i];
         update_joint(j, t_us, dt_s, in[static_cast<std::size_t>(j.def.parent)],
                      in[static_cast<std::size_t>(j.def.child)]);
+        headings[i] = {j.filter.initialised(), j.filter.delta_rad(), source_of(j, t_us)};
     }
+    compose(in, std::span<const JointHeading>(headings.data(), joints_.size()), out);
+}
+
+void ChainEstimator::compose(std::span<const SegmentInput> in, std::span<const JointHeading> headings,
+                             std::span<SegmentOutput> out) {
+    const bool per_segment = params_.mode == HeadingMode::kMagnetometer;
     for (std::size_t k = 0; k < segment_count_; ++k) {
         const auto s = static_cast<std::size_t>(order_[k]);
         const SegmentInput& x = in[s];
@@ -289,16 +339,16 @@ void ChainEstimator::update(std::int64_t t_us, std::span<const SegmentInput> in,
             if (x.mag_available) psi_[s] = x.mag_heading_rad;
             source = x.mag_available && x.mag_trusted ? HeadingSource::kMagnetometer : HeadingSource::kGyro;
         } else {
-            const Joint& j = joints_[static_cast<std::size_t>(ji)];
-            const auto parent = static_cast<std::size_t>(j.def.parent);
-            if (j.filter.initialised()) {
-                psi_[s] = psi_[parent] + j.filter.delta_rad();
+            const JointHeading& h = headings[static_cast<std::size_t>(ji)];
+            const auto parent = static_cast<std::size_t>(joints_[static_cast<std::size_t>(ji)].def.parent);
+            if (h.known) {
+                psi_[s] = psi_[parent] + h.delta_rad;
             } else if (x.mag_available && params_.mode == HeadingMode::kAuto) {
                 psi_[s] = x.mag_heading_rad;  // nothing from the joint yet: the segment's own field
             } else {
                 psi_[s] = psi_[parent];
             }
-            source = source_of(j, t_us);
+            source = h.source;
         }
         out[s].q_earth_sensor = (rz(psi_[s]) * x.q6).normalized();
         out[s].source = source;

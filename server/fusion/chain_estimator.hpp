@@ -46,6 +46,7 @@
 #include "core/frame.hpp"
 #include "fusion/heading_filter.hpp"
 #include "fusion/hinge_axis_estimator.hpp"
+#include "fusion/joint_constraints.hpp"
 #include "math/quaternion.hpp"
 
 namespace mocap::fusion {
@@ -87,11 +88,16 @@ struct ChainParams {
     double sigma_two_dof_axis = 0.035;       ///< 2dof axis-angle constraint noise (cosine units)
     double sigma_two_dof_rate_rad_s = 0.05;  ///< 2dof rate constraint noise, rad/s
     double gate_sigma = 5.0;                 ///< innovations beyond this many σ are refused
+    double mag_correlation_s = 30.0;         ///< time over which a magnetometer difference's error persists, s
     double sigma_mag_deg = 3.0;              ///< a magnetometer difference's error where fields agree, °
     double mag_agree_deg = 10.0;             ///< ... and how far it may be from the joint's estimate, °
     double field_norm_agree = 0.06;          ///< two fields agree within this relative norm difference
     double field_dip_agree_deg = 4.0;        ///< ... and this dip difference, °
     double hold_s = 5.0;                     ///< no constraint for this long: the source is the gyro
+    double search_s = 20.0;                  ///< 2dof: window of the cost that starts δ, s
+    double search_margin = 25.0;             ///< ... its runner-up must be this much worse (χ²)
+    double noise_tau_s = 30.0;               ///< time over which each constraint's real error is learned, s
+    double min_noise_ratio = 0.01;           ///< a constraint counts at most this much better than its model
     double lost_s = 3.0;                     ///< the gate refused every constraint for this long: restart δ
     HingeAxisParams axis{};                  ///< axes learned from the motion
 };
@@ -106,6 +112,13 @@ struct SegmentInput {
     bool mag_trusted = false;        ///< the filter uses the field now (not rejected)
     double field_norm_ut = 0.0;      ///< the field the filter sees (0: unknown)
     double field_dip_rad = 0.0;
+};
+
+/// One joint's relative heading as compose() applies it.
+struct JointHeading {
+    bool known = false;  ///< false: nothing has seen δ yet
+    double delta_rad = 0.0;
+    HeadingSource source = HeadingSource::kNone;
 };
 
 struct SegmentOutput {
@@ -148,6 +161,12 @@ public:
     /// One step at t_us (not decreasing). in and out have segment_count entries.
     void update(std::int64_t t_us, std::span<const SegmentInput> in, std::span<SegmentOutput> out);
 
+    /// Turns every segment's q6 by the headings of the joints given (one per joint, in
+    /// joint order) instead of the estimator's own: the roots as update() does, the children
+    /// by their parent's heading plus δ. For a smoother that blends two passes' δ.
+    void compose(std::span<const SegmentInput> in, std::span<const JointHeading> headings,
+                 std::span<SegmentOutput> out);
+
     [[nodiscard]] std::size_t segment_count() const { return segment_count_; }
     [[nodiscard]] std::size_t joint_count() const { return joints_.size(); }
     [[nodiscard]] const JointDef& joint(std::size_t j) const { return joints_[j].def; }
@@ -155,13 +174,16 @@ public:
     [[nodiscard]] const ChainParams& params() const { return params_; }
 
 private:
+    enum Stream : std::uint8_t { kAxisPair, kRatePair, kTwoDofAxis, kTwoDofRate, kMag, kStreams };
     struct Joint {
         JointDef def;
         HeadingFilter filter;
-        std::int64_t last_joint_us = -1;           // last constraint measurement taken
-        std::int64_t last_mag_us = -1;             // last magnetometer difference taken
-        std::int64_t refused_since_us = -1;        // first of the refusals in a row (-1: none)
-        std::unique_ptr<HingeAxisEstimator> axis;  // estimate_axes hinges only
+        std::int64_t last_joint_us = -1;             // last constraint measurement taken
+        std::int64_t last_mag_us = -1;               // last magnetometer difference taken
+        std::int64_t refused_since_us = -1;          // first of the refusals in a row (-1: none)
+        std::unique_ptr<HingeAxisEstimator> axis;    // estimate_axes hinges only
+        TrigQuad search;                             // 2dof: the constraints' cost over δ, last search_s
+        std::array<double, kStreams> noise_ratio{};  // learned error variance / model variance
         bool axes_estimated = false;
         JointStatus stats;
     };
@@ -169,6 +191,7 @@ private:
     /// Constraint measurements of one step; true if one was taken.
     bool constrain(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c);
     void learn_axes(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c);
+    double learn_noise(Joint& j, Stream stream, double innovation_rad, double model_var, double dt_s) const;
     [[nodiscard]] bool fields_agree(const SegmentInput& p, const SegmentInput& c) const;
     [[nodiscard]] HeadingSource source_of(const Joint& j, std::int64_t t_us) const;
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 namespace mocap::fusion {
 
@@ -11,6 +12,67 @@ double TrigLinear::value(double delta_rad) const {
 
 double TrigLinear::slope(double delta_rad) const {
     return -c * std::sin(delta_rad) + s * std::cos(delta_rad);
+}
+
+void TrigQuad::add(const TrigLinear& g, double w) {
+    // (C cos δ + S sin δ + K)² expanded with cos² = (1 + cos 2δ)/2, sin² = (1 − cos 2δ)/2.
+    a0 += w * (0.5 * (g.c * g.c + g.s * g.s) + g.k * g.k);
+    a1 += w * 2.0 * g.c * g.k;
+    b1 += w * 2.0 * g.s * g.k;
+    a2 += w * 0.5 * (g.c * g.c - g.s * g.s);
+    b2 += w * g.c * g.s;
+}
+
+void TrigQuad::scale(double f) {
+    a0 *= f;
+    a1 *= f;
+    b1 *= f;
+    a2 *= f;
+    b2 *= f;
+}
+
+void TrigQuad::shift(double s_rad) {
+    // a cos(δ − s) + b sin(δ − s) = (a cos s − b sin s) cos δ + (a sin s + b cos s) sin δ
+    const auto turn = [](double& a, double& b, double ang) {
+        const double c = std::cos(ang), s = std::sin(ang);
+        const double na = a * c - b * s, nb = a * s + b * c;
+        a = na;
+        b = nb;
+    };
+    turn(a1, b1, s_rad);
+    turn(a2, b2, 2.0 * s_rad);
+}
+
+double TrigQuad::value(double d) const {
+    return a0 + a1 * std::cos(d) + b1 * std::sin(d) + a2 * std::cos(2.0 * d) + b2 * std::sin(2.0 * d);
+}
+
+TrigQuad::Minimum TrigQuad::minimum() const {
+    constexpr int kGrid = 72;
+    constexpr double kStep = 2.0 * std::numbers::pi / kGrid;
+    int best = 0;
+    for (int i = 1; i < kGrid; ++i) {
+        if (value(i * kStep) < value(best * kStep)) best = i;
+    }
+    Minimum m;
+    double d = best * kStep;
+    for (int it = 0; it < 8; ++it) {  // Newton on J' = 0, kept within the grid cell
+        const double d1 =
+            -a1 * std::sin(d) + b1 * std::cos(d) - 2.0 * a2 * std::sin(2.0 * d) + 2.0 * b2 * std::cos(2.0 * d);
+        const double d2 =
+            -a1 * std::cos(d) - b1 * std::sin(d) - 4.0 * a2 * std::cos(2.0 * d) - 4.0 * b2 * std::sin(2.0 * d);
+        if (d2 <= 0.0) break;
+        d = std::clamp(d - d1 / d2, best * kStep - kStep, best * kStep + kStep);
+    }
+    m.delta_rad = math::wrap_pi(d);
+    m.value = value(d);
+    m.curvature = -a1 * std::cos(d) - b1 * std::sin(d) - 4.0 * a2 * std::cos(2.0 * d) - 4.0 * b2 * std::sin(2.0 * d);
+    m.runner_up = 1e300;
+    for (int i = 0; i < kGrid; ++i) {
+        const double x = i * kStep;
+        if (std::abs(math::wrap_pi(x - d)) >= std::numbers::pi / 4.0) m.runner_up = std::min(m.runner_up, value(x));
+    }
+    return m;
 }
 
 TrigLinear dot_rz(const Vec3& x, const Vec3& y) {

@@ -45,6 +45,31 @@ struct TrigLinear {
 };
 TrigLinear dot_rz(const Vec3& x, const Vec3& y);
 
+/// A cost over δ that is a sum of squared TrigLinear residuals: a trigonometric polynomial
+/// of order two, J(δ) = a0 + a1 cos δ + b1 sin δ + a2 cos 2δ + b2 sin 2δ, so any number of
+/// samples sums into five numbers. For constraints whose single sample has more than one root
+/// (2dof): the sum over a window of motion has one clear minimum once the motion is rich
+/// enough, which starts the heading filter without a magnetometer.
+struct TrigQuad {
+    double a0 = 0, a1 = 0, b1 = 0, a2 = 0, b2 = 0;
+    /// Adds w · g(δ)².
+    void add(const TrigLinear& g, double w);
+    /// Multiplies every coefficient (exponential forgetting).
+    void scale(double f);
+    /// Moves the cost along δ by s: J_new(δ) = J(δ − s) (the frames drifted by s).
+    void shift(double s_rad);
+    [[nodiscard]] double value(double delta_rad) const;
+
+    struct Minimum {
+        double delta_rad = 0;  ///< where J is smallest
+        double value = 0;      ///< J there
+        double curvature = 0;  ///< J'' there
+        double runner_up = 0;  ///< smallest J at least 45° away
+    };
+    /// Grid of 5° refined by Newton steps.
+    [[nodiscard]] Minimum minimum() const;
+};
+
 /// Rz(δ) v: v turned about the vertical.
 Vec3 rotate_z(double delta_rad, const Vec3& v);
 
