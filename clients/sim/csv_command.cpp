@@ -1,17 +1,94 @@
 #include "sim/csv_command.hpp"
 
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 
 #include "filter_tool/filter_run.hpp"
+#include "sim/chain_scenario.hpp"
 
 namespace mocap::sim {
+namespace {
+
+bool is_chain_scenario(const std::string& name) {
+    return name == "chain";
+}
+
+std::string scenario_list() {
+    std::string s = "chain";
+    for (const std::string& n : single_sensor_scenario_names())
+        s += " | " + n;
+    return s;
+}
+
+/// The scenario's rate, duration and field unless the command line sets them.
+struct ChainDefaults {
+    double rate_hz;
+    double duration_s;
+    const char* magnetic_env;
+};
+ChainDefaults chain_defaults(const std::string& scenario) {
+    (void)scenario;  // chain only
+    return {ChainOptions{}.rate_hz, ChainOptions{}.duration_s, "lab"};
+}
+
+int run_chain_command(const CsvCommandOptions& o) {
+    const ChainDefaults d = chain_defaults(o.scenario);
+    const double rate_hz = o.rate_hz > 0.0 ? o.rate_hz : d.rate_hz;
+    const double duration_s = o.duration_s > 0.0 ? o.duration_s : d.duration_s;
+    const std::string env_name = !o.magnetic_env.empty() ? o.magnetic_env : d.magnetic_env;
+    if (o.mag_noise_scale != 1.0) {
+        std::cerr << "mocap-sim csv: --mag-noise-scale applies to the single-sensor scenarios only\n";
+        return 2;
+    }
+    const std::filesystem::path out(o.out_path);
+    const std::filesystem::path dir = out.parent_path().empty() ? std::filesystem::path(".") : out.parent_path();
+    if (out.filename().empty() || !std::filesystem::is_directory(dir)) {
+        std::cerr << "mocap-sim csv: --out must name a TOML file in an existing folder, got '" << o.out_path << "'\n";
+        return 1;
+    }
+    std::string error;
+    const auto env = MagneticEnv::load(env_name, o.seed, &error);
+    if (!env) {
+        std::cerr << "mocap-sim csv: " << error << "\n";
+        return 2;
+    }
+    ChainOptions c;
+    c.seed = o.seed;
+    c.rate_hz = rate_hz;
+    c.duration_s = duration_s;
+    c.noise_scale = o.noise_scale;
+    const ChainRecording rec = make_chain_scenario(c, *env);
+    if (!write_chain_files(rec, dir / out.filename(), o.frame == "ned", &error)) {
+        std::cerr << "mocap-sim csv: " << error << "\n";
+        return 1;
+    }
+    return 0;
+}
+
+}  // namespace
+
+std::vector<std::string> single_sensor_scenario_names() {
+    std::vector<std::string> names;
+    // ScenarioKind counts up from 0 and scenario_name() answers "unknown" past the last kind.
+    for (int i = 0; i < 64; ++i) {
+        const std::string name(scenario_name(static_cast<ScenarioKind>(i)));
+        if (!parse_scenario_kind(name)) break;
+        names.push_back(name);
+    }
+    return names;
+}
 
 CLI::App* add_csv_command(CLI::App& app, CsvCommandOptions& options) {
-    CLI::App* cmd = app.add_subcommand("csv", "Write one sensor's benchmark recording with its reference orientation");
-    cmd->add_option("--scenario", options.scenario, "fourati | realistic | magnetic | continuous")
+    CLI::App* cmd = app.add_subcommand("csv", "Write a benchmark recording with its reference orientation");
+    cmd->add_option("--scenario", options.scenario, scenario_list())
         ->required()
-        ->check(CLI::IsMember({"fourati", "realistic", "magnetic", "continuous"}));
+        ->check(CLI::Validator(
+            [](std::string& name) -> std::string {
+                if (is_chain_scenario(name) || parse_scenario_kind(name)) return {};
+                return "unknown scenario '" + name + "' (" + scenario_list() + ")";
+            },
+            "SCENARIO"));
     cmd->add_option("--seed", options.seed, "Random seed (same seed, same file)")->capture_default_str();
     cmd->add_option("--frame", options.frame, "Earth frame of the reference columns: enu | ned")
         ->check(CLI::IsMember({"enu", "ned"}))
@@ -22,7 +99,11 @@ CLI::App* add_csv_command(CLI::App& app, CsvCommandOptions& options) {
     cmd->add_option("--mag-noise-scale", options.mag_noise_scale, "Multiply the magnetometer noise sigma (study knob)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
-    cmd->add_option("--out", options.out_path, "Output CSV file")->required();
+    cmd->add_option("--rate", options.rate_hz, "chain: sample rate, Hz (default 40)")->check(CLI::Range(1.0, 2000.0));
+    cmd->add_option("--duration", options.duration_s, "chain: seconds (default 180)")->check(CLI::Range(1.0, 36000.0));
+    cmd->add_option("--magnetic-env", options.magnetic_env,
+                    "chain: clean | lab | steel-floor | FILE.toml (default lab)");
+    cmd->add_option("--out", options.out_path, "Output CSV file, or DIR/NAME.toml for chain")->required();
     return cmd;
 }
 
@@ -44,9 +125,15 @@ tools::Recording to_recording(const Scenario& scenario, bool ned) {
 }
 
 int run_csv_command(const CsvCommandOptions& options) {
+    if (is_chain_scenario(options.scenario)) return run_chain_command(options);
     const auto kind = parse_scenario_kind(options.scenario);
     if (!kind) {
         std::cerr << "mocap-sim csv: unknown scenario '" << options.scenario << "'\n";
+        return 2;
+    }
+    if (options.rate_hz > 0.0 || options.duration_s > 0.0 || !options.magnetic_env.empty()) {
+        std::cerr << "mocap-sim csv: --rate, --duration and --magnetic-env apply to chain; '" << options.scenario
+                  << "' has its own\n";
         return 2;
     }
     ScenarioOptions scenario_options;

@@ -97,7 +97,7 @@ void add_floor(MagneticEnvSpec& s, std::uint64_t seed, bool steel) {
     s.floor.push_back(beams);
 }
 
-/// A steel workbench (legs, frame, top) with a PC under it and a monitor on it, centred on
+/// A steel workbench (legs, frame, top) with a PC under it, a monitor and a vise on it, centred on
 /// workbench_position_m(), and two steel cabinets further along the same wall. Moments are
 /// mostly along the earth field (induced) with some remanence.
 void add_furniture(MagneticEnvSpec& s) {
@@ -108,12 +108,13 @@ void add_furniture(MagneticEnvSpec& s) {
         for (const double y : {-0.35, 0.35})
             add({x, y, 0.37}, 1.2 * Vec3(0.0, 0.0, -1.0) + 0.3 * along_field, 0.08);  // legs
     }
-    add({-0.4, -0.1, 0.72}, 1.6 * along_field + Vec3(0.6, 0.2, 0.0), 0.12);  // frame and top
-    add({0.4, 0.1, 0.72}, 1.4 * along_field + Vec3(-0.3, 0.5, 0.0), 0.12);
-    add({0.0, 0.3, 0.72}, 1.0 * along_field + Vec3(0.4, -0.4, 0.0), 0.12);
-    add({0.5, -0.2, 0.25}, Vec3(2.5, -1.5, -3.0), 0.15);                   // PC under the bench
-    add({-0.2, -0.3, 0.95}, Vec3(-1.0, 0.8, -0.6), 0.1);                   // monitor at the back edge
-    add({-4.0, -0.5, 0.9}, 8.0 * along_field + Vec3(2.0, 0.0, 0.0), 0.4);  // cabinets
+    add({-0.4, -0.1, 0.72}, 2.5 * along_field + Vec3(1.0, 0.3, 0.0), 0.2);  // frame and top
+    add({0.4, 0.1, 0.72}, 2.2 * along_field + Vec3(-0.5, 0.8, 0.0), 0.2);
+    add({0.0, 0.3, 0.72}, 1.6 * along_field + Vec3(0.6, -0.6, 0.0), 0.2);
+    add({0.5, -0.2, 0.25}, Vec3(2.5, -1.5, -3.0), 0.15);                      // PC under the bench
+    add({0.2, -0.45, 1.0}, Vec3(-2.0, 1.6, -1.2), 0.2);                       // monitor at the back edge
+    add({-0.55, 0.45, 0.8}, 2.2 * along_field + Vec3(1.5, -0.8, 0.0), 0.12);  // a vise on the top
+    add({-4.0, -0.5, 0.9}, 8.0 * along_field + Vec3(2.0, 0.0, 0.0), 0.4);     // cabinets
     add({5.0, -0.5, 0.9}, 8.0 * along_field + Vec3(-1.0, 2.0, 0.0), 0.4);
 }
 

@@ -14,9 +14,9 @@
 //                 horizontally is faded out smoothly (C²) between reach/2 and reach;
 //   dipoles       a finite list (furniture, equipment, a file's own sources).
 // Presets (make_magnetic_env_spec): `clean` (earth field only, 50 µT, dip 60°: the simulator's
-// field until now), `lab` (reinforced floor, building steel, a steel workbench with a PC and a
-// monitor against the south wall at y = −9 m, two cabinets), `steel-floor` (lab with twice the
-// floor steel, shallower). A TOML file describes the same things (docs/simulator.md has the
+// field until now), `lab` (reinforced floor, building steel, a steel workbench with a PC, a
+// monitor and a vise against the south wall at y = −9 m, two cabinets), `steel-floor` (lab with
+// about twice the floor steel, shallower). A TOML file describes the same things (docs/simulator.md has the
 // format). The walking area of `mocap-sim stream` (|y| < 8 m) holds only floor sources.
 //
 // Frames and units: ENU (x east, y north, z up), metres, floor at z = 0, field in µT.

@@ -106,6 +106,39 @@ TEST_F(ToolsEndToEnd, SimWritesTheContractFileDeterministically) {
     EXPECT_NE(run(sim("--scenario fourati --out /nonexistent-dir/x.csv")).exit_code, 0);
 }
 
+// --scenario chain: CHAIN.toml, one CSV per segment in the layout mocap-filter reads,
+// and truth.toml; the scenario check takes the single-sensor names from the scenario code.
+TEST_F(ToolsEndToEnd, SimWritesChainFilesTheFilterReads) {
+    const ToolRun chain = run(sim("--scenario chain --duration 20 --out " + path("chain.toml").string()));
+    ASSERT_EQ(chain.exit_code, 0) << chain.err;
+    const std::string toml = slurp(path("chain.toml"));
+    std::size_t joints = 0;
+    for (std::size_t at = 0; (at = toml.find("[[joint]]", at)) != std::string::npos; ++at)
+        ++joints;
+    EXPECT_EQ(joints, 4u);
+    EXPECT_NE(toml.find("type = \"2dof\""), std::string::npos) << toml;
+    EXPECT_NE(slurp(path("truth.toml")).find("r_parent_m"), std::string::npos);
+    for (const char* seg : {"seg1", "seg2", "seg3", "seg4", "seg5"}) {
+        const std::string csv = slurp(path(std::string(seg) + ".csv"));
+        EXPECT_EQ(csv.rfind("t,gx,gy,gz,ax,ay,az,mx,my,mz,qw,qx,qy,qz,movement\n", 0), 0u) << seg;
+        EXPECT_EQ(count_lines(csv), 802u) << seg << ": header + 20 s at 40 Hz + 1";
+    }
+    const ToolRun eval = run(
+        filt("--filter mocap --in " + path("seg3.csv").string() + " --out " + path("est.csv").string() + " --eval"));
+    ASSERT_EQ(eval.exit_code, 0) << eval.err;
+    EXPECT_TRUE(std::isfinite(json_number(eval.out, "rmse_total_deg")));
+
+    const ToolRun bad = run(sim("--scenario nope --out " + path("x.csv").string()));
+    EXPECT_NE(bad.exit_code, 0);
+    EXPECT_NE(bad.err.find("chain | fourati | realistic"), std::string::npos) << bad.err;
+    const ToolRun fixed = run(sim("--scenario realistic --rate 50 --out " + path("x.csv").string()));
+    EXPECT_EQ(fixed.exit_code, 2);
+    EXPECT_NE(fixed.err.find("apply to chain"), std::string::npos) << fixed.err;
+    EXPECT_NE(run(sim("--scenario chain --out /nonexistent-dir/chain.toml")).exit_code, 0);
+    EXPECT_EQ(run(sim("--scenario chain --duration 5 --magnetic-env nope --out " + path("c2.toml").string())).exit_code,
+              2);
+}
+
 TEST_F(ToolsEndToEnd, FilterEvaluatesASimulatedRecording) {
     const std::string in = path("in.csv").string(), out = path("out.csv").string();
     ASSERT_EQ(run(sim("--scenario realistic --seed 4 --out " + in)).exit_code, 0);
