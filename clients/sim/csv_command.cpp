@@ -6,16 +6,17 @@
 
 #include "filter_tool/filter_run.hpp"
 #include "sim/chain_scenario.hpp"
+#include "sim/pendulum_scenario.hpp"
 
 namespace mocap::sim {
 namespace {
 
 bool is_chain_scenario(const std::string& name) {
-    return name == "chain";
+    return name == "chain" || name == "pendulum";
 }
 
 std::string scenario_list() {
-    std::string s = "chain";
+    std::string s = "chain | pendulum";
     for (const std::string& n : single_sensor_scenario_names())
         s += " | " + n;
     return s;
@@ -28,8 +29,8 @@ struct ChainDefaults {
     const char* magnetic_env;
 };
 ChainDefaults chain_defaults(const std::string& scenario) {
-    (void)scenario;  // chain only
-    return {ChainOptions{}.rate_hz, ChainOptions{}.duration_s, "lab"};
+    if (scenario == "chain") return {ChainOptions{}.rate_hz, ChainOptions{}.duration_s, "lab"};
+    return {PendulumOptions{}.rate_hz, PendulumOptions{}.duration_s, "clean"};
 }
 
 int run_chain_command(const CsvCommandOptions& o) {
@@ -53,12 +54,22 @@ int run_chain_command(const CsvCommandOptions& o) {
         std::cerr << "mocap-sim csv: " << error << "\n";
         return 2;
     }
-    ChainOptions c;
-    c.seed = o.seed;
-    c.rate_hz = rate_hz;
-    c.duration_s = duration_s;
-    c.noise_scale = o.noise_scale;
-    const ChainRecording rec = make_chain_scenario(c, *env);
+    ChainRecording rec;
+    if (o.scenario == "chain") {
+        ChainOptions c;
+        c.seed = o.seed;
+        c.rate_hz = rate_hz;
+        c.duration_s = duration_s;
+        c.noise_scale = o.noise_scale;
+        rec = make_chain_scenario(c, *env);
+    } else {
+        PendulumOptions p;
+        p.seed = o.seed;
+        p.rate_hz = rate_hz;
+        p.duration_s = duration_s;
+        p.noise_scale = o.noise_scale;
+        rec = make_pendulum_scenario(p, *env);
+    }
     if (!write_chain_files(rec, dir / out.filename(), o.frame == "ned", &error)) {
         std::cerr << "mocap-sim csv: " << error << "\n";
         return 1;
@@ -99,11 +110,13 @@ CLI::App* add_csv_command(CLI::App& app, CsvCommandOptions& options) {
     cmd->add_option("--mag-noise-scale", options.mag_noise_scale, "Multiply the magnetometer noise sigma (study knob)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
-    cmd->add_option("--rate", options.rate_hz, "chain: sample rate, Hz (default 40)")->check(CLI::Range(1.0, 2000.0));
-    cmd->add_option("--duration", options.duration_s, "chain: seconds (default 180)")->check(CLI::Range(1.0, 36000.0));
+    cmd->add_option("--rate", options.rate_hz, "chain, pendulum: sample rate, Hz (default 40 chain, 100 pendulum)")
+        ->check(CLI::Range(1.0, 2000.0));
+    cmd->add_option("--duration", options.duration_s, "chain, pendulum: seconds (default 180 chain, 210 pendulum)")
+        ->check(CLI::Range(1.0, 36000.0));
     cmd->add_option("--magnetic-env", options.magnetic_env,
-                    "chain: clean | lab | steel-floor | FILE.toml (default lab)");
-    cmd->add_option("--out", options.out_path, "Output CSV file, or DIR/NAME.toml for chain")->required();
+                    "chain, pendulum: clean | lab | steel-floor | FILE.toml (default lab chain, clean pendulum)");
+    cmd->add_option("--out", options.out_path, "Output CSV file, or DIR/NAME.toml for chain and pendulum")->required();
     return cmd;
 }
 
@@ -132,8 +145,8 @@ int run_csv_command(const CsvCommandOptions& options) {
         return 2;
     }
     if (options.rate_hz > 0.0 || options.duration_s > 0.0 || !options.magnetic_env.empty()) {
-        std::cerr << "mocap-sim csv: --rate, --duration and --magnetic-env apply to chain; '" << options.scenario
-                  << "' has its own\n";
+        std::cerr << "mocap-sim csv: --rate, --duration and --magnetic-env apply to chain and pendulum; '"
+                  << options.scenario << "' has its own\n";
         return 2;
     }
     ScenarioOptions scenario_options;

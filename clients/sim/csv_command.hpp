@@ -1,22 +1,22 @@
 // csv_command.hpp — `mocap-sim csv`: writes a benchmark recording with its truth: one sensor's
 // CSV (the scenarios of scenario.hpp), or a chain of sensors as CHAIN.toml plus one CSV per
-// segment (chain_scenario.hpp; files in chain_recording.hpp).
+// segment (chain_scenario.hpp, pendulum_scenario.hpp; files in chain_recording.hpp).
 //
 //   mocap-sim csv --scenario NAME [--seed N] [--frame enu|ned] [--noise-scale X]
 //                 [--mag-noise-scale X] --out FILE.csv
 //       NAME: any name parse_scenario_kind() accepts (fourati, realistic, magnetic,
 //       continuous, ...); rate, duration and field are the scenario's own.
-//   mocap-sim csv --scenario chain [--seed N] [--frame enu|ned] [--noise-scale X]
+//   mocap-sim csv --scenario chain|pendulum [--seed N] [--frame enu|ned] [--noise-scale X]
 //                 [--rate HZ] [--duration S] [--magnetic-env clean|lab|steel-floor|FILE.toml]
 //                 --out DIR/NAME.toml
-//       defaults: 40 Hz, 180 s, lab. DIR must exist;
+//       defaults: chain 40 Hz, 180 s, lab; pendulum 100 Hz, 210 s, clean. DIR must exist;
 //       the CSVs (seg1.csv, ...) and truth.toml are written next to NAME.toml.
 //
 // Columns t,gx,gy,gz,ax,ay,az,mx,my,mz,qw,qx,qy,qz,movement (recording_csv.hpp); the
 // reference is q_earth_sensor in ENU, or in NED with --frame ned (for mocap-filter --frame
 // ned, which then reports Euler errors in the paper's frame). The noise scales are study
-// knobs (ScenarioOptions); the benchmark uses the defaults (1). For chain --noise-scale 0
-// also removes the gyro bias.
+// knobs (ScenarioOptions); the benchmark uses the defaults (1). For chain and pendulum
+// --noise-scale 0 also removes the gyro bias.
 #pragma once
 
 #include <cstdint>
@@ -36,9 +36,9 @@ struct CsvCommandOptions {
     std::string frame = "enu";
     double noise_scale = 1.0;
     double mag_noise_scale = 1.0;
-    double rate_hz = 0.0;      ///< chain: 0 = the scenario's default
-    double duration_s = 0.0;   ///< chain: 0 = the scenario's default
-    std::string magnetic_env;  ///< chain: empty = the scenario's default
+    double rate_hz = 0.0;      ///< chain/pendulum: 0 = the scenario's default
+    double duration_s = 0.0;   ///< chain/pendulum: 0 = the scenario's default
+    std::string magnetic_env;  ///< chain/pendulum: empty = the scenario's default
     std::string out_path;
 };
 

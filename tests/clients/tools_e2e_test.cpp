@@ -106,7 +106,7 @@ TEST_F(ToolsEndToEnd, SimWritesTheContractFileDeterministically) {
     EXPECT_NE(run(sim("--scenario fourati --out /nonexistent-dir/x.csv")).exit_code, 0);
 }
 
-// --scenario chain: CHAIN.toml, one CSV per segment in the layout mocap-filter reads,
+// --scenario chain|pendulum: CHAIN.toml, one CSV per segment in the layout mocap-filter reads,
 // and truth.toml; the scenario check takes the single-sensor names from the scenario code.
 TEST_F(ToolsEndToEnd, SimWritesChainFilesTheFilterReads) {
     const ToolRun chain = run(sim("--scenario chain --duration 20 --out " + path("chain.toml").string()));
@@ -128,12 +128,19 @@ TEST_F(ToolsEndToEnd, SimWritesChainFilesTheFilterReads) {
     ASSERT_EQ(eval.exit_code, 0) << eval.err;
     EXPECT_TRUE(std::isfinite(json_number(eval.out, "rmse_total_deg")));
 
+    fs::create_directories(path("pendulum"));
+    const ToolRun pendulum =
+        run(sim("--scenario pendulum --duration 10 --seed 4 --out " + (path("pendulum") / "p.toml").string()));
+    ASSERT_EQ(pendulum.exit_code, 0) << pendulum.err;
+    EXPECT_EQ(count_lines(slurp(path("pendulum") / "seg2.csv")), 1002u) << "100 Hz";
+    EXPECT_NE(slurp(path("pendulum") / "truth.toml").find("axis_wander_deg"), std::string::npos);
+
     const ToolRun bad = run(sim("--scenario nope --out " + path("x.csv").string()));
     EXPECT_NE(bad.exit_code, 0);
-    EXPECT_NE(bad.err.find("chain | fourati | realistic"), std::string::npos) << bad.err;
+    EXPECT_NE(bad.err.find("chain | pendulum | fourati | realistic"), std::string::npos) << bad.err;
     const ToolRun fixed = run(sim("--scenario realistic --rate 50 --out " + path("x.csv").string()));
     EXPECT_EQ(fixed.exit_code, 2);
-    EXPECT_NE(fixed.err.find("apply to chain"), std::string::npos) << fixed.err;
+    EXPECT_NE(fixed.err.find("apply to chain and pendulum"), std::string::npos) << fixed.err;
     EXPECT_NE(run(sim("--scenario chain --out /nonexistent-dir/chain.toml")).exit_code, 0);
     EXPECT_EQ(run(sim("--scenario chain --duration 5 --magnetic-env nope --out " + path("c2.toml").string())).exit_code,
               2);
