@@ -121,7 +121,7 @@ struct Model {
                 bar[0].mass_kg * j.ja1[r].dot(a1_bias - g) + bar[1].mass_kg * j.ja2[r].dot(a2_bias - g) +
                 j.jw1[r].dot(k.w1.cross(j.i1 * k.w1)) + j.jw2[r].dot(j.i2 * alpha2_bias + k.w2.cross(j.i2 * k.w2));
         }
-        const Vec2 qdd = j.mass(bar).ldlt().solve(rhs);
+        Vec2 qdd = j.mass(bar).ldlt().solve(rhs);
         if (a1 != nullptr) *a1 = j.ja1[0] * qdd[0] + a1_bias;
         if (a2 != nullptr) *a2 = j.ja2[0] * qdd[0] + j.ja2[1] * qdd[1] + a2_bias;
         return qdd;
