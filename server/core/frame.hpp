@@ -46,13 +46,33 @@ enum SegmentFlags : std::uint8_t {
     kSegmentNeverSeen = 1u << 1,   ///< no sample since start: identity pose
     kSegmentCalibrated = 1u << 2,  ///< sensor-to-segment calibration applied
     kSegmentFromNode = 1u << 3,    ///< orientation computed on the node, not in the daemon
+    // Where the segment's heading came from (at most one is set; none before a heading is
+    // known or when the daemon does not say): its own magnetometer, the joints of the body
+    // (fusion/chain_estimator.hpp), or the gyroscope alone (held: nothing observed it lately).
+    kSegmentHeadingMag = 1u << 4,
+    kSegmentHeadingJoints = 1u << 5,
+    kSegmentHeadingGyro = 1u << 6,
 };
 
-/// One segment's filtered orientation (before skeleton calibration).
+/// What the segment's filter says about its magnetometer heading (SegmentPose::mag).
+enum class SegmentMag : std::uint8_t {
+    kNone = 0,      ///< no magnetometer heading (no field, or a filter that does not split it)
+    kRejected = 1,  ///< the filter holds its heading on the gyro: the field is rejected
+    kTrusted = 2,   ///< the filter uses the field now
+};
+
+/// One segment's filtered orientation (before skeleton calibration), and what the chain stage
+/// needs to replace the filter's magnetometer heading (filter/orientation_filter.hpp,
+/// HeadingSplit): q_earth_sensor = Rz(mag_heading_rad) ⊗ q6.
 struct SegmentPose {
     std::array<double, 4> q_earth_sensor_wxyz{1.0, 0.0, 0.0, 0.0};
     std::int64_t sample_us = 0;
     std::uint8_t flags = kSegmentNeverSeen;
+    SegmentMag mag = SegmentMag::kNone;
+    float mag_heading_rad = 0.0f;       ///< the filter's heading correction about the vertical
+    float field_norm_ut = 0.0f;         ///< the field the filter sees (0: unknown)
+    float field_dip_rad = 0.0f;         ///< its dip, positive down
+    std::array<float, 3> rate_rad_s{};  ///< bias-corrected rate, sensor frame
 };
 
 /// One subject at one SYNC instant, all segments, as the assembler emits it.

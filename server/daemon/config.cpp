@@ -247,6 +247,16 @@ void read_choice(TableReader& r, std::string_view key, bool& out, const char* ye
     }
 }
 
+void read_fusion(TableReader& r, DaemonConfig& c) {
+    r.read("heading", c.fusion_heading);
+    // The names of fusion::parse_heading_mode (the config library does not link the fusion
+    // layer; pipeline_config.cpp converts, and a test checks both accept the same names).
+    if (c.fusion_heading != "magnetometer" && c.fusion_heading != "joints" && c.fusion_heading != "auto") {
+        r.fail("heading", r.take("heading"), "must be \"magnetometer\", \"joints\" or \"auto\"");
+    }
+    read_choice(r, "axis", c.fusion_estimate_axes, "estimate", "model");
+}
+
 void read_skeleton(TableReader& r, DaemonConfig& c) {
     r.read("calibration_dir", c.calibration_dir);
     r.read("calibration_s", c.calibration_s, 0.1, 60.0);
@@ -560,10 +570,11 @@ std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string
         TableReader top(root, "");
         using Section = void (*)(TableReader&, DaemonConfig&);
         const std::pair<const char*, Section> sections[] = {
-            {"log", read_log},         {"ingest", read_ingest},     {"pipeline", read_pipeline},
-            {"filter", read_filter},   {"skeleton", read_skeleton}, {"serve", read_serve},
-            {"control", read_control}, {"outputs", read_outputs},   {"http", read_http},
-            {"limits", read_limits},   {"cluster", read_cluster},   {"vmc", read_vmc},
+            {"log", read_log},       {"ingest", read_ingest},   {"pipeline", read_pipeline},
+            {"filter", read_filter}, {"fusion", read_fusion},   {"skeleton", read_skeleton},
+            {"serve", read_serve},   {"control", read_control}, {"outputs", read_outputs},
+            {"http", read_http},     {"limits", read_limits},   {"cluster", read_cluster},
+            {"vmc", read_vmc},
         };
         for (const auto& [name, fn] : sections) {
             if (const auto* t = top.sub_table(name)) {

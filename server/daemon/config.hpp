@@ -71,6 +71,9 @@ struct DaemonConfig {
     // [filter]
     std::string filter_name = "mocap";
     std::vector<std::pair<std::string, std::string>> filter_params;
+    // [fusion]
+    std::string fusion_heading = "auto";  ///< "magnetometer" | "joints" | "auto" (docs/fusion.md)
+    bool fusion_estimate_axes = false;    ///< axis = "estimate" (else "model")
     // [skeleton]
     std::string calibration_dir = ".";
     double calibration_s = 1.0;

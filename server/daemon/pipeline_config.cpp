@@ -67,6 +67,8 @@ skeleton::PoseSolverOptions pose_solver_options_from_config(const DaemonConfig& 
     so.smoothing.alpha = config.smoothing_alpha;
     if (config.auto_calibrate == "t-pose") so.auto_calibrate = skeleton::CalibrationPose::kTPose;
     if (config.auto_calibrate == "n-pose") so.auto_calibrate = skeleton::CalibrationPose::kNPose;
+    so.fusion.chain.mode = fusion::parse_heading_mode(config.fusion_heading).value_or(fusion::HeadingMode::kAuto);
+    so.fusion.estimate_axes = config.fusion_estimate_axes;
     return so;
 }
 

@@ -31,6 +31,15 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
     filter_->update(s);
     const math::Quat q = filter_->orientation();
     out.q_earth_sensor_wxyz = {q.w(), q.x(), q.y(), q.z()};
+    const filter::HeadingSplit h = filter_->heading_split();
+    if (h.has_mag_heading) {
+        out.mag = h.mag_trusted ? SegmentMag::kTrusted : SegmentMag::kRejected;
+        out.mag_heading_rad = static_cast<float>(h.mag_heading_rad);
+        out.field_norm_ut = static_cast<float>(h.field_norm_ut);
+        out.field_dip_rad = static_cast<float>(h.field_dip_rad);
+    }
+    const math::Vec3 rate = math::to_vec3(s.gyro_rad_s) - filter_->gyro_bias_rad_s();
+    out.rate_rad_s = {static_cast<float>(rate.x()), static_cast<float>(rate.y()), static_cast<float>(rate.z())};
     return true;
 }
 

@@ -43,13 +43,16 @@ PoseSolver::PoseSolver(BodyModel model, PoseSolverOptions options, PublishFn pub
       joints_(default_joint_specs(model_)),
       ids_(served_ids(options_)),
       subjects_(ids_.size()) {
-    for (auto& s : subjects_)
+    for (auto& s : subjects_) {
         s.smoother = PoseSmoother(options_.smoothing);
+        if (options_.fusion.chain.mode != fusion::HeadingMode::kMagnetometer) s.chain.emplace(model_, options_.fusion);
+    }
     group_.add("frames_solved", frames_solved_);
     group_.add("calibrations_ok", calibrations_ok_);
     group_.add("calibrations_failed", calibrations_failed_);
     group_.add("auto_calibration_retries", auto_calibration_retries_);
     group_.add("calibrations_shared", calibrations_shared_);
+    group_.add("calibrations_refined", calibrations_refined_);
     if (store_) {
         store_->bind(model_, [this](std::uint32_t id, const Calibration& c, const std::string& where,
                                     std::uint64_t saves_seen) { offer_calibration(id, c, where, saves_seen); });
@@ -64,6 +67,7 @@ std::size_t PoseSolver::load_calibrations() {
         StoredCalibration stored = store_->load(model_, id);
         if (stored.calibration) {
             subjects_[i].calibration = *stored.calibration;
+            if (subjects_[i].chain) subjects_[i].chain->on_calibration(*stored.calibration);
             subjects_[i].root.emplace(model_);
             ++loaded;
             log(LogLevel::kInfo, subject_text(id) + "calibration loaded from " + stored.where);
@@ -99,6 +103,7 @@ PoseSolver::Subject* PoseSolver::find(std::uint32_t subject_id) noexcept {
 
 void PoseSolver::install(Subject& s, const Calibration& calibration) {
     s.calibration = calibration;
+    if (s.chain) s.chain->on_calibration(calibration);
     s.smoother.reset();
     s.root.emplace(model_);
     s.root->reset(root_position(model_));
@@ -177,6 +182,25 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
     if (!error.empty()) log(LogLevel::kError, subject_text(subject_id) + error);
 }
 
+void PoseSolver::refine(Subject& s, std::uint32_t subject_id, std::int64_t sample_us) {
+    if (!s.chain || !s.calibration || !options_.fusion.estimate_axes) return;
+    if (s.refine_checked_us >= 0 && sample_us - s.refine_checked_us < 1'000'000 && sample_us >= s.refine_checked_us) {
+        return;
+    }
+    s.refine_checked_us = sample_us;
+    Calibration refined = *s.calibration;
+    if (!s.chain->refine_calibration(model_, refined)) return;
+    // The pose does not jump back to a T-pose: only the mountings turn, so the smoothing and
+    // the root's travel carry on.
+    s.calibration = refined;
+    s.chain->on_calibration(refined);
+    calibrations_refined_.add();
+    log(LogLevel::kInfo, subject_text(subject_id) + "mountings refined from the hinge axes learned from the motion");
+    if (!store_) return;
+    const std::string error = store_->save(model_, subject_id, refined);
+    if (!error.empty()) log(LogLevel::kError, subject_text(subject_id) + error);
+}
+
 void PoseSolver::on_frame(const SubjectFrame& frame) {
     if (has_requests_.load(std::memory_order_acquire)) take_requests();
     Subject* const found = find(frame.subject_id);
@@ -188,6 +212,17 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
     for (std::size_t i = 0; i < n; ++i) {
         const auto& q = frame.segments[i].q_earth_sensor_wxyz;
         q_earth_sensor[i] = Quat(q[0], q[1], q[2], q[3]);
+    }
+    std::array<std::uint8_t, kMaxSegments> heading{};
+    if (s.chain) {
+        s.chain->apply(frame, std::span<Quat>(q_earth_sensor.data(), n), std::span<std::uint8_t>(heading.data(), n));
+    } else {
+        for (std::size_t i = 0; i < n; ++i) {
+            const SegmentMag m = frame.segments[i].mag;
+            heading[i] = m == SegmentMag::kTrusted    ? kSegmentHeadingMag
+                         : m == SegmentMag::kRejected ? kSegmentHeadingGyro
+                                                      : 0;
+        }
     }
     if (s.first_us < 0) {
         s.first_us = frame.sample_us;
@@ -202,6 +237,7 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
         s.pose = *options_.auto_calibrate;
     }
     if (s.collecting) collect(s, frame.subject_id, frame, q_earth_sensor);
+    refine(s, frame.subject_id, frame.sample_us);
 
     std::array<Quat, kMaxSegments> q_world = q_earth_sensor;
     const std::span<const Quat> sensors(q_earth_sensor.data(), n);
@@ -222,7 +258,8 @@ void PoseSolver::on_frame(const SubjectFrame& frame) {
         out_.q_world_segment_wxyz[i] = {q.w(), q.x(), q.y(), q.z()};
         const auto& p = fk.joint_position_m[i];
         out_.position_m[i] = {p.x(), p.y(), p.z()};
-        out_.extra_flags[i] = s.calibration && s.calibration->calibrated[i] ? kSegmentCalibrated : 0;
+        out_.extra_flags[i] = static_cast<std::uint8_t>(
+            (s.calibration && s.calibration->calibrated[i] ? kSegmentCalibrated : 0) | heading[i]);
     }
     std::array<JointAngles, kMaxSegments> angles{};
     compute_joint_angles(joints_, std::span<const Quat>(q_world.data(), n),

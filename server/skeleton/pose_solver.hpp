@@ -1,7 +1,8 @@
 // pose_solver.hpp — the assembler's FrameSink: turns each subject's filtered sensor
 // orientations into the calibrated skeleton pose and hands it to the outputs (PublishFn).
 //
-// Per frame: q_earth_sensor of every segment -> (calibration) q_world_segment -> optional
+// Per frame: q_earth_sensor of every segment -> (chain stage, body_chain.hpp: headings held
+// by the joints, unless options.fusion says magnetometer) -> (calibration) q_world_segment -> optional
 // Slerp smoothing -> forward kinematics (positions; once calibrated the root travels by
 // foot contacts, skeleton/root_motion.hpp, otherwise it stays at its T-pose height) ->
 // joint angles -> publish.
@@ -46,6 +47,7 @@
 
 #include "core/counters.hpp"
 #include "core/subject_assembler.hpp"
+#include "skeleton/body_chain.hpp"
 #include "skeleton/body_model.hpp"
 #include "skeleton/calibration.hpp"
 #include "skeleton/calibration_store.hpp"
@@ -67,6 +69,8 @@ struct PoseSolverOptions {
     /// Calibrate a subject without a calibration from its first still period, assuming
     /// this pose (nullopt = only on command).
     std::optional<CalibrationPose> auto_calibrate;
+    /// Where the segments' headings come from (body_chain.hpp); magnetometer: each filter's own.
+    FusionOptions fusion{};
 };
 
 using PublishFn = std::function<void(const SubjectFrame&, const SkeletonPose&)>;
@@ -108,7 +112,8 @@ public:
     [[nodiscard]] const std::vector<JointSpec>& joints() const { return joints_; }
     /// Component "skeleton": frames_solved, calibrations_ok, calibrations_failed,
     /// auto_calibration_retries (automatic attempts restarted because the subject moved),
-    /// calibrations_shared (calibrations made elsewhere and applied here).
+    /// calibrations_shared (calibrations made elsewhere and applied here), calibrations_refined
+    /// (mountings turned to agree with hinge axes learned from the motion).
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
 
 private:
@@ -124,6 +129,8 @@ private:
         bool auto_run = false;                       // the collection in progress is the automatic one
         std::int64_t first_us = -1;                  // sample time of the subject's first frame
         std::uint64_t calibrated_here = 0;           // successful calibrations made by this solver
+        std::optional<BodyChain> chain;              // the chain stage (none: per-segment headings)
+        std::int64_t refine_checked_us = -1;         // sample time the learned axes were last looked at
     };
     struct Offer {
         std::uint32_t subject_id = 0;
@@ -138,6 +145,8 @@ private:
     void install(Subject& s, const Calibration& calibration);
     void collect(Subject& s, std::uint32_t subject_id, const SubjectFrame& frame,
                  const std::array<Quat, kMaxSegments>& q_earth_sensor);
+    /// Once a second of sample time: mountings turned to the hinge axes the chain learned.
+    void refine(Subject& s, std::uint32_t subject_id, std::int64_t sample_us);
     /// The subject with this id, nullptr if it is not served.
     [[nodiscard]] Subject* find(std::uint32_t subject_id) noexcept;
     void log(LogLevel level, const std::string& line) const {
@@ -159,7 +168,8 @@ private:
     std::vector<Offer> offers_;                                        // guarded by requests_mutex_
     std::atomic<bool> has_requests_{false};
 
-    Counter frames_solved_, calibrations_ok_, calibrations_failed_, auto_calibration_retries_, calibrations_shared_;
+    Counter frames_solved_, calibrations_ok_, calibrations_failed_, auto_calibration_retries_, calibrations_shared_,
+        calibrations_refined_;
     CounterGroup group_{"skeleton"};
 };
 

@@ -338,8 +338,9 @@ TEST(PoseSolver, CountsFramesAndRejectsUnknownSubjects) {
     std::vector<std::string> names;
     for (const auto& c : rig.solver->counters().snapshot())
         names.push_back(c.name);
-    EXPECT_EQ(names, (std::vector<std::string>{"frames_solved", "calibrations_ok", "calibrations_failed",
-                                               "auto_calibration_retries", "calibrations_shared"}));
+    EXPECT_EQ(names,
+              (std::vector<std::string>{"frames_solved", "calibrations_ok", "calibrations_failed",
+                                        "auto_calibration_retries", "calibrations_shared", "calibrations_refined"}));
 }
 
 }  // namespace

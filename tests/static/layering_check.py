@@ -3,7 +3,8 @@
 
 Layers (each a directory of server/; README.md "Layout"):
 
-    core < math < filter, skeleton (siblings: never each other) < pipeline < serve < cluster
+    core < math < fusion < skeleton; filter and skeleton are siblings (never each other)
+    filter, skeleton < pipeline < serve < cluster
     ingest uses core and the wire library only
     serve, cluster and ingest < daemon (which sees everything in server/)
     nothing in server/ includes clients/
@@ -27,15 +28,16 @@ import re
 import sys
 import tempfile
 
-SERVER_LAYERS = ["core", "math", "filter", "skeleton", "pipeline", "serve", "cluster", "ingest", "daemon"]
+SERVER_LAYERS = ["core", "math", "filter", "fusion", "skeleton", "pipeline", "serve", "cluster", "ingest", "daemon"]
 # What each layer may include (besides itself). "proto" = headers generated from proto/
 # (mocap/v1/*.pb.h), "wire" = the firmware's wire library (mocap_wire/*).
 ALLOWED = {
     "core": set(),
     "math": {"core"},
     "filter": {"core", "math"},
-    "skeleton": {"core", "math"},
-    "pipeline": {"core", "math", "filter", "skeleton"},
+    "fusion": {"core", "math"},
+    "skeleton": {"core", "math", "fusion"},
+    "pipeline": {"core", "math", "filter", "fusion", "skeleton"},
     "serve": {"core", "math", "skeleton", "pipeline", "proto"},
     "cluster": {"core", "math", "skeleton", "pipeline", "serve", "proto"},
     "ingest": {"core", "wire"},
@@ -45,8 +47,9 @@ RULES = {
     "core": "core is the bottom layer: it includes nothing else of server/",
     "math": "math sits on core only",
     "filter": "filter sits on core and math; filter and skeleton are siblings and never include each other",
-    "skeleton": "skeleton sits on core and math; filter and skeleton are siblings and never include each other",
-    "pipeline": "pipeline sits on core, math, filter and skeleton; serve and daemon are above it",
+    "fusion": "fusion (the chain stage) sits on core and math; the filters reach it only through frames",
+    "skeleton": "skeleton sits on core, math and fusion; filter and skeleton are siblings and never include each other",
+    "pipeline": "pipeline sits on core, math, filter, fusion and skeleton; serve and daemon are above it",
     "serve": "serve sits on core, math, skeleton, pipeline and the protobuf headers; not on filter or ingest",
     "cluster": "cluster sits on serve (its frame encoder) and what serve sits on; not on filter or ingest",
     "ingest": "ingest uses core and the wire library (mocap_wire/) only",
@@ -198,7 +201,7 @@ def self_test():
         ("lower includes higher", {"server/core/b.cpp": '// x\n#include "filter/f.hpp"\n'},
          'server/core/b.cpp:2: core/ includes "filter/f.hpp" (filter): core is the bottom layer'),
         ("siblings", {"server/skeleton/t.cpp": '#include "filter/f.hpp"\n'},
-         "server/skeleton/t.cpp:1: skeleton/ includes \"filter/f.hpp\" (filter): skeleton sits on core and math; "
+         "server/skeleton/t.cpp:1: skeleton/ includes \"filter/f.hpp\" (filter): skeleton sits on core, math and fusion; "
          "filter and skeleton are siblings"),
         ("ingest beyond core and wire", {"server/ingest/j.cpp": '#include "math/q.hpp"\n'},
          "server/ingest/j.cpp:1: ingest/ includes \"math/q.hpp\" (math): ingest uses core and the wire library"),

@@ -31,6 +31,9 @@ class SegmentFlags(enum.IntFlag):
     NEVER_SEEN = 2  # no sample since start: identity
     CALIBRATED = 4  # sensor-to-segment calibration applied
     FROM_NODE = 8  # orientation computed on the node
+    HEADING_MAG = 16  # heading from the segment's own magnetometer
+    HEADING_JOINTS = 32  # heading held by the body's joints (docs/fusion.md)
+    HEADING_GYRO = 64  # heading held by the gyroscope alone (nothing observed it lately)
 
 
 @dataclass(frozen=True)
