@@ -91,6 +91,7 @@ std::optional<ChainRunOutput> run_chain(const ChainRecording& chain, const Chain
             x.fresh = true;
             x.q6 = h.q6;
             x.gyro_rad_s = math::to_vec3(sample.gyro_rad_s) - f.gyro_bias_rad_s();
+            x.accel_m_s2 = math::to_vec3(sample.accel_m_s2);
             x.mag_available = h.has_mag_heading;
             x.mag_heading_rad = h.mag_heading_rad;
             x.mag_trusted = h.mag_trusted;
@@ -152,6 +153,7 @@ std::optional<ChainRunOutput> run_chain_offline(const ChainRecording& chain, con
             x.fresh = true;
             x.q6 = r6.orientation[k];
             x.gyro_rad_s = math::to_vec3(samples[k].gyro_rad_s) - bias;
+            x.accel_m_s2 = math::to_vec3(samples[k].accel_m_s2);
             x.mag_available = with_mag;
             if (with_mag) {
                 x.mag_heading_rad = heading_of(r9.orientation[k] * r6.orientation[k].conjugate());
@@ -260,6 +262,22 @@ std::string chain_eval_json(const ChainRecording& chain, const ChainRunOutput& r
                           {last_key, e.last_mean_deg},
                           {"rmse_deg", e.rmse_deg},
                           {"max_deg", e.max_deg}});
+        if (k < run.joint_status.size()) {
+            const fusion::JointStatus& st = run.joint_status[k];
+            const auto v = [](const math::Vec3& x) { return nlohmann::ordered_json::array({x.x(), x.y(), x.z()}); };
+            nlohmann::ordered_json& o = joints.back();
+            o["axes"] = st.axes_known ? nlohmann::ordered_json{{"estimated", st.axes_estimated},
+                                                               {"parent", v(st.axis_parent)},
+                                                               {"child", v(st.axis_child)}}
+                                      : nlohmann::ordered_json(nullptr);
+            o["centre"] = st.centre_known
+                              ? nlohmann::ordered_json{{"parent_m", v(st.r_parent)}, {"child_m", v(st.r_child)}}
+                              : nlohmann::ordered_json(nullptr);
+            o["constraint_updates"] = st.joint_updates;
+            o["mag_updates"] = st.mag_updates;
+            o["refused"] = st.refused;
+            o["restarts"] = st.restarts;
+        }
         if (e.samples == 0) continue;
         sum += e.mean_deg;
         ++n;

@@ -46,8 +46,9 @@ struct Limit {
 // Angles in rad, grip in m; posture + 3 swings bounds each degree of freedom (header).
 constexpr std::array<Limit, kChannels> kLimits = {{
     {50 * kDeg, 12 * kDeg},  // yaw
-    {8 * kDeg, 4 * kDeg},    // pitch
-    {20 * kDeg, 6 * kDeg},   // roll
+    {12 * kDeg, 5 * kDeg},   // pitch (tilts the arm's length: it stays at table height)
+    {60 * kDeg, 10 * kDeg},  // roll: the base is held in the hand, turned about the arm's
+                             // length, so no hinge axis stays vertical for long
     {0.10, 0.06},            // x
     {0.10, 0.06},            // y
     {0.06, 0.04},            // z
@@ -91,7 +92,11 @@ Quat rot(const Vec3& axis, double angle_rad) {
 
 std::vector<Episode> plan_episodes(SimRng& rng, double duration_s) {
     std::vector<Episode> out;
+    // The hand holds the base in some posture from the start (a recording begins at rest,
+    // not with every joint at zero).
     std::array<double, kChannels> posture{};
+    for (std::size_t c = 0; c < kChannels; ++c)
+        posture[c] = rng.uniform(-1.0, 1.0) * kLimits[c].posture;
     // Each group alone once, in a seeded order (Fisher–Yates), then mixtures.
     std::array<std::size_t, kGroups> order = {0, 1, 2, 3, 4};
     for (std::size_t i = kGroups - 1; i > 0; --i)
@@ -146,7 +151,7 @@ std::vector<Episode> plan_episodes(SimRng& rng, double duration_s) {
 }
 
 std::array<double, kChannels> channels_at(const std::vector<Episode>& episodes, double t_s) {
-    std::array<double, kChannels> v{};
+    std::array<double, kChannels> v = episodes.empty() ? std::array<double, kChannels>{} : episodes.front().from;
     for (const Episode& ep : episodes) {
         if (t_s <= ep.t0_s) break;  // still in the posture the previous episode left
         const double glide = transition((t_s - ep.t0_s) / (ep.t1_s - ep.t0_s));

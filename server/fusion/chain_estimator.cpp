@@ -103,6 +103,11 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
             j.def.axis_parent.normalize();
             j.def.axis_child.normalize();
         }
+        if (!d.centre_known && d.estimate_centre) {
+            JointPositionParams cp = params_.centre;
+            if (d.type == JointType::kHinge) cp.free_directions = 1;  // any point of the axis is a centre
+            j.centre = std::make_unique<JointPositionEstimator>(cp);
+        }
         if (d.type == JointType::kHinge && (d.estimate_axes || !d.axes_known)) {
             j.def.estimate_axes = true;
             j.axis = std::make_unique<HingeAxisEstimator>(params_.axis);
@@ -133,6 +138,11 @@ void ChainEstimator::reset() {
         j.last_joint_us = j.last_mag_us = j.refused_since_us = -1;
         j.stats = JointStatus{};
         if (j.axis) j.axis->reset();
+        if (j.centre) {
+            j.centre->reset();
+            j.def.centre_known = false;
+        }
+        j.past = {};
         if (j.axes_estimated) j.def.axes_known = false;  // learned in the run that is forgotten
         j.axes_estimated = false;
     }
@@ -175,19 +185,44 @@ bool ChainEstimator::fields_agree(const SegmentInput& p, const SegmentInput& c) 
            std::abs(p.field_dip_rad - c.field_dip_rad) <= params_.field_dip_agree_deg * kDeg;
 }
 
+bool ChainEstimator::centre_pair(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c, Vec3& a,
+                                 Vec3& b) {
+    Joint::Past& older = j.past[0];
+    Joint::Past& prev = j.past[1];
+    bool ok = false;
+    const bool have_accel = p.accel_m_s2.squaredNorm() > 0.0 && c.accel_m_s2.squaredNorm() > 0.0;
+    if (have_accel && older.t_us >= 0 && prev.t_us > older.t_us && t_us > prev.t_us) {
+        const double span_s = static_cast<double>(t_us - older.t_us) * 1e-6;
+        const Vec3 dw_p = (p.gyro_rad_s - older.p.gyro_rad_s) / span_s;
+        const Vec3 dw_c = (c.gyro_rad_s - older.c.gyro_rad_s) / span_s;
+        const SegmentInput& pp = prev.p;
+        const SegmentInput& pc = prev.c;
+        if (j.centre &&
+            j.centre->add(prev.t_us, pp.gyro_rad_s, dw_p, pp.accel_m_s2, pc.gyro_rad_s, dw_c, pc.accel_m_s2) &&
+            j.centre->ready()) {
+            j.def.r_parent = j.centre->r_parent();
+            j.def.r_child = j.centre->r_child();
+            j.def.centre_known = true;
+        }
+        if (j.def.centre_known) {
+            a = math::rotate(pp.q6, pp.accel_m_s2 + gamma_matrix(pp.gyro_rad_s, dw_p) * j.def.r_parent);
+            b = math::rotate(pc.q6, pc.accel_m_s2 + gamma_matrix(pc.gyro_rad_s, dw_c) * j.def.r_child);
+            ok = true;
+        }
+    }
+    older = prev;
+    prev = {have_accel ? t_us : -1, p, c};
+    return ok;
+}
+
 bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c) {
     const JointDef& d = j.def;
-    if (!d.axes_known || d.type == JointType::kBall) return false;
     // One independent measurement per correlation time (heading_filter.hpp).
     const double scale = dt_s > 0.0 ? std::max(1.0, params_.correlation_s / dt_s) : 1.0;
-    const Vec3 a = math::rotate(p.q6, d.axis_parent);
-    const Vec3 b = math::rotate(c.q6, d.axis_child);
-    const Vec3 u = math::rotate(p.q6, p.gyro_rad_s);
-    const Vec3 v = math::rotate(c.q6, c.gyro_rad_s);
     HeadingFilter& f = j.filter;
     bool taken = false;
     const auto lost_us = static_cast<std::int64_t>(params_.lost_s * 1e6);
-    const auto take = [&](const HeadingMeasurement& m, Stream stream) {
+    const auto take = [&](const HeadingMeasurement& m, Stream stream, double init_floor_rad = 5.0 * kDeg) {
         if (!m.ok) return;
         // The first informative sample starts the estimate (its variance is the sample's own,
         // with a floor, as it is the only one so far); so does a constraint after the gate has
@@ -196,7 +231,7 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
         const bool lost = j.refused_since_us >= 0 && t_us - j.refused_since_us >= lost_us;
         if (!f.initialised() || (lost && d.type == JointType::kHinge)) {
             if (lost) ++j.stats.restarts;
-            f.init(f.delta_rad() + m.residual_rad, std::max(std::sqrt(m.var_rad2), 5.0 * kDeg));
+            f.init(f.delta_rad() + m.residual_rad, std::max(std::sqrt(m.var_rad2), init_floor_rad));
             j.refused_since_us = -1;
             taken = true;
             return;
@@ -210,6 +245,20 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
             if (j.refused_since_us < 0) j.refused_since_us = t_us;
         }
     };
+    // Every joint type: the joint centre is one point of both segments, so its specific force
+    // is one earth vector seen from both 6D frames (one step late: it needs ω̇). A single
+    // sample of it is noisy, so a start from it is given at least 20°.
+    if (Vec3 fa, fb; centre_pair(j, t_us, p, c, fa, fb)) {
+        const double h = 0.5 * (std::hypot(fa.x(), fa.y()) + std::hypot(fb.x(), fb.y()));
+        take(pair_measurement(fa, fb, f.delta_rad(), params_.sigma_acc_m_s2 + params_.sigma_acc_rel * h,
+                              params_.min_acc_horizontal_m_s2),
+             kAccPair, 20.0 * kDeg);
+    }
+    if (!d.axes_known || d.type == JointType::kBall) return taken;
+    const Vec3 a = math::rotate(p.q6, d.axis_parent);
+    const Vec3 b = math::rotate(c.q6, d.axis_child);
+    const Vec3 u = math::rotate(p.q6, p.gyro_rad_s);
+    const Vec3 v = math::rotate(c.q6, c.gyro_rad_s);
     if (d.type == JointType::kHinge) {
         take(pair_measurement(a, b, f.delta_rad(), params_.sigma_axis, params_.min_axis_horizontal), kAxisPair);
         // The angular velocity perpendicular to the axis is the same vector for both segments.
@@ -367,6 +416,9 @@ JointStatus ChainEstimator::status(std::size_t j) const {
     s.axes_estimated = x.axes_estimated;
     s.axis_parent = x.def.axis_parent;
     s.axis_child = x.def.axis_child;
+    s.centre_known = x.def.centre_known;
+    s.r_parent = x.def.r_parent;
+    s.r_child = x.def.r_child;
     return s;
 }
 

@@ -47,6 +47,7 @@
 #include "fusion/heading_filter.hpp"
 #include "fusion/hinge_axis_estimator.hpp"
 #include "fusion/joint_constraints.hpp"
+#include "fusion/joint_position_estimator.hpp"
 #include "math/quaternion.hpp"
 
 namespace mocap::fusion {
@@ -74,6 +75,11 @@ struct JointDef {
     Vec3 axis_parent = Vec3::UnitX();  ///< unit, parent sensor frame (2dof: the axis fixed in the parent)
     Vec3 axis_child = Vec3::UnitX();   ///< unit, child sensor frame (2dof: the axis fixed in the child)
     double cos_axis_angle = 0.0;       ///< 2dof: cosine of the constant angle between the axes
+    bool centre_known = false;         ///< the joint centre's place in both sensor frames is given
+    bool estimate_centre = true;       ///< learn it from the motion (joint_position_estimator.hpp)
+                                       ///< when not given
+    Vec3 r_parent = Vec3::Zero();      ///< joint centre from the parent's sensor, its frame, m
+    Vec3 r_child = Vec3::Zero();       ///< joint centre from the child's sensor, its frame, m
 };
 
 struct ChainParams {
@@ -100,6 +106,10 @@ struct ChainParams {
     double min_noise_ratio = 0.01;           ///< a constraint counts at most this much better than its model
     double lost_s = 3.0;                     ///< the gate refused every constraint for this long: restart δ
     HingeAxisParams axis{};                  ///< axes learned from the motion
+    JointPositionParams centre{};            ///< joint centres learned from the motion
+    double sigma_acc_m_s2 = 0.3;             ///< error of the joint centre's specific force, m/s² ...
+    double sigma_acc_rel = 0.05;             ///< ... plus this fraction of its horizontal size
+    double min_acc_horizontal_m_s2 = 0.5;    ///< its horizontal part must be this long to count, m/s²
 };
 
 /// One segment's filter output for this step.
@@ -107,6 +117,7 @@ struct SegmentInput {
     bool fresh = false;              ///< a new sample this step (false: hold, stale)
     Quat q6 = Quat::Identity();      ///< 6D orientation: filter inclination, own heading frame
     Vec3 gyro_rad_s = Vec3::Zero();  ///< bias-corrected rate, sensor frame
+    Vec3 accel_m_s2 = Vec3::Zero();  ///< specific force, sensor frame (zero: none)
     bool mag_available = false;      ///< the filter has a magnetometer heading
     double mag_heading_rad = 0.0;    ///< d: the filter's own output is Rz(d) ⊗ q6
     bool mag_trusted = false;        ///< the filter uses the field now (not rejected)
@@ -141,6 +152,8 @@ struct JointStatus {
     bool axes_known = false;
     bool axes_estimated = false;  ///< the axes in use were learned from the motion
     Vec3 axis_parent = Vec3::UnitX(), axis_child = Vec3::UnitX();
+    bool centre_known = false;
+    Vec3 r_parent = Vec3::Zero(), r_child = Vec3::Zero();
 };
 
 class ChainEstimator {
@@ -174,14 +187,22 @@ public:
     [[nodiscard]] const ChainParams& params() const { return params_; }
 
 private:
-    enum Stream : std::uint8_t { kAxisPair, kRatePair, kTwoDofAxis, kTwoDofRate, kMag, kStreams };
+    enum Stream : std::uint8_t { kAxisPair, kRatePair, kTwoDofAxis, kTwoDofRate, kAccPair, kMag, kStreams };
     struct Joint {
         JointDef def;
         HeadingFilter filter;
-        std::int64_t last_joint_us = -1;             // last constraint measurement taken
-        std::int64_t last_mag_us = -1;               // last magnetometer difference taken
-        std::int64_t refused_since_us = -1;          // first of the refusals in a row (-1: none)
-        std::unique_ptr<HingeAxisEstimator> axis;    // estimate_axes hinges only
+        std::int64_t last_joint_us = -1;                 // last constraint measurement taken
+        std::int64_t last_mag_us = -1;                   // last magnetometer difference taken
+        std::int64_t refused_since_us = -1;              // first of the refusals in a row (-1: none)
+        std::unique_ptr<HingeAxisEstimator> axis;        // estimate_axes hinges only
+        std::unique_ptr<JointPositionEstimator> centre;  // joints whose centre is learned
+        // The two previous steps of both segments: the joint centre's specific force needs
+        // the angular acceleration, a central difference, so it is measured one step late.
+        struct Past {
+            std::int64_t t_us = -1;
+            SegmentInput p, c;
+        };
+        std::array<Past, 2> past{};
         TrigQuad search;                             // 2dof: the constraints' cost over δ, last search_s
         std::array<double, kStreams> noise_ratio{};  // learned error variance / model variance
         bool axes_estimated = false;
@@ -191,6 +212,9 @@ private:
     /// Constraint measurements of one step; true if one was taken.
     bool constrain(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c);
     void learn_axes(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c);
+    /// The joint centre's specific force of the previous step as a vector pair; false when
+    /// the centre is unknown or the step had no neighbours.
+    bool centre_pair(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c, Vec3& a, Vec3& b);
     double learn_noise(Joint& j, Stream stream, double innovation_rad, double model_var, double dt_s) const;
     [[nodiscard]] bool fields_agree(const SegmentInput& p, const SegmentInput& c) const;
     [[nodiscard]] HeadingSource source_of(const Joint& j, std::int64_t t_us) const;

@@ -1,0 +1,82 @@
+// joint_position_estimator.hpp — where a joint's centre is, seen from each of its two sensors,
+// learned from the motion (docs/fusion.md, "Joint centres from motion").
+//
+// Method (Seel, Schauer, Raisch 2012): the joint centre is one point of both segments, so its
+// specific force is one earth vector seen from both sensors. From the parent's sensor at r_p
+// (parent sensor frame) it is f_p + Γ_p r_p with Γ = [ω̇]× + [ω]×² (the sensor's angular
+// velocity and acceleration), from the child's f_c + Γ_c r_c; their norms agree whatever the
+// two frames' headings and inclinations:
+//     e_k = |f_p + Γ_p r_p| − |f_c + Γ_c r_c| = 0.
+// Gauss–Newton with Levenberg damping over the six unknowns, with a small ridge towards the
+// last solution: along a hinge's axis every point is a centre, and the ridge picks one.
+// ω̇ is the caller's (a central difference of the rates, one sample late).
+//
+// Samples: those where either segment turns or accelerates in rotation enough for Γ to matter
+// (|ω|² + |ω̇| above min_gamma), one per sample_spacing_s, in a ring of `capacity`. solve() at
+// most every solve_interval_s of sample time. Ready: enough samples, a residual small against
+// the specific forces, and motion that identifies all six unknowns (a segment that only ever
+// turns about one axis leaves the centre's place along it open: not ready, so a hinge whose
+// segments turn only about it needs its other constraints).
+//
+// Memory: the ring at construction. Not thread-safe (one per joint, on the chain's thread).
+// Cost: add() O(1); solve() O(capacity × 15 iterations) (~1 ms for 600 samples).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "math/quaternion.hpp"
+
+namespace mocap::fusion {
+
+using math::Vec3;
+
+struct JointPositionParams {
+    double min_gamma = 1.0;           ///< |ω|² + |ω̇| a sample needs, 1/s²
+    double sample_spacing_s = 0.04;   ///< at most one sample per this interval, s
+    std::size_t capacity = 600;       ///< samples kept (the most recent)
+    std::size_t min_samples = 150;    ///< before the first solution
+    double solve_interval_s = 2.0;    ///< sample time between solutions, s
+    double max_residual = 0.1;        ///< RMS residual / RMS specific force that still counts
+    double max_distance_m = 1.0;      ///< a centre farther from its sensor is not believed, m
+    double min_conditioning = 1e-3;   ///< identifiability: smallest / largest normal-matrix eigenvalue
+    std::size_t free_directions = 0;  ///< directions the motion cannot fix by nature (1: a hinge's axis)
+};
+
+class JointPositionEstimator {
+public:
+    explicit JointPositionEstimator(const JointPositionParams& params = {});
+
+    void reset();
+    /// One step (sensor frames): rates, angular accelerations and specific forces of both
+    /// segments. Returns true when a new solution was computed in this call.
+    bool add(std::int64_t t_us, const Vec3& w_p, const Vec3& dw_p, const Vec3& f_p, const Vec3& w_c, const Vec3& dw_c,
+             const Vec3& f_c);
+
+    [[nodiscard]] bool ready() const { return ready_; }
+    [[nodiscard]] const Vec3& r_parent() const { return r_p_; }
+    [[nodiscard]] const Vec3& r_child() const { return r_c_; }
+    [[nodiscard]] double relative_residual() const { return relative_residual_; }
+    [[nodiscard]] std::size_t samples() const { return count_; }
+
+    bool solve();
+
+private:
+    struct Sample {
+        Eigen::Matrix3d g_p, g_c;  // Γ of each sensor
+        Vec3 f_p, f_c;
+    };
+
+    JointPositionParams params_;
+    std::vector<Sample> ring_;
+    std::size_t next_ = 0, count_ = 0;
+    std::int64_t last_sample_us_ = -1, last_solve_us_ = -1;
+    bool ready_ = false;
+    Vec3 r_p_ = Vec3::Zero(), r_c_ = Vec3::Zero();
+    double relative_residual_ = 0.0;
+};
+
+/// Γ = [ω̇]× + [ω]×²: f at a point r from the sensor is f + Γ r.
+Eigen::Matrix3d gamma_matrix(const Vec3& w, const Vec3& dw);
+
+}  // namespace mocap::fusion
