@@ -147,7 +147,8 @@ OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const
 
     const PassOutput fwd = run_pass(filter, aligned, true);
     PassOutput bwd = run_pass(filter, aligned, false);
-    if (!used_field(fwd) && !used_field(bwd)) {
+    const bool no_field = !used_field(fwd) && !used_field(bwd);
+    if (no_field) {
         result.backward_heading_offset_rad = backward_heading_offset(fwd, bwd, 2.0 * params_.converge_tau_s);
         const double h = 0.5 * result.backward_heading_offset_rad;
         const math::Quat rz(std::cos(h), 0.0, 0.0, std::sin(h));
@@ -172,6 +173,15 @@ OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const
         const double wb = 1.0 / variance(bwd.run_s[i], resid_bwd[i]);
         result.forward_weight[i] = wf / (wf + wb);
         result.orientation[i] = math::average_two(fwd.q[i], wf, bwd.q[i], wb);
+        if (no_field) {
+            // Without a field only the inclination is blended; the heading stays the forward
+            // pass's, the integral of the gyro: the passes' headings drift apart where their
+            // tilt corrections differ (large accelerations), and a blend of them would
+            // wander by half of that, turning a segment against its neighbours.
+            const math::Quat d = fwd.q[i] * result.orientation[i].conjugate();
+            const double h = std::atan2(d.z(), d.w());  // half the turn about the vertical
+            result.orientation[i] = (math::Quat(std::cos(h), 0.0, 0.0, std::sin(h)) * result.orientation[i]).normalized();
+        }
         result.mag_used[i] = static_cast<char>(fwd.mag_used[i] || bwd.mag_used[i]);
     }
     return result;

@@ -15,8 +15,10 @@
 //     Without a magnetometer the two passes' headings are unrelated (each keeps its first
 //     sample's): the backward pass is turned about the vertical into the forward pass's frame
 //     first, by the circular mean of their heading difference once both have settled (both
-//     integrate the same gyro, so the difference hardly changes); with one, the field gives
-//     both the same frame.
+//     integrate the same gyro, so the difference hardly changes), and the blend below keeps
+//     the forward pass's heading (the passes' tilt corrections differ under large
+//     accelerations, and so do their headings by a few degrees); with a field, the field
+//     gives both the same frame.
 //  4. Blend: q_i = Markley average of f_i and b_i with weights 1/σ² (math::average_two).
 //     A pass's σ² at sample i is
 //        sigma_floor² + sigma_start²·exp(−2 s/converge_tau_s) + e²

@@ -117,7 +117,10 @@ TEST(OfflineSmoother, WithoutAMagnetometerBothPassesShareTheForwardHeading) {
     const double offline = rms_deg_any_heading(r.orientation, rows, 0.0);
     const double online = rms_deg_any_heading(causal, rows, 0.0);
     EXPECT_LT(offline, online) << "offline " << offline << "°, causal " << online << "°";
-    EXPECT_LT(offline, 3.0);  // measured 2.2° (causal 10.0°; 38.1° with the passes blended unaligned)
+    // Measured 4.1° (causal 10.0°; 38.1° with the passes blended unaligned; 2.2° with their
+    // headings blended too, which turned segments of a chain against each other by up to 30°
+    // on a simulated pendulum, docs/fusion.md).
+    EXPECT_LT(offline, 5.0);
 }
 
 TEST(OfflineSmoother, DeterministicAndEmptyInputGivesEmptyResult) {
