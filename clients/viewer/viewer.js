@@ -1,8 +1,9 @@
 // viewer.js — draws the poses of one subject streamed by mocapd's WebSocket (/ws?subject=N,
 // protocol in server/serve/http_server.hpp) with three.js: a bone per segment from its
 // origin to its tip (tip = origin + q * end_m), joints as spheres, links from a parent's
-// origin to its children's, a floor grid, orbit controls. Colours show each segment's
-// stale flags. Latency is Date.now() minus the sink's send stamp: both wall clocks.
+// origin to its children's, a floor grid, orbit controls. Bone colours show each segment's
+// stale flags; the sphere at a segment's origin shows where its heading comes from (its
+// magnetometer, the body's joints, or the gyroscope alone: docs/fusion.md). Latency is Date.now() minus the sink's send stamp: both wall clocks.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { initTakesPanel } from './takes_panel.js';
@@ -10,7 +11,19 @@ import { initTakesPanel } from './takes_panel.js';
 const kStale = 1;
 const kNeverSeen = 2;
 const kCalibrated = 4;
-const colours = { live: 0x4fc3f7, stale: 0xffa726, never: 0xef5350, link: 0x9e9e9e, joint: 0xeeeeee };
+const kHeadingMag = 16;
+const kHeadingJoints = 32;
+const kHeadingGyro = 64;
+const colours = { live: 0x4fc3f7, stale: 0xffa726, never: 0xef5350, link: 0x9e9e9e, joint: 0xeeeeee,
+                  mag: 0x7986cb, joints: 0x81c784, gyro: 0xffd54f };
+
+// Where a segment's heading came from, by its flags.
+function headingSource(flags) {
+  if (flags & kHeadingJoints) return 'joints';
+  if (flags & kHeadingMag) return 'mag';
+  if (flags & kHeadingGyro) return 'gyro';
+  return 'none';
+}
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -86,6 +99,7 @@ function stretch(mesh, a, b) {
 }
 
 const origin = [];
+const headings = [];
 const tip = new THREE.Vector3();
 const q = new THREE.Quaternion();
 function applyFrame(f) {
@@ -99,6 +113,9 @@ function applyFrame(f) {
     stretch(bones[i], origin[i], tip);
     const flags = f.flags[i];
     bones[i].material.color.setHex(flags & kNeverSeen ? colours.never : flags & kStale ? colours.stale : colours.live);
+    const source = headingSource(flags);
+    headings[i] = source;
+    joints[i].material.color.setHex(source === 'none' ? colours.joint : colours[source]);
     joints[i].position.copy(origin[i]);
     const p = segments[i].parent;
     if (p >= 0 && p < n) stretch(links[i], origin[p], origin[i]);
@@ -123,6 +140,8 @@ state.scene = () => ({ grid: grid.position.toArray(), camera: camera.position.to
                        target: controls.target.toArray(), root: origin[0] ? origin[0].toArray() : null });
 // The segment origins last drawn (world frame), live or from a take.
 state.pose = () => origin.map((o) => o.toArray());
+// Each segment's heading source as last drawn: 'mag' | 'joints' | 'gyro' | 'none'.
+state.headings = () => headings.slice(0, segments.length);
 let latest = null;
 let arrivals = [];
 let latencies = [];

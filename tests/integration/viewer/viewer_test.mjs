@@ -39,6 +39,16 @@ try {
   // server drops what the page cannot take), so only require a live stream.
   if (state.fps < 10) fail(`frame rate ${state.fps} Hz in the browser`);
   if (!Number.isFinite(state.latencyMs)) fail('no latency shown');
+  // Body-aware fusion ([fusion] heading = "auto", the default): once calibrated, the knees'
+  // constraints hold the calves' headings, and the page says so for each segment.
+  await page.waitForFunction(() => {
+    const h = window.mocapViewer.headings();
+    const names = window.mocapViewer.hello.segments.map((s) => s.name);
+    return h[names.indexOf('left_calf')] === 'joints' && h[names.indexOf('right_calf')] === 'joints';
+  }, null, { timeout: 30000 });
+  const headings = await page.evaluate(() => window.mocapViewer.headings());
+  console.log('headings:', JSON.stringify(headings));
+  if (!headings.includes('mag') && !headings.includes('gyro')) fail('the root shows no absolute heading source');
 
   const panel = await page.locator('#panel').boundingBox();
   const shotA = await page.screenshot();
