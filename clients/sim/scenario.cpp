@@ -16,7 +16,7 @@ constexpr double kDegToRad = kPi / 180.0;
 constexpr double kGaussToUt = 100.0;
 
 // Independent random streams of one seed (SimRng's `stream`).
-enum Stream : std::uint64_t { kMotion = 1, kNoise = 2, kBias = 3, kDisturbance = 4, kStart = 5 };
+enum Stream : std::uint64_t { kMotion = 1, kNoise = 2, kBias = 3, kDisturbance = 4, kStart = 5, kBursts = 6 };
 
 /// Earth field of the given strength and dip (inclination below the horizon), pointing to
 /// magnetic north (+y in ENU) so that magnetic and true north coincide.
@@ -24,13 +24,13 @@ Vec3 field_enu_ut(double norm_ut, double dip_rad) {
     return {0.0, norm_ut * std::cos(dip_rad), -norm_ut * std::sin(dip_rad)};
 }
 
-// ---------------------------------------------------------------- fourati / continuous
+// ---------------------------------------------------------------- fourati / continuous / bursts
 
 constexpr double kTablePieceS = 15.0;  // Table I: four pieces of 15 s
 constexpr int kTableSubsteps = 8;      // RK4 steps per sample interval for the truth
 
 bool follows_table_one(ScenarioKind kind) {
-    return kind == ScenarioKind::fourati || kind == ScenarioKind::continuous;
+    return kind == ScenarioKind::fourati || kind == ScenarioKind::continuous || kind == ScenarioKind::bursts;
 }
 
 /// Table I's piece (1..4) for the sample interval (t - dt, t]: the piece of its midpoint, so
@@ -212,6 +212,40 @@ Disturbance make_disturbance(SimRng& rng, const ScenarioSpec& spec) {
     return d;
 }
 
+/// A burst of linear acceleration in the earth frame with a plateau and raised-cosine ramps:
+/// it does not average out over the burst, as a push or a carried sensor's start does not.
+struct PlateauBurst {
+    double t0_s = 0.0;
+    double t1_s = 0.0;
+    Vec3 acc_m_s2 = Vec3::Zero();  ///< plateau value
+};
+
+/// spec.lin_acc_bursts bursts, one in each equal slice of the recording, at least 1 s from the
+/// slice's ends (so consecutive bursts are 2 s apart at least and the first waits for 1 s).
+std::vector<PlateauBurst> plan_plateau_bursts(SimRng& rng, const ScenarioSpec& spec) {
+    std::vector<PlateauBurst> bursts;
+    if (spec.lin_acc_bursts <= 0) return bursts;
+    const double slice = spec.duration_s / spec.lin_acc_bursts;
+    for (int i = 0; i < spec.lin_acc_bursts; ++i) {
+        PlateauBurst b;
+        const double lo = i * slice + 1.0;
+        const double hi = std::max(lo, (i + 1) * slice - 1.0 - spec.lin_acc_burst_s);
+        b.t0_s = rng.uniform(lo, hi);
+        b.t1_s = b.t0_s + spec.lin_acc_burst_s;
+        const double amp = rng.uniform(spec.lin_acc_burst_min_m_s2, spec.lin_acc_burst_max_m_s2);
+        b.acc_m_s2 = amp * random_unit(rng);
+        bursts.push_back(b);
+    }
+    return bursts;
+}
+
+Vec3 plateau_lin_acc_m_s2(const std::vector<PlateauBurst>& bursts, double ramp_s, double t_s) {
+    Vec3 a = Vec3::Zero();
+    for (const PlateauBurst& b : bursts)
+        a += smooth_window(t_s, b.t0_s, b.t1_s, ramp_s) * b.acc_m_s2;
+    return a;
+}
+
 Vec3 noise_vec(SimRng& rng, double sigma) {
     const Vec3 n(rng.normal(), rng.normal(), rng.normal());
     return sigma * n;
@@ -238,6 +272,7 @@ std::optional<ScenarioKind> parse_scenario_kind(std::string_view name) {
     if (name == "realistic") return ScenarioKind::realistic;
     if (name == "magnetic") return ScenarioKind::magnetic;
     if (name == "continuous") return ScenarioKind::continuous;
+    if (name == "bursts") return ScenarioKind::bursts;
     return std::nullopt;
 }
 
@@ -251,6 +286,8 @@ std::string_view scenario_name(ScenarioKind kind) {
             return "magnetic";
         case ScenarioKind::continuous:
             return "continuous";
+        case ScenarioKind::bursts:
+            return "bursts";
     }
     return "unknown";
 }
@@ -277,11 +314,21 @@ ScenarioSpec scenario_spec(ScenarioKind kind) {
     s.mag_noise_ut = 0.5;
     s.gyro_bias_max_rad_s = 2.0 * kDegToRad;
     s.mag_field_ut = field_enu_ut(50.0, 60.0 * kDegToRad);
-    if (kind == ScenarioKind::continuous) {
+    if (kind == ScenarioKind::continuous || kind == ScenarioKind::bursts) {
         // Table I's 60 s with the same sensor; every axis biased by 0.02 rad/s (1.15 °/s).
         s.duration_s = 60.0;
         s.gyro_bias_max_rad_s = 0.02;
         s.gyro_bias_min_fraction = 1.0;
+    }
+    if (kind == ScenarioKind::bursts) {
+        // Eight 1 s pushes of 2–5 m/s² (0.2 s ramps): a fifth to a half of gravity, the size of
+        // a limb's swing starting or stopping, each long enough to pass a 3 s low-pass in part.
+        s.gyro_bias_mixed_signs = true;
+        s.lin_acc_bursts = 8;
+        s.lin_acc_burst_s = 1.0;
+        s.lin_acc_burst_ramp_s = 0.2;
+        s.lin_acc_burst_min_m_s2 = 2.0;
+        s.lin_acc_burst_max_m_s2 = 5.0;
     }
     return s;
 }
@@ -299,15 +346,22 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
     SimRng bias_rng(seed, kBias);
     SimRng disturbance_rng(seed, kDisturbance);
     SimRng start_rng(seed, kStart);
+    SimRng bursts_rng(seed, kBursts);
 
     const MotionPlan plan = table_one ? MotionPlan{} : plan_motion(motion_rng, spec.duration_s);
     Disturbance disturbance;
     if (kind == ScenarioKind::magnetic) disturbance = make_disturbance(disturbance_rng, spec);
+    const std::vector<PlateauBurst> plateau_bursts = plan_plateau_bursts(bursts_rng, spec);
 
     if (options.gyro_bias && spec.gyro_bias_max_rad_s > 0.0) {
         for (int i = 0; i < 3; ++i) {
             sc.gyro_bias_rad_s[i] =
                 bias_rng.sign() * bias_rng.uniform(spec.gyro_bias_min_fraction, 1.0) * spec.gyro_bias_max_rad_s;
+        }
+        const bool all_equal = (sc.gyro_bias_rad_s.array() > 0.0).all() || (sc.gyro_bias_rad_s.array() < 0.0).all();
+        if (spec.gyro_bias_mixed_signs && all_equal) {
+            const int axis = std::min(static_cast<int>(bias_rng.uniform() * 3.0), 2);
+            sc.gyro_bias_rad_s[axis] = -sc.gyro_bias_rad_s[axis];
         }
     }
 
@@ -348,7 +402,8 @@ Scenario make_scenario(ScenarioKind kind, std::uint64_t seed, const ScenarioOpti
         row.q_earth_sensor = math::canonical(q);
         row.moving = table_one || plan_moving(plan, t, dt);
         row.gyro_true_rad_s = w;
-        row.lin_acc_earth_m_s2 = table_one ? Vec3::Zero() : plan_lin_acc_m_s2(plan, t);
+        row.lin_acc_earth_m_s2 =
+            table_one ? plateau_lin_acc_m_s2(plateau_bursts, spec.lin_acc_burst_ramp_s, t) : plan_lin_acc_m_s2(plan, t);
         row.mag_earth_ut = spec.mag_field_ut + disturbance.at(t);
 
         const Quat q_sensor_earth = math::conj(q);

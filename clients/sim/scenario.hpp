@@ -1,6 +1,6 @@
 // scenario.hpp — benchmark recordings of one sensor with their true orientation.
 //
-// Four scenarios (docs/accuracy.md describes them and how the paper's NED model maps here):
+// Five scenarios (docs/accuracy.md describes them and how the paper's NED model maps here):
 //   fourati    Fourati et al.'s CSMO simulation: 60 s at 100 Hz, the body rate of the paper's
 //              Table I (fourati_table_rate_rad_s) from the paper's q(0) = identity (NED), white
 //              noise σ = 0.4 on gyro (rad/s), accelerometer (m/s²) and magnetometer (G, i.e.
@@ -13,6 +13,10 @@
 //   continuous fourati's motion (up to 2.5 rad/s, never at rest) with realistic's sensor noise
 //              and field and a constant gyro bias of 0.02 rad/s (1.15 °/s) on every axis
 //              (signs from the seed): bias that can only be learned in motion.
+//   bursts     continuous with signs that differ between the axes (never all equal) and eight
+//              1 s bursts of linear acceleration (2–5 m/s², a random earth-frame direction each,
+//              raised-cosine ramps, one in each eighth of the recording): bias learned in motion
+//              while the accelerometer is, at times, not measuring gravity.
 //
 // Conventions (docs/design.md, "Quaternions and frames"): earth frame ENU, q_earth_sensor
 // rotates sensor vectors into the earth frame, (w, x, y, z) Hamilton. The accelerometer reads
@@ -44,9 +48,9 @@ namespace mocap::sim {
 using math::Quat;
 using math::Vec3;
 
-enum class ScenarioKind { fourati, realistic, magnetic, continuous };
+enum class ScenarioKind { fourati, realistic, magnetic, continuous, bursts };
 
-/// "fourati" | "realistic" | "magnetic" | "continuous" -> kind; nullopt for anything else.
+/// "fourati" | "realistic" | "magnetic" | "continuous" | "bursts" -> kind; nullopt for anything else.
 std::optional<ScenarioKind> parse_scenario_kind(std::string_view name);
 std::string_view scenario_name(ScenarioKind kind);
 
@@ -60,6 +64,13 @@ struct ScenarioSpec {
     double gyro_bias_max_rad_s = 0.0;      ///< largest per-axis bias magnitude
     double gyro_bias_min_fraction = 0.25;  ///< per-axis magnitude drawn in [fraction·max, max],
                                            ///< random sign
+    bool gyro_bias_mixed_signs = false;    ///< the axes' signs are never all equal
+    int lin_acc_bursts = 0;                ///< bursts of linear acceleration on Table I's motion,
+                                           ///< one in each equal slice of the recording
+    double lin_acc_burst_s = 0.0;          ///< length of each burst, ramps included, s
+    double lin_acc_burst_ramp_s = 0.0;     ///< raised-cosine ramp at each end of a burst, s
+    double lin_acc_burst_min_m_s2 = 0.0;   ///< a burst's plateau magnitude is drawn in [min, max]
+    double lin_acc_burst_max_m_s2 = 0.0;
     Vec3 gravity_up_m_s2{0.0, 0.0, 9.81};  ///< specific force at rest, earth frame (ENU)
     Vec3 mag_field_ut = Vec3::Zero();      ///< undisturbed earth field, ENU, µT
 };

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 namespace mocap::sim {
 namespace {
@@ -14,7 +15,7 @@ using math::Vec3;
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr ScenarioKind kAllKinds[] = {ScenarioKind::fourati, ScenarioKind::realistic, ScenarioKind::magnetic,
-                                      ScenarioKind::continuous};
+                                      ScenarioKind::continuous, ScenarioKind::bursts};
 
 bool same_rows(const Scenario& a, const Scenario& b) {
     if (a.rows.size() != b.rows.size()) return false;
@@ -142,6 +143,80 @@ TEST(Scenario, ContinuousIsTableOneWithBiasAndMemsNoise) {
     for (const std::uint64_t seed : {1u, 2u, 3u, 5u, 6u})
         other = other || make_scenario(ScenarioKind::continuous, seed).gyro_bias_rad_s != c.gyro_bias_rad_s;
     EXPECT_TRUE(other);
+}
+
+// bursts: continuous's truth, sensors and bias magnitude, with signs that are never all equal.
+TEST(Scenario, BurstsIsContinuousWithMixedBiasSigns) {
+    const Scenario c = make_scenario(ScenarioKind::continuous, 4);
+    const Scenario b = make_scenario(ScenarioKind::bursts, 4);
+    ASSERT_EQ(b.rows.size(), c.rows.size());
+    for (std::size_t i = 0; i < b.rows.size(); ++i) {
+        ASSERT_EQ(b.rows[i].q_earth_sensor.coeffs(), c.rows[i].q_earth_sensor.coeffs());
+        ASSERT_EQ(b.rows[i].gyro_true_rad_s, c.rows[i].gyro_true_rad_s);
+        ASSERT_TRUE(b.rows[i].moving);
+    }
+    EXPECT_DOUBLE_EQ(b.spec.gyro_noise_rad_s, c.spec.gyro_noise_rad_s);
+    EXPECT_DOUBLE_EQ(b.spec.accel_noise_m_s2, c.spec.accel_noise_m_s2);
+    EXPECT_DOUBLE_EQ(b.spec.mag_noise_ut, c.spec.mag_noise_ut);
+    EXPECT_EQ(b.spec.mag_field_ut, c.spec.mag_field_ut);
+    // Signs: never all equal (a seed that draws them equal gets one flipped), and the seed
+    // chooses among the six mixed patterns.
+    int patterns = 0;
+    bool seen[8] = {};
+    for (std::uint64_t seed = 1; seed <= 40; ++seed) {
+        const Vec3 bias = make_scenario(ScenarioKind::bursts, seed, {.noise_scale = 0.0}).gyro_bias_rad_s;
+        ASSERT_EQ(bias.cwiseAbs(), Vec3::Constant(0.02)) << seed;
+        const auto positive = (bias.array() > 0.0).count();
+        ASSERT_TRUE(positive == 1 || positive == 2) << "seed " << seed << ": " << bias.transpose();
+        const int code = (bias.x() > 0 ? 1 : 0) + (bias.y() > 0 ? 2 : 0) + (bias.z() > 0 ? 4 : 0);
+        if (!seen[code]) ++patterns;
+        seen[code] = true;
+    }
+    EXPECT_EQ(patterns, 6);
+}
+
+// Eight bursts of linear acceleration, one per 7.5 s slice: 1 s long, a plateau of 2–5 m/s² in
+// one earth-frame direction, raised-cosine ramps (no step the filters could lock onto), nothing
+// in the first second and nothing between them.
+TEST(Scenario, BurstsHaveEightSmoothPlateausOfLinearAcceleration) {
+    for (const std::uint64_t seed : {1u, 2u, 3u, 4u, 5u}) {
+        const Scenario s = make_scenario(ScenarioKind::bursts, seed);
+        struct Seen {
+            double t0 = 0.0, t1 = 0.0, peak = 0.0;
+            Vec3 dir = Vec3::Zero();
+        };
+        std::vector<Seen> bursts;
+        bool inside = false;
+        double max_step = 0.0;
+        Vec3 prev = Vec3::Zero();
+        for (const ScenarioRow& row : s.rows) {
+            const double t = 1e-6 * static_cast<double>(row.sample.t_us);
+            const Vec3 a = row.lin_acc_earth_m_s2;
+            max_step = std::max(max_step, (a - prev).norm());
+            prev = a;
+            if (a.norm() > 0.0) {
+                if (!inside) bursts.push_back({t, t, 0.0, a.normalized()});
+                inside = true;
+                Seen& b = bursts.back();
+                b.t1 = t;
+                b.peak = std::max(b.peak, a.norm());
+                ASSERT_LT((a.normalized() - b.dir).norm(), 1e-9) << "one direction per burst, t = " << t;
+            } else {
+                inside = false;
+            }
+        }
+        ASSERT_EQ(bursts.size(), 8u) << "seed " << seed;
+        for (std::size_t i = 0; i < bursts.size(); ++i) {
+            const Seen& b = bursts[i];
+            EXPECT_GE(b.t0, 7.5 * static_cast<double>(i) + 1.0) << seed;
+            EXPECT_LE(b.t1, 7.5 * static_cast<double>(i + 1) - 1.0) << seed;
+            EXPECT_NEAR(b.t1 - b.t0, 1.0, 0.011) << seed;  // samples strictly inside (t0, t0 + 1 s)
+            EXPECT_GE(b.peak, 2.0) << seed;
+            EXPECT_LE(b.peak, 5.0) << seed;
+        }
+        // A 0.2 s raised-cosine ramp to at most 5 m/s² moves at most 5·π/(2·0.2)·0.01 ≈ 0.39 m/s² per sample.
+        EXPECT_LT(max_step, 0.4) << seed;
+    }
 }
 
 // Integrating the noiseless, unbiased gyro with q_k = q_{k-1} ⊗ exp(ω_k dt/2) reproduces
