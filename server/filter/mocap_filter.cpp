@@ -15,6 +15,16 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 // the estimate steady).
 constexpr double kMagDelayMaxS = 0.05;
 constexpr double kMagDelayWindowS = 60.0;
+// Linear acceleration (header, "Linear acceleration"): the specific force's deviation from the
+// low-passed gravity is clipped at kAccClipScales running medians of that deviation, never
+// below kAccClipMinM_s2; the median follows the deviation by at most a factor e per
+// kAccDevMedianTauS. It is kept at or above the median the smallest clip stands for, so that
+// on a quiet sensor a deviation that persists (a low-pass that is itself off) raises the clip
+// at once rather than after seconds of climbing from the noise.
+constexpr double kAccClipScales = 3.0;
+constexpr double kAccClipMinM_s2 = 0.5;
+constexpr double kAccDevMedianTauS = 1.0;
+constexpr double kAccDevMedianMinM_s2 = kAccClipMinM_s2 / kAccClipScales;
 
 // Butterworth cut-off chosen so the non-oscillating part of the step response has time
 // constant tau (as in VQF). tau <= 0 means "no filtering".
@@ -189,6 +199,7 @@ void MocapFilter::compute_coeffs(double ts_s) {
     k_noise_floor_ = gain_from_tau(300.0, ts_s);
     k_mag_offset_ = p.mag_offset_tau_s > 0.0 ? gain_from_tau(p.mag_offset_tau_s, ts_s) : 0.0;
     mag_delay_forgetting_ = std::exp(-ts_s / kMagDelayWindowS);
+    acc_dev_median_step_ = std::exp(ts_s / kAccDevMedianTauS);
     // Bias Kalman filter in units of 0.01 °/s, which keeps the numbers near 1.
     bias_p0_ = std::pow(p.bias_sigma_init_deg_s * 100.0, 2);
     bias_v_ = std::pow(0.1 * p.bias_sigma_init_deg_s * 100.0, 2) * ts_s / p.bias_forgetting_time_s;
@@ -285,7 +296,8 @@ void MocapFilter::update_acc(const math::Vec3& acc) {
     }
     // Low-pass in the almost-inertial frame: while the sensor turns, linear acceleration
     // averages out there, gravity does not.
-    const math::Vec3 acc_i = math::rotate(s.q_i_sensor, acc);
+    math::Vec3 acc_i = math::rotate(s.q_i_sensor, acc);
+    clip_acc_deviation(acc_i);
     low_pass(s.acc_lp, acc_i.data(), acc_lp_, s.tau_acc_eff_s, s.ts_s);
     const math::Vec3 acc_e = math::rotate(s.q_e6_i, out3(s.acc_lp)).normalized();
 
@@ -293,6 +305,33 @@ void MocapFilter::update_acc(const math::Vec3& acc) {
     s.q_e6_i = (tilt_to_vertical(acc_e) * s.q_e6_i).normalized();
 
     if (s.ts_s > 0.0 && (params_.rest_bias || params_.motion_bias)) update_bias(acc_e);
+}
+
+// Linear acceleration (header): the low-pass averages linear acceleration that comes and goes,
+// but a push that keeps one direction for a second moves it as if gravity had tilted, and the
+// motion bias measurement then takes the correction for gyro bias. Such a push stands out
+// from the deviations the motion usually makes: the deviation of the specific force from the
+// low-passed gravity is clipped (a Huber weight) at a few running medians of that deviation.
+// A running median, not a mean square, so the pushes themselves hardly raise it; moved by a
+// bounded factor per second, so it follows a change of motion within seconds (vigorous
+// motion raises it and is then averaged as before). acc_clip is the share let through.
+void MocapFilter::clip_acc_deviation(math::Vec3& acc_i) {
+    MocapFilterState& s = state_;
+    s.acc_clip = 1.0;
+    if (s.acc_lp.count == 0 || s.ts_s == 0.0) return;
+    const math::Vec3 lp = out3(s.acc_lp);
+    const math::Vec3 dev = acc_i - lp;
+    const double d = dev.norm();
+    if (s.acc_dev_median_m_s2 == 0.0) s.acc_dev_median_m_s2 = std::max(d, kAccDevMedianMinM_s2);
+    const double th = std::max(kAccClipMinM_s2, kAccClipScales * s.acc_dev_median_m_s2);
+    if (d > th && s.acc_lp.running) {
+        s.acc_clip = th / d;
+        acc_i = lp + s.acc_clip * dev;
+        ++s.acc_samples_clipped;
+    }
+    s.acc_dev_median_m_s2 = d > s.acc_dev_median_m_s2 ? s.acc_dev_median_m_s2 * acc_dev_median_step_
+                                                      : s.acc_dev_median_m_s2 / acc_dev_median_step_;
+    s.acc_dev_median_m_s2 = std::max(s.acc_dev_median_m_s2, kAccDevMedianMinM_s2);
 }
 
 void MocapFilter::update_bias(const math::Vec3& acc_e) {
@@ -329,7 +368,9 @@ void MocapFilter::update_bias(const math::Vec3& acc_e) {
         e.x() = -acc_e.y() / s.ts_s + s.bias_b_lp.out[0] - h.row(0).dot(s.bias_rad_s);
         e.y() = acc_e.x() / s.ts_s + s.bias_b_lp.out[1] - h.row(1).dot(s.bias_rad_s);
         e.z() = -h.row(2).dot(s.bias_rad_s);
-        w = math::Vec3(bias_motion_w_, bias_motion_w_, bias_vertical_w_);
+        // A clipped sample's correction is partly linear acceleration: its variance grows with
+        // the square of the deviation over the clip.
+        w = math::Vec3(bias_motion_w_, bias_motion_w_, bias_vertical_w_) / (s.acc_clip * s.acc_clip);
     } else {
         return;
     }
