@@ -13,6 +13,7 @@
 #include "filter/offline_smoother.hpp"
 #include "filter_tool/recording_csv.hpp"
 #include "fusion/chain_smoother.hpp"
+#include "pipeline/chain_offline.hpp"
 
 namespace mocap::tools {
 namespace {
@@ -29,34 +30,6 @@ std::vector<fusion::JointDef> joint_defs(const ChainRecording& chain) {
 
 double seconds_since(const Recording& r, std::size_t row) {
     return static_cast<double>(r.rows[row].sample.t_us - r.rows.front().sample.t_us) * 1e-6;
-}
-
-/// The field's norm and dip seen through a 0.5 s low-pass, per sample (0 where none).
-void field_of(const std::vector<ImuSample>& samples, std::vector<double>& norm_ut, std::vector<double>& dip_rad) {
-    norm_ut.assign(samples.size(), 0.0);
-    dip_rad.assign(samples.size(), 0.0);
-    math::Vec3 m_lp = math::Vec3::Zero(), a_lp = math::Vec3::Zero();
-    bool started = false;
-    for (std::size_t k = 0; k < samples.size(); ++k) {
-        const ImuSample& s = samples[k];
-        if (!s.has_mag()) continue;
-        const math::Vec3 m = math::to_vec3(s.mag_ut), a = math::to_vec3(s.accel_m_s2);
-        const double dt = k > 0 ? static_cast<double>(s.t_us - samples[k - 1].t_us) * 1e-6 : 0.0;
-        const double g = started ? 1.0 - std::exp(-std::max(dt, 0.0) / 0.5) : 1.0;
-        m_lp += g * (m - m_lp);
-        a_lp += g * (a - a_lp);
-        started = true;
-        const double n = m_lp.norm(), an = a_lp.norm();
-        if (n <= 0.0 || an <= 0.0) continue;
-        norm_ut[k] = n;
-        // Positive down: the field against the measured up.
-        dip_rad[k] = -std::asin(std::clamp(m_lp.dot(a_lp) / (n * an), -1.0, 1.0));
-    }
-}
-
-/// The part of q about the vertical, rad.
-double heading_of(const Quat& q) {
-    return 2.0 * std::atan2(q.z(), q.w());
 }
 
 }  // namespace
@@ -125,43 +98,16 @@ std::optional<ChainRunOutput> run_chain_offline(const ChainRecording& chain, con
     std::vector<std::int64_t> t_us(rows);
     for (std::size_t k = 0; k < rows; ++k)
         t_us[k] = chain.segments.front().recording.rows[k].sample.t_us;
+    std::vector<ImuSample> samples;
     for (std::size_t s = 0; s < ns; ++s) {
-        std::vector<ImuSample> samples, samples_6d;
+        samples.clear();
         for (const RecordingRow& r : chain.segments[s].recording.rows) {
             samples.push_back(r.sample);
             if (options.no_mag) samples.back().flags |= kImuNoMag;
-            samples_6d.push_back(r.sample);
-            samples_6d.back().flags |= kImuNoMag;
         }
-        const filter::OfflineResult r6 = smoother.smooth(*f, samples_6d);
-        const bool with_mag =
-            std::any_of(samples.begin(), samples.end(), [](const ImuSample& x) { return x.has_mag(); });
-        filter::OfflineResult r9;
-        if (with_mag) r9 = smoother.smooth(*f, samples);
-        std::vector<double> norm_ut, dip_rad;
-        field_of(samples, norm_ut, dip_rad);
-        // A constant bias: what the raw rate has that the re-solved motion does not.
-        math::Vec3 bias = math::Vec3::Zero();
-        for (std::size_t k = 1; k < rows; ++k) {
-            const double dt = static_cast<double>(t_us[k] - t_us[k - 1]) * 1e-6;
-            const math::Vec3 w = math::rotvec_from_quat(r6.orientation[k - 1].conjugate() * r6.orientation[k]) / dt;
-            bias += math::to_vec3(samples[k].gyro_rad_s) - w;
-        }
-        if (rows > 1) bias /= static_cast<double>(rows - 1);
-        for (std::size_t k = 0; k < rows; ++k) {
-            fusion::SegmentInput& x = in[k * ns + s];
-            x.fresh = true;
-            x.q6 = r6.orientation[k];
-            x.gyro_rad_s = math::to_vec3(samples[k].gyro_rad_s) - bias;
-            x.accel_m_s2 = math::to_vec3(samples[k].accel_m_s2);
-            x.mag_available = with_mag;
-            if (with_mag) {
-                x.mag_heading_rad = heading_of(r9.orientation[k] * r6.orientation[k].conjugate());
-                x.mag_trusted = r9.mag_used[k] != 0;
-                x.field_norm_ut = norm_ut[k];
-                x.field_dip_rad = dip_rad[k];
-            }
-        }
+        const std::vector<fusion::SegmentInput> seg = pipeline::offline_segment_inputs(smoother, *f, samples);
+        for (std::size_t k = 0; k < rows; ++k)
+            in[k * ns + s] = seg[k];
     }
     const std::vector<fusion::JointDef> defs = joint_defs(chain);
     const fusion::ChainSmoothResult sm = fusion::smooth_chain(ns, defs, options.chain, t_us, in);

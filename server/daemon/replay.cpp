@@ -8,6 +8,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <thread>
 
 #include "cluster/raw_take_reader.hpp"
@@ -19,6 +20,8 @@
 #include "daemon/wall_clock.hpp"
 #include "filter/filter_factory.hpp"
 #include "filter/offline_smoother.hpp"
+#include "fusion/chain_smoother.hpp"
+#include "pipeline/chain_offline.hpp"
 #include "pipeline/filter_processor.hpp"
 #include "pipeline/pipeline.hpp"
 #include "serve/raw_recorder.hpp"
@@ -111,36 +114,123 @@ bool replay_jetstream(const DaemonConfig& config, const ReplayOptions& options,
     return true;
 }
 
-/// Offline: replaces each node's samples' orientation by the smoothed one (replay.hpp).
-/// Returns how many samples carry a smoothed orientation; false + error if a filter cannot be
-/// built.
-bool smooth_offline(const DaemonConfig& config, const pipeline::Pipeline& pipeline, std::vector<SegmentSample>& samples,
-                    std::uint64_t* smoothed, std::string* error) {
-    std::map<std::pair<std::uint32_t, std::uint8_t>, std::vector<std::size_t>> nodes;
+/// What the offline re-solve of a take needs besides its samples.
+struct OfflineSetup {
+    const DaemonConfig& config;
+    const pipeline::Pipeline& pipeline;
+    const skeleton::FusionOptions& fusion;  ///< [fusion] as configured (the pipeline's chain stage is off)
+    const std::string& calibration_dir;     ///< "" = no calibration before the replay
+};
+
+void set_node_quat(SegmentSample& s, const math::Quat& q) {
+    s.node_q_wxyz = {q.w(), q.x(), q.y(), q.z()};
+    s.has_node_quat = true;
+}
+
+/// One subject's take through the chain smoother (replay.hpp, "Offline"): `take` holds, per
+/// segment, the indices of its samples in `samples`.
+bool smooth_subject_chain(const OfflineSetup& setup, std::uint32_t subject,
+                          const std::vector<std::vector<std::size_t>>& take, std::vector<SegmentSample>& samples,
+                          std::string* error) {
+    const skeleton::BodyModel& model = setup.pipeline.model();
+    const std::size_t ns = model.size();
+    const filter::OfflineSmoother smoother;
+    std::vector<std::vector<std::uint64_t>> sync(ns);
+    std::vector<std::vector<std::int64_t>> t_us(ns);
+    std::vector<std::vector<fusion::SegmentInput>> in(ns);
+    std::vector<pipeline::ChainTrack> tracks(ns);
+    std::vector<ImuSample> imu;
+    for (std::size_t s = 0; s < ns; ++s) {
+        if (take[s].empty()) continue;
+        auto f = filter::make_filter(model.segments[s].filter, setup.config.filter_params, error);
+        if (!f) return false;
+        imu.clear();
+        for (const std::size_t i : take[s]) {
+            imu.push_back(samples[i].imu);
+            sync[s].push_back(samples[i].sync);
+            t_us[s].push_back(samples[i].imu.t_us);
+        }
+        in[s] = pipeline::offline_segment_inputs(smoother, *f, imu);
+        tracks[s] = {sync[s], t_us[s], in[s]};
+    }
+    const pipeline::ChainRows rows = pipeline::chain_rows(tracks);
+    // The rows hold their own copies: the per-segment ones go before the passes allocate theirs.
+    tracks.clear();
+    in.clear();
+    sync.clear();
+    t_us.clear();
+    // The calibration the solver starts the replay with, if any: one made during the replay
+    // comes too late for the joints' axes, which the take then gives.
+    std::optional<skeleton::Calibration> calibration;
+    if (!setup.calibration_dir.empty())
+        calibration = CalibrationFiles(setup.calibration_dir).load(model, subject).calibration;
+    const std::vector<fusion::JointDef> joints =
+        pipeline::body_chain_joints(model, setup.fusion, calibration ? &*calibration : nullptr);
+    if (const std::string bad = fusion::ChainEstimator::check(ns, joints); !bad.empty()) {
+        *error = "offline chain of subject " + std::to_string(subject) + ": " + bad;
+        return false;
+    }
+    const fusion::ChainSmoothResult sm = fusion::smooth_chain(ns, joints, setup.fusion.chain, rows.t_us, rows.in);
+    for (std::size_t s = 0; s < ns; ++s) {
+        for (std::size_t k = 0; k < take[s].size(); ++k)
+            set_node_quat(samples[take[s][k]], sm.out[rows.row_of[s][k] * ns + s].q_earth_sensor);
+    }
+    std::size_t constrained = 0, with_axes = 0;
+    for (std::size_t j = 0; j < joints.size(); ++j) {
+        if (joints[j].type == fusion::JointType::kBall) continue;
+        ++constrained;
+        if (sm.joints[j].axes_known) ++with_axes;
+    }
+    spdlog::info(
+        "replay: offline chain of subject {} (heading {}): {} instants, axes of {} of {} hinge and 2-DoF "
+        "joints ({})",
+        subject, fusion::to_string(setup.fusion.chain.mode), rows.sync.size(), with_axes, constrained,
+        !calibration                 ? "learned from the take, no calibration before the replay"
+        : setup.fusion.estimate_axes ? "hinges learned from the take, the rest from the calibration"
+                                     : "from the calibration");
+    return true;
+}
+
+/// Offline: gives each selected sample its smoothed orientation as its node's own estimate
+/// (replay.hpp, "Offline"). *smoothed counts them; false + error if a filter cannot be built.
+bool smooth_offline(const OfflineSetup& setup, std::vector<SegmentSample>& samples, std::uint64_t* smoothed,
+                    std::string* error) {
+    const bool chain = setup.fusion.chain.mode != fusion::HeadingMode::kMagnetometer;
+    const pipeline::Pipeline& pipeline = setup.pipeline;
+    // Per subject and segment (one node each), the samples the smoother can take, in order.
+    std::map<std::uint32_t, std::vector<std::vector<std::size_t>>> takes;
     for (std::size_t i = 0; i < samples.size(); ++i) {
         const SegmentSample& s = samples[i];
-        if (s.has_node_quat || pipeline.segment_of(s.node_id) < 0 || !pipeline::FilterProcessor::accepts(s.imu))
-            continue;
-        auto& idx = nodes[{s.subject_id, s.node_id}];
-        if (idx.empty() || s.imu.t_us > samples[idx.back()].imu.t_us) idx.push_back(i);
+        const int segment = pipeline.segment_of(s.node_id);
+        if (s.has_node_quat || segment < 0 || !pipeline::FilterProcessor::accepts(s.imu)) continue;
+        auto& take = takes[s.subject_id];
+        take.resize(pipeline.model().size());
+        auto& idx = take[static_cast<std::size_t>(segment)];
+        const bool later =
+            idx.empty() || (s.imu.t_us > samples[idx.back()].imu.t_us && (!chain || s.sync > samples[idx.back()].sync));
+        if (later) idx.push_back(i);
     }
     const filter::OfflineSmoother smoother;
     std::vector<ImuSample> imu;
-    for (const auto& [key, idx] : nodes) {
-        const auto& segment = pipeline.model().segments[static_cast<std::size_t>(pipeline.segment_of(key.second))];
-        auto f = filter::make_filter(segment.filter, config.filter_params, error);
-        if (!f) return false;
-        imu.clear();
-        for (std::size_t i : idx)
-            imu.push_back(samples[i].imu);
-        const filter::OfflineResult r = smoother.smooth(*f, imu);
-        for (std::size_t k = 0; k < idx.size(); ++k) {
-            SegmentSample& s = samples[idx[k]];
-            const math::Quat& q = r.orientation[k];
-            s.node_q_wxyz = {q.w(), q.x(), q.y(), q.z()};
-            s.has_node_quat = true;
+    for (const auto& [subject, take] : takes) {
+        for (const auto& idx : take)
+            *smoothed += idx.size();
+        if (chain) {
+            if (!smooth_subject_chain(setup, subject, take, samples, error)) return false;
+            continue;
         }
-        *smoothed += idx.size();
+        for (std::size_t segment = 0; segment < take.size(); ++segment) {
+            const auto& idx = take[segment];
+            if (idx.empty()) continue;
+            auto f = filter::make_filter(pipeline.model().segments[segment].filter, setup.config.filter_params, error);
+            if (!f) return false;
+            imu.clear();
+            for (const std::size_t i : idx)
+                imu.push_back(samples[i].imu);
+            const filter::OfflineResult r = smoother.smooth(*f, imu);
+            for (std::size_t k = 0; k < idx.size(); ++k)
+                set_node_quat(samples[idx[k]], r.orientation[k]);
+        }
     }
     return true;
 }
@@ -186,6 +276,11 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     }
     auto pc = pipeline_config_from_config(config, error);
     if (!pc) return false;
+    // Offline, the chain stage runs over the whole take before the pipeline (smooth_offline):
+    // the smoothed orientations already hold the joints' headings, and the pipeline's causal
+    // chain stage over them would only add its own noise.
+    const skeleton::FusionOptions fusion_options = pc->solver.fusion;
+    if (options.offline) pc->solver.fusion.chain.mode = fusion::HeadingMode::kMagnetometer;
     pc->calibration_store = calibration_files(options.calibration_dir);
     // The pipeline's own clock is read only by the live stages (worker pool, assembler
     // thread); the synchronous mode runs on the recorded received_us below.
@@ -271,7 +366,8 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     }
     order.flush();
     if (options.offline) {
-        if (!smooth_offline(config, *pipeline, held, &result->samples_smoothed, error)) return false;
+        const OfflineSetup setup{config, *pipeline, fusion_options, options.calibration_dir};
+        if (!smooth_offline(setup, held, &result->samples_smoothed, error)) return false;
         spdlog::info("replay: offline re-solve of {} of {} samples", result->samples_smoothed, held.size());
         for (const SegmentSample& h : held)
             play(h);
