@@ -162,7 +162,10 @@ void ChainEstimator::set_axes(std::size_t joint, const Vec3& axis_parent, const 
 }
 
 void ChainEstimator::learn_axes(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c) {
-    if (!j.axis || !j.axis->add(t_us, p.gyro_rad_s, c.gyro_rad_s, p.q6, c.q6) || !j.axis->ready()) return;
+    if (!j.axis) return;
+    const bool solved = j.axis->add(t_us, p.gyro_rad_s, c.gyro_rad_s, p.q6, c.q6, !solved_this_step_);
+    solved_this_step_ = solved_this_step_ || solved;
+    if (!solved || !j.axis->ready()) return;
     const Vec3& ap = j.axis->axis_parent();
     const Vec3& ac = j.axis->axis_child();
     // A change below ~1° is the estimate's own noise: keep the axes (and δ) as they are.
@@ -274,7 +277,7 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
         // Each sample has two roots in δ; their sum over the last search_s has one, once the
         // motion is rich enough: that starts (and restarts) δ without a magnetometer.
         j.search.shift(f.initialised() ? f.rate_rad_s() * dt_s : 0.0);
-        j.search.scale(dt_s > 0.0 ? std::exp(-dt_s / params_.search_s) : 1.0);
+        j.search.scale(step_.search_decay);
         const double sa = params_.sigma_two_dof_axis, sr = sigma_rate;
         j.search.add(g_axis, 1.0 / (sa * sa * scale));
         j.search.add(g_rate, 1.0 / (sr * sr * scale));
@@ -347,7 +350,8 @@ double ChainEstimator::learn_noise(Joint& j, Stream stream, double innovation_ra
                                    double dt_s) const {
     double& r = j.noise_ratio[stream];
     const double x = std::min(innovation_rad * innovation_rad / model_var, 100.0);
-    const double k = dt_s > 0.0 ? 1.0 - std::exp(-dt_s / params_.noise_tau_s) : 0.0;
+    (void)dt_s;
+    const double k = step_.noise_gain;
     r += k * (x - r);
     return std::max(params_.min_noise_ratio, r);
 }
@@ -364,6 +368,12 @@ HeadingSource ChainEstimator::source_of(const Joint& j, std::int64_t t_us) const
 void ChainEstimator::update(std::int64_t t_us, std::span<const SegmentInput> in, std::span<SegmentOutput> out) {
     const double dt_s = last_us_ >= 0 && t_us > last_us_ ? static_cast<double>(t_us - last_us_) * 1e-6 : 0.0;
     last_us_ = t_us;
+    solved_this_step_ = false;
+    if (dt_s != step_.dt_s) {  // the coefficients of one step, recomputed only when the rate changes
+        step_.dt_s = dt_s;
+        step_.search_decay = dt_s > 0.0 ? std::exp(-dt_s / params_.search_s) : 1.0;
+        step_.noise_gain = dt_s > 0.0 ? 1.0 - std::exp(-dt_s / params_.noise_tau_s) : 0.0;
+    }
     std::array<JointHeading, kMaxSegments> headings{};
     for (std::size_t i = 0; i < joints_.size(); ++i) {
         Joint& j = joints_[i];

@@ -226,6 +226,10 @@ private:
     std::array<int, kMaxSegments> order_{};           // segments, parents before children
     std::array<double, kMaxSegments> psi_{};          // heading applied to each segment's q6
     std::int64_t last_us_ = -1;
+    bool solved_this_step_ = false;  // one axis or centre solve per step at most (their cost)
+    struct StepCoefficients {
+        double dt_s = -1.0, search_decay = 1.0, noise_gain = 0.0;
+    } step_;
 };
 
 }  // namespace mocap::fusion

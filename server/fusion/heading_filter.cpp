@@ -46,7 +46,8 @@ void HeadingFilter::predict(double dt_s) {
     p11_ += sr * sr * dt_s;
     // A joint that goes unobserved for a long time: δ's uncertainty saturates, so a later
     // measurement is taken at once rather than after the variance has run away.
-    const double pmax = std::pow(params_.sigma_max_deg * kDeg, 2);
+    const double smax = params_.sigma_max_deg * kDeg;
+    const double pmax = smax * smax;
     if (p00_ > pmax) {
         const double s = std::sqrt(pmax / p00_);
         p00_ = pmax;

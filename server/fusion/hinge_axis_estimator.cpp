@@ -27,18 +27,19 @@ Mat32 tangent_basis(const Vec3& j) {
 }  // namespace
 
 HingeAxisEstimator::HingeAxisEstimator(const HingeAxisParams& params)
-    : params_(params), ring_(std::max<std::size_t>(params.capacity, 1)) {}
+    : params_(params), ring_(std::max<std::size_t>(params.capacity, 1)), interval_s_(params.solve_interval_s) {}
 
 void HingeAxisEstimator::reset() {
     next_ = count_ = 0;
     last_sample_us_ = last_solve_us_ = -1;
     solved_once_ = ready_ = false;
+    interval_s_ = params_.solve_interval_s;
     j_p_ = j_c_ = Vec3::UnitX();
     relative_residual_ = 0.0;
 }
 
 bool HingeAxisEstimator::add(std::int64_t t_us, const Vec3& rate_parent, const Vec3& rate_child, const Quat& q6_parent,
-                             const Quat& q6_child) {
+                             const Quat& q6_child, bool may_solve) {
     const double min2 = params_.min_rate_rad_s * params_.min_rate_rad_s;
     const bool moving = rate_parent.squaredNorm() > min2 || rate_child.squaredNorm() > min2;
     const auto spacing_us = static_cast<std::int64_t>(params_.sample_spacing_s * 1e6);
@@ -49,11 +50,18 @@ bool HingeAxisEstimator::add(std::int64_t t_us, const Vec3& rate_parent, const V
         count_ = std::min(count_ + 1, ring_.size());
         last_sample_us_ = t_us;
     }
-    if (count_ < params_.min_samples) return false;
-    const auto interval_us = static_cast<std::int64_t>(params_.solve_interval_s * 1e6);
+    if (count_ < params_.min_samples || !may_solve) return false;
+    const auto interval_us = static_cast<std::int64_t>(interval_s_ * 1e6);
     if (last_solve_us_ >= 0 && t_us - last_solve_us_ < interval_us && t_us >= last_solve_us_) return false;
     last_solve_us_ = t_us;
-    return solve();
+    const Vec3 jp = j_p_, jc = j_c_;
+    const bool was_ready = ready_;
+    if (!solve()) return false;
+    // A solution that no longer moves (< 0.2°) is checked less and less often, up to
+    // max_interval_s: the axes are constants of the mounting.
+    const bool still = was_ready && ready_ && std::abs(jp.dot(j_p_)) > 0.999994 && std::abs(jc.dot(j_c_)) > 0.999994;
+    interval_s_ = still ? std::min(2.0 * interval_s_, params_.max_interval_s) : params_.solve_interval_s;
+    return true;
 }
 
 double HingeAxisEstimator::refine(Vec3& jp, Vec3& jc, int iterations, double* conditioning) const {

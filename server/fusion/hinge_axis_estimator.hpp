@@ -42,7 +42,8 @@ struct HingeAxisParams {
     double sample_spacing_s = 0.04;  ///< at most one sample per this interval, s
     std::size_t capacity = 600;      ///< samples kept (the most recent)
     std::size_t min_samples = 150;   ///< informative samples before the first solution
-    double solve_interval_s = 2.0;   ///< sample time between solutions, s
+    double solve_interval_s = 2.0;   ///< sample time between solutions, s ...
+    double max_interval_s = 32.0;    ///< ... doubled while the solution stays put, up to this
     double max_residual = 0.15;      ///< RMS residual / RMS rate that still counts as a hinge
     double min_conditioning = 1e-3;  ///< identifiability: smallest / largest normal-matrix eigenvalue
 };
@@ -54,8 +55,10 @@ public:
     void reset();
     /// One step: both segments' bias-corrected rates (sensor frames) and 6D orientations.
     /// Returns true when a new solution was computed in this call.
+    /// may_solve false: collect only (the caller spreads several estimators' solves over its
+    /// steps, one per step, so no frame pays for two).
     bool add(std::int64_t t_us, const Vec3& rate_parent, const Vec3& rate_child, const Quat& q6_parent,
-             const Quat& q6_child);
+             const Quat& q6_child, bool may_solve = true);
 
     [[nodiscard]] bool ready() const { return ready_; }
     [[nodiscard]] const Vec3& axis_parent() const { return j_p_; }
@@ -83,6 +86,7 @@ private:
     bool solved_once_ = false, ready_ = false;
     Vec3 j_p_ = Vec3::UnitX(), j_c_ = Vec3::UnitX();
     double relative_residual_ = 0.0;
+    double interval_s_;
 };
 
 }  // namespace mocap::fusion

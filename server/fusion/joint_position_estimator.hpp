@@ -36,7 +36,8 @@ struct JointPositionParams {
     double sample_spacing_s = 0.04;   ///< at most one sample per this interval, s
     std::size_t capacity = 600;       ///< samples kept (the most recent)
     std::size_t min_samples = 150;    ///< before the first solution
-    double solve_interval_s = 2.0;    ///< sample time between solutions, s
+    double solve_interval_s = 2.0;    ///< sample time between solutions, s ...
+    double max_interval_s = 32.0;     ///< ... doubled while the solution stays put, up to this
     double max_residual = 0.1;        ///< RMS residual / RMS specific force that still counts
     double max_distance_m = 1.0;      ///< a centre farther from its sensor is not believed, m
     double min_conditioning = 1e-3;   ///< identifiability: smallest / largest normal-matrix eigenvalue
@@ -50,8 +51,9 @@ public:
     void reset();
     /// One step (sensor frames): rates, angular accelerations and specific forces of both
     /// segments. Returns true when a new solution was computed in this call.
+    /// may_solve false: collect only (the caller spreads several estimators' solves over its steps).
     bool add(std::int64_t t_us, const Vec3& w_p, const Vec3& dw_p, const Vec3& f_p, const Vec3& w_c, const Vec3& dw_c,
-             const Vec3& f_c);
+             const Vec3& f_c, bool may_solve = true);
 
     [[nodiscard]] bool ready() const { return ready_; }
     [[nodiscard]] const Vec3& r_parent() const { return r_p_; }
@@ -74,6 +76,8 @@ private:
     bool ready_ = false;
     Vec3 r_p_ = Vec3::Zero(), r_c_ = Vec3::Zero();
     double relative_residual_ = 0.0;
+    double interval_s_;
+    bool was_solved_ = false;
 };
 
 /// Γ = [ω̇]× + [ω]×²: f at a point r from the sensor is f + Γ r.
