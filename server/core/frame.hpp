@@ -73,6 +73,7 @@ struct SegmentPose {
     float field_norm_ut = 0.0f;         ///< the field the filter sees (0: unknown)
     float field_dip_rad = 0.0f;         ///< its dip, positive down
     std::array<float, 3> rate_rad_s{};  ///< bias-corrected rate, sensor frame
+    std::array<float, 3> accel_m_s2{};  ///< specific force, sensor frame (for the joint centres' constraint)
 };
 
 /// One subject at one SYNC instant, all segments, as the assembler emits it.

@@ -109,7 +109,6 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
             j.centre = std::make_unique<JointPositionEstimator>(cp);
         }
         if (d.type == JointType::kHinge && (d.estimate_axes || !d.axes_known)) {
-            j.def.estimate_axes = true;
             j.axis = std::make_unique<HingeAxisEstimator>(params_.axis);
         }
         joint_of_child_[static_cast<std::size_t>(d.child)] = static_cast<int>(joints_.size()) - 1;
@@ -161,8 +160,25 @@ void ChainEstimator::set_axes(std::size_t joint, const Vec3& axis_parent, const 
     ++j.stats.restarts;
 }
 
+void ChainEstimator::set_centre(std::size_t joint, const Vec3& r_parent, const Vec3& r_child) {
+    Joint& j = joints_[joint];
+    j.def.r_parent = r_parent;
+    j.def.r_child = r_child;
+    j.def.centre_known = true;
+}
+
+void ChainEstimator::anchor(std::size_t joint, double sigma_rad) {
+    if (last_us_ < 0) return;  // nothing composed yet: no heading to keep
+    Joint& j = joints_[joint];
+    j.filter.init(
+        math::wrap_pi(psi_[static_cast<std::size_t>(j.def.child)] - psi_[static_cast<std::size_t>(j.def.parent)]),
+        sigma_rad);
+    j.refused_since_us = -1;
+}
+
 void ChainEstimator::learn_axes(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c) {
-    if (!j.axis) return;
+    // Axes given (a calibration, a chain file) stay unless the motion was asked to replace them.
+    if (!j.axis || (j.def.axes_known && !j.def.estimate_axes && !j.axes_estimated)) return;
     const bool solved = j.axis->add(t_us, p.gyro_rad_s, c.gyro_rad_s, p.q6, c.q6, !solved_this_step_);
     solved_this_step_ = solved_this_step_ || solved;
     if (!solved || !j.axis->ready()) return;
@@ -248,10 +264,14 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
             if (j.refused_since_us < 0) j.refused_since_us = t_us;
         }
     };
-    // Every joint type: the joint centre is one point of both segments, so its specific force
-    // is one earth vector seen from both 6D frames (one step late: it needs ω̇). A single
+    // A joint without axes (a ball joint): the joint centre is one point of both segments, so
+    // its specific force is one earth vector seen from both 6D frames (one step late: it needs
+    // ω̇). It depends on the centre's place and on ω̇ at the sample rate, so it is the weakest
+    // constraint: used only where neither axes nor agreeing fields (auto) see δ. A single
     // sample of it is noisy, so a start from it is given at least 20°.
-    if (Vec3 fa, fb; centre_pair(j, t_us, p, c, fa, fb)) {
+    const bool mag_recent = j.last_mag_us >= 0 && static_cast<double>(t_us - j.last_mag_us) * 1e-6 < params_.hold_s;
+    const bool centre_needed = (d.type == JointType::kBall || !d.axes_known) && !mag_recent;
+    if (Vec3 fa, fb; centre_pair(j, t_us, p, c, fa, fb) && centre_needed) {
         const double h = 0.5 * (std::hypot(fa.x(), fa.y()) + std::hypot(fb.x(), fb.y()));
         take(pair_measurement(fa, fb, f.delta_rad(), params_.sigma_acc_m_s2 + params_.sigma_acc_rel * h,
                               params_.min_acc_horizontal_m_s2),

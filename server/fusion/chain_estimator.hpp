@@ -171,6 +171,16 @@ public:
     /// Gives joint j its axes (sensor frames, normalised here); the estimate keeps its δ.
     void set_axes(std::size_t joint, const Vec3& axis_parent, const Vec3& axis_child);
 
+    /// Gives joint j its centre in both sensor frames (a body model's guess); a centre learned
+    /// from the motion replaces it once ready (JointDef::estimate_centre).
+    void set_centre(std::size_t joint, const Vec3& r_parent, const Vec3& r_child);
+
+    /// Starts joint j's δ from the relative heading the last update() composed (a calibration
+    /// taken from that output fixed the mountings against it, so the constraints built from
+    /// those mountings agree with it), with standard deviation sigma_rad. No-op before the
+    /// first update().
+    void anchor(std::size_t joint, double sigma_rad);
+
     /// One step at t_us (not decreasing). in and out have segment_count entries.
     void update(std::int64_t t_us, std::span<const SegmentInput> in, std::span<SegmentOutput> out);
 

@@ -27,8 +27,9 @@ std::vector<JointDef> with_take_axes(std::size_t ns, std::span<const JointDef> j
         for (std::size_t k = 0; k < rows; ++k) {
             const SegmentInput& a = in[k * ns + ip];
             const SegmentInput& b = in[k * ns + ic];
-            est.add(t_us[k], a.gyro_rad_s, b.gyro_rad_s, a.q6, b.q6);
+            if (a.fresh && b.fresh) est.add(t_us[k], a.gyro_rad_s, b.gyro_rad_s, a.q6, b.q6);
         }
+        if (est.samples() < p.min_samples) continue;  // too little motion to trust: the passes keep trying
         est.solve();
         if (!est.ready()) continue;  // the passes keep trying on their own
         d.axis_parent = est.axis_parent();

@@ -35,7 +35,8 @@ struct ChainSmoothResult {
     std::vector<JointStatus> joints;  ///< the forward pass's status at the end (counts, axes)
 };
 
-/// in: rows × segment_count inputs, row-major, every one fresh; t_us: rows instants,
+/// in: rows × segment_count inputs, row-major (a segment without a sample at an instant: its
+/// previous input, fresh = false); t_us: rows instants,
 /// increasing. Requires ChainEstimator::check(segment_count, joints) to pass.
 ChainSmoothResult smooth_chain(std::size_t segment_count, std::span<const JointDef> joints, const ChainParams& params,
                                std::span<const std::int64_t> t_us, std::span<const SegmentInput> in);

@@ -40,6 +40,8 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
     }
     const math::Vec3 rate = math::to_vec3(s.gyro_rad_s) - filter_->gyro_bias_rad_s();
     out.rate_rad_s = {static_cast<float>(rate.x()), static_cast<float>(rate.y()), static_cast<float>(rate.z())};
+    out.accel_m_s2 = {static_cast<float>(s.accel_m_s2[0]), static_cast<float>(s.accel_m_s2[1]),
+                      static_cast<float>(s.accel_m_s2[2])};
     return true;
 }
 

@@ -82,19 +82,32 @@ std::uint8_t heading_flags(fusion::HeadingSource source) {
 }
 
 BodyChain::BodyChain(const BodyModel& model, const FusionOptions& options)
-    : joints_(body_joints(model)),
+    : model_(model),
+      joints_(body_joints(model)),
       estimator_(model.size(), defs_of(joints_, options.estimate_axes), options.chain),
       in_(model.size()),
       out_(model.size()) {}
 
-void BodyChain::on_calibration(const Calibration& calibration) {
+void BodyChain::on_calibration(const Calibration& calibration, bool anchor) {
     for (std::size_t j = 0; j < joints_.size(); ++j) {
         const BodyJoint& b = joints_[j];
-        if (b.def.type == fusion::JointType::kBall) continue;
         const auto p = static_cast<std::size_t>(b.def.parent), c = static_cast<std::size_t>(b.def.child);
         if (!calibration.calibrated[p] || !calibration.calibrated[c]) continue;
+        // The centre as the model puts it, each sensor at its segment's middle (as the
+        // simulator places them; a real mounting elsewhere is corrected once the motion shows it).
+        const auto& sp = model_.segments[p];
+        const auto& sc = model_.segments[c];
+        estimator_.set_centre(j, math::rotate(calibration.q_sensor_segment[p], Vec3(sc.offset_m - 0.5 * sp.end_m)),
+                              math::rotate(calibration.q_sensor_segment[c], Vec3(-0.5 * sc.end_m)));
+        if (b.def.type == fusion::JointType::kBall) {
+            if (anchor) estimator_.anchor(j, 10.0 * kDeg);
+            continue;
+        }
         estimator_.set_axes(j, math::rotate(calibration.q_sensor_segment[p], b.axis_parent_segment),
                             math::rotate(calibration.q_sensor_segment[c], b.axis_child_segment));
+        // The mountings were taken from what the chain showed: start δ there, so the
+        // constraints refine it rather than pick one of a 2-DoF joint's two roots anew.
+        if (anchor) estimator_.anchor(j, 10.0 * kDeg);
     }
 }
 
@@ -114,6 +127,7 @@ void BodyChain::apply(const SubjectFrame& frame, std::span<Quat> q_earth_sensor,
         x.field_norm_ut = s.field_norm_ut;
         x.field_dip_rad = s.field_dip_rad;
         x.gyro_rad_s = Vec3(s.rate_rad_s[0], s.rate_rad_s[1], s.rate_rad_s[2]);
+        x.accel_m_s2 = Vec3(s.accel_m_s2[0], s.accel_m_s2[1], s.accel_m_s2[2]);
         x.q6 = x.mag_available ? (rot_z(-x.mag_heading_rad) * q_earth_sensor[i]).normalized() : q_earth_sensor[i];
     }
     estimator_.update(frame.sample_us, in_, out_);

@@ -62,8 +62,10 @@ public:
     BodyChain(const BodyModel& model, const FusionOptions& options);
 
     /// A calibration was installed: the joints' axes in the sensor frames from its mountings
-    /// (segments it did not calibrate keep theirs unknown).
-    void on_calibration(const Calibration& calibration);
+    /// (segments it did not calibrate keep theirs unknown). anchor: the calibration was taken
+    /// from this chain's own output a moment ago, so each joint's δ starts from the relative
+    /// heading shown then (ChainEstimator::anchor); false for one loaded or made elsewhere.
+    void on_calibration(const Calibration& calibration, bool anchor);
 
     /// One frame: replaces q_earth_sensor[i] (the filters' own, filled by the caller) with the
     /// chain's and writes each segment's heading flags. Segments flagged stale or never seen
@@ -79,6 +81,7 @@ public:
     [[nodiscard]] const std::vector<BodyJoint>& joints() const { return joints_; }
 
 private:
+    BodyModel model_;
     std::vector<BodyJoint> joints_;
     fusion::ChainEstimator estimator_;
     std::vector<fusion::SegmentInput> in_;

@@ -67,7 +67,7 @@ std::size_t PoseSolver::load_calibrations() {
         StoredCalibration stored = store_->load(model_, id);
         if (stored.calibration) {
             subjects_[i].calibration = *stored.calibration;
-            if (subjects_[i].chain) subjects_[i].chain->on_calibration(*stored.calibration);
+            if (subjects_[i].chain) subjects_[i].chain->on_calibration(*stored.calibration, false);
             subjects_[i].root.emplace(model_);
             ++loaded;
             log(LogLevel::kInfo, subject_text(id) + "calibration loaded from " + stored.where);
@@ -101,9 +101,9 @@ PoseSolver::Subject* PoseSolver::find(std::uint32_t subject_id) noexcept {
     return i < 0 ? nullptr : &subjects_[static_cast<std::size_t>(i)];
 }
 
-void PoseSolver::install(Subject& s, const Calibration& calibration) {
+void PoseSolver::install(Subject& s, const Calibration& calibration, bool made_here) {
     s.calibration = calibration;
-    if (s.chain) s.chain->on_calibration(calibration);
+    if (s.chain) s.chain->on_calibration(calibration, made_here);
     s.smoother.reset();
     s.root.emplace(model_);
     s.root->reset(root_position(model_));
@@ -118,7 +118,7 @@ void PoseSolver::apply_offer(Offer& offer) {
             subject_text(offer.subject_id) + "calibration from " + offer.where + " not applied: calibrated here since");
         return;
     }
-    install(s, offer.calibration);
+    install(s, offer.calibration, false);
     s.auto_pending = false;
     if (s.collecting && s.auto_run) s.collecting = false;  // calibrated now: no automatic one
     calibrations_shared_.add();
@@ -172,7 +172,7 @@ void PoseSolver::collect(Subject& s, std::uint32_t subject_id, const SubjectFram
         log(LogLevel::kInfo, subject_text(subject_id) + "calibrated automatically from its first still period (" +
                                  std::string(to_string(s.pose)) + " assumed); send a calibrate request to redo it");
     }
-    install(s, *result.calibration);
+    install(s, *result.calibration, true);
     ++s.calibrated_here;
     calibrations_ok_.add();
     log(LogLevel::kInfo, subject_text(subject_id) + "calibrated (" + std::string(to_string(s.pose)) + ")");
@@ -193,7 +193,7 @@ void PoseSolver::refine(Subject& s, std::uint32_t subject_id, std::int64_t sampl
     // The pose does not jump back to a T-pose: only the mountings turn, so the smoothing and
     // the root's travel carry on.
     s.calibration = refined;
-    s.chain->on_calibration(refined);
+    s.chain->on_calibration(refined, true);
     calibrations_refined_.add();
     log(LogLevel::kInfo, subject_text(subject_id) + "mountings refined from the hinge axes learned from the motion");
     if (!store_) return;

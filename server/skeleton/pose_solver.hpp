@@ -142,7 +142,8 @@ private:
     void take_requests();
     void apply_offer(Offer& offer);
     /// Installs a calibration and starts the subject's smoothing and root travel afresh.
-    void install(Subject& s, const Calibration& calibration);
+    /// made_here: taken from this solver's frames (the chain keeps the headings it showed).
+    void install(Subject& s, const Calibration& calibration, bool made_here);
     void collect(Subject& s, std::uint32_t subject_id, const SubjectFrame& frame,
                  const std::array<Quat, kMaxSegments>& q_earth_sensor);
     /// Once a second of sample time: mountings turned to the hinge axes the chain learned.

@@ -47,7 +47,7 @@ TEST(BodyChain, AxesInTheSensorsFromTheMountings) {
         cal.calibrated[i] = true;
         cal.q_sensor_segment[i] = axis_angle(Vec3(0.2, 0.5, 0.8), 0.3 * static_cast<double>(i));
     }
-    chain.on_calibration(cal);
+    chain.on_calibration(cal, false);
     const int calf = m.index_of(seg::kLeftCalf), thigh = m.index_of(seg::kLeftThigh);
     for (std::size_t j = 0; j < chain.joints().size(); ++j) {
         if (chain.joints()[j].def.child != calf) continue;
@@ -80,7 +80,7 @@ TEST(BodyChain, ALearnedKneeAxisCorrectsATurnedMounting) {
     cal.calibrated[thigh] = cal.calibrated[calf] = true;
     cal.q_sensor_segment[thigh] = mount_thigh;
     cal.q_sensor_segment[calf] = (mount_calf * axis_angle(Vec3::UnitZ(), -25.0 * kDeg)).normalized();
-    chain.on_calibration(cal);
+    chain.on_calibration(cal, false);
 
     // The thigh swings and turns; the knee flexes about the segments' y.
     const double dt = 0.01;
@@ -117,7 +117,7 @@ TEST(BodyChain, ALearnedKneeAxisCorrectsATurnedMounting) {
     ASSERT_TRUE(chain.refine_calibration(m, cal));
     EXPECT_LT(math::angle_rad(cal.q_sensor_segment[calf] * mount_calf.conjugate()) / kDeg, 1.0);
     EXPECT_LT(math::angle_rad(cal.q_sensor_segment[thigh] * mount_thigh.conjugate()) / kDeg, 1.0);
-    chain.on_calibration(cal);
+    chain.on_calibration(cal, false);
     EXPECT_FALSE(chain.refine_calibration(m, cal));  // nothing left to turn
 }
 
