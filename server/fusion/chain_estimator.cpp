@@ -103,7 +103,9 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
             j.def.axis_parent.normalize();
             j.def.axis_child.normalize();
         }
-        if (!d.centre_known && d.estimate_centre) {
+        // Only a joint the centre constraint may serve (no axes) learns its centre: the
+        // estimate costs more than all the other constraints together.
+        if (!d.centre_known && d.estimate_centre && (d.type == JointType::kBall || !d.axes_known)) {
             JointPositionParams cp = params_.centre;
             if (d.type == JointType::kHinge) cp.free_directions = 1;  // any point of the axis is a centre
             j.centre = std::make_unique<JointPositionEstimator>(cp);
@@ -216,9 +218,14 @@ bool ChainEstimator::centre_pair(Joint& j, std::int64_t t_us, const SegmentInput
         const Vec3 dw_c = (c.gyro_rad_s - older.c.gyro_rad_s) / span_s;
         const SegmentInput& pp = prev.p;
         const SegmentInput& pc = prev.c;
-        if (j.centre &&
-            j.centre->add(prev.t_us, pp.gyro_rad_s, dw_p, pp.accel_m_s2, pc.gyro_rad_s, dw_c, pc.accel_m_s2) &&
-            j.centre->ready()) {
+        const bool solved = j.centre && j.centre->add(prev.t_us, pp.gyro_rad_s, dw_p, pp.accel_m_s2, pc.gyro_rad_s,
+                                                      dw_c, pc.accel_m_s2, !solved_this_step_);
+        solved_this_step_ = solved_this_step_ || solved;
+        // A learned centre replaces a given one (the body model's guess) only where it
+        // explains the motion clearly better: a sensor mounted off the segment's middle.
+        if (solved && j.centre->ready() &&
+            (!j.def.centre_known || j.centre->cost(j.centre->r_parent(), j.centre->r_child()) <
+                                        0.7 * j.centre->cost(j.def.r_parent, j.def.r_child))) {
             j.def.r_parent = j.centre->r_parent();
             j.def.r_child = j.centre->r_child();
             j.def.centre_known = true;
@@ -270,8 +277,9 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
     // constraint: used only where neither axes nor agreeing fields (auto) see δ. A single
     // sample of it is noisy, so a start from it is given at least 20°.
     const bool mag_recent = j.last_mag_us >= 0 && static_cast<double>(t_us - j.last_mag_us) * 1e-6 < params_.hold_s;
-    const bool centre_needed = (d.type == JointType::kBall || !d.axes_known) && !mag_recent;
-    if (Vec3 fa, fb; centre_pair(j, t_us, p, c, fa, fb) && centre_needed) {
+    const bool axes_free = d.type == JointType::kBall || !d.axes_known;
+    if (!axes_free) j.past[1].t_us = -1;  // not followed: a later centre pair starts afresh
+    if (Vec3 fa, fb; axes_free && centre_pair(j, t_us, p, c, fa, fb) && !mag_recent) {
         const double h = 0.5 * (std::hypot(fa.x(), fa.y()) + std::hypot(fb.x(), fb.y()));
         take(pair_measurement(fa, fb, f.delta_rad(), params_.sigma_acc_m_s2 + params_.sigma_acc_rel * h,
                               params_.min_acc_horizontal_m_s2),

@@ -39,9 +39,9 @@ using math::Vec3;
 
 struct HingeAxisParams {
     double min_rate_rad_s = 0.5;     ///< a sample counts when a segment turns faster, rad/s
-    double sample_spacing_s = 0.025; ///< at most one sample per this interval, s
+    double sample_spacing_s = 0.04;  ///< at most one sample per this interval, s
     std::size_t capacity = 600;      ///< samples kept (the most recent)
-    std::size_t min_samples = 60;    ///< informative samples before the first solution
+    std::size_t min_samples = 150;   ///< informative samples before the first solution
     double solve_interval_s = 2.0;   ///< sample time between solutions, s ...
     double max_interval_s = 32.0;    ///< ... doubled while the solution stays put, up to this
     double max_residual = 0.15;      ///< RMS residual / RMS rate that still counts as a hinge

@@ -55,6 +55,16 @@ bool JointPositionEstimator::add(std::int64_t t_us, const Vec3& w_p, const Vec3&
     return true;
 }
 
+double JointPositionEstimator::cost(const Vec3& r_parent, const Vec3& r_child) const {
+    double c = 0.0;
+    for (std::size_t k = 0; k < count_; ++k) {
+        const Sample& s = ring_[k];
+        const double e = (s.f_p + s.g_p * r_parent).norm() - (s.f_c + s.g_c * r_child).norm();
+        c += e * e;
+    }
+    return c;
+}
+
 bool JointPositionEstimator::solve() {
     if (count_ < 7) return false;
     Vec6 x;
@@ -94,7 +104,7 @@ bool JointPositionEstimator::solve() {
     double cost = cost_of(x, &jtj, &jte);
     double lambda = 1e-3 * jtj.trace() / 6.0 + 1e-12;
     // From scratch 15 iterations; from a previous solution (the usual case: the centre is a
-    // constant) 4 are enough and keep a solve under a millisecond.
+    // constant) 3 are enough and keep a solve under a millisecond.
     const int iterations = was_solved_ ? 4 : 15;
     was_solved_ = true;
     for (int it = 0; it < iterations; ++it) {

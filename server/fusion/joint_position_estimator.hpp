@@ -63,6 +63,10 @@ public:
 
     bool solve();
 
+    /// Σ e² of the stored samples for a candidate centre (to compare a given one with the
+    /// learned one). O(samples).
+    [[nodiscard]] double cost(const Vec3& r_parent, const Vec3& r_child) const;
+
 private:
     struct Sample {
         Eigen::Matrix3d g_p, g_c;  // Γ of each sensor

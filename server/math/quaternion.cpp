@@ -99,6 +99,8 @@ double error_inclination_rad(const Quat& q_err) {
 }
 
 double wrap_pi(double a_rad) {
+    // Most callers pass an angle already in range or one turn off: no fmod for those.
+    if (a_rad > -std::numbers::pi && a_rad <= std::numbers::pi) return a_rad;
     constexpr double two_pi = 2.0 * std::numbers::pi;
     double r = std::fmod(a_rad + std::numbers::pi, two_pi);
     if (r <= 0.0) r += two_pi;
