@@ -25,6 +25,16 @@ constexpr double kAccClipScales = 3.0;
 constexpr double kAccClipMinM_s2 = 0.5;
 constexpr double kAccDevMedianTauS = 1.0;
 constexpr double kAccDevMedianMinM_s2 = kAccClipMinM_s2 / kAccClipScales;
+// Heading guard and vertical bias (header, "Vertical gyro bias"): the guard follows a heading
+// disagreement that moves by no more than the heading correction and kDriftSigmas standard
+// deviations of the vertical bias (as the rest measurements know it) can move it; the field's
+// departures from its reference are low-passed over kFieldDevTauS (what a heading correction
+// over tau_mag_s averages out faster does not count) before their variance weighs the heading's
+// measurement of the bias.
+constexpr double kDriftSigmas = 2.0;
+constexpr double kFieldDevTauS = 2.0;
+// (rad/s)² to the bias filter's units, (0.01 °/s)².
+constexpr double kRadS2ToBiasUnits = (100.0 / kDeg) * (100.0 / kDeg);
 
 // Butterworth cut-off chosen so the non-oscillating part of the step response has time
 // constant tau (as in VQF). tau <= 0 means "no filtering".
@@ -67,6 +77,18 @@ void low_pass(LowPassState<N>& s, const double* x, const LowPassCoeffs& c, doubl
         z[1] = c.b[2] * x[i] - c.a[1] * y;
         s.out[i] = y;
     }
+}
+
+// Heading of the horizontal field h (6D earth frame) less delta, measured as the cross product
+// with the expected direction over the mean horizontal field strength h_ref. Unlike the angle of
+// each reading, this is unbiased under noise as large as the field itself (the per-reading angle
+// wraps around and pulls the average towards zero).
+double heading_disagreement(const math::Vec3& h, double delta_rad, double h_ref) {
+    const double u_x = std::sin(delta_rad), u_y = std::cos(delta_rad);
+    const double dot = h.x() * u_x + h.y() * u_y;
+    return dot > 0.0 && h_ref > 0.0
+               ? std::clamp((h.x() * u_y - h.y() * u_x) / h_ref, -0.5 * std::numbers::pi, 0.5 * std::numbers::pi)
+               : math::wrap_pi(std::atan2(h.x(), h.y()) - delta_rad);
 }
 
 math::Vec3 out3(const LowPassState<3>& s) {
@@ -153,6 +175,7 @@ void MocapFilter::reset() {
     state_.clock = SampleClock(params_.max_step_s);
     const double p0 = std::pow(params_.bias_sigma_init_deg_s * 100.0, 2);
     state_.bias_p = p0 * math::Mat3::Identity();
+    state_.vertical_bias_var = std::pow(params_.bias_clip_deg_s * 100.0, 2);
     state_.tau_acc_eff_s = params_.tau_acc_s;
     state_.tau_mag_eff_s = params_.tau_mag_s;
 }
@@ -202,10 +225,12 @@ void MocapFilter::compute_coeffs(double ts_s) {
     acc_dev_median_step_ = std::exp(ts_s / kAccDevMedianTauS);
     // Bias Kalman filter in units of 0.01 °/s, which keeps the numbers near 1.
     bias_p0_ = std::pow(p.bias_sigma_init_deg_s * 100.0, 2);
+    vertical_bias_var0_ = std::pow(p.bias_clip_deg_s * 100.0, 2);
     bias_v_ = std::pow(0.1 * p.bias_sigma_init_deg_s * 100.0, 2) * ts_s / p.bias_forgetting_time_s;
     const double p_motion = std::pow(p.bias_sigma_motion_deg_s * 100.0, 2);
     bias_motion_w_ = p_motion * p_motion / bias_v_ + p_motion;
     bias_vertical_w_ = bias_motion_w_ / std::max(p.bias_vertical_forgetting, 1e-10);
+    k_field_dev_ = gain_from_tau(kFieldDevTauS, ts_s);
     const double p_rest = std::pow(p.bias_sigma_rest_deg_s * 100.0, 2);
     bias_rest_w_ = p_rest * p_rest / bias_v_ + p_rest;
 }
@@ -351,6 +376,7 @@ void MocapFilter::update_bias(const math::Vec3& acc_e) {
     for (int i = 0; i < 3; ++i) {
         if (s.bias_p(i, i) < bias_p0_) s.bias_p(i, i) += bias_v_;
     }
+    if (s.vertical_bias_var < vertical_bias_var0_) s.vertical_bias_var += bias_v_;
 
     math::Vec3 e;
     math::Mat3 h;
@@ -359,6 +385,7 @@ void MocapFilter::update_bias(const math::Vec3& acc_e) {
         e = out3(s.rest_gyro_lp) - s.bias_rad_s;
         h = math::Mat3::Identity();
         w = math::Vec3::Constant(bias_rest_w_);
+        s.vertical_bias_var = 1.0 / (1.0 / s.vertical_bias_var + 1.0 / bias_rest_w_);
     } else if (p.motion_bias && s.bias_r_lp.running) {
         // The accelerometer's correction this step is the rotation vector (acc_e.y, -acc_e.x)
         // in earth axes; in steady state it cancels R·(bias error)·ts. While the low-passes
@@ -427,6 +454,15 @@ void MocapFilter::update_mag_guard(const math::Vec3& mag_e) {
             s.mag_disturbed = false;
             s.mag_ref_norm += k_mag_ref_ * (s.mag_norm - s.mag_ref_norm);
             s.mag_ref_dip_rad += k_mag_ref_ * (s.mag_dip_rad - s.mag_ref_dip_rad);
+            // How much an accepted field departs from its reference in norm and dip, low-passed:
+            // a field that varies from place to place (or a residual of the sensor's calibration)
+            // varies in heading by about as much, per axis (update_heading_bias).
+            const double dn = s.mag_norm - s.mag_ref_norm;
+            const double dd = s.mag_norm * (s.mag_dip_rad - s.mag_ref_dip_rad);
+            s.mag_dev_norm_ut += k_field_dev_ * (dn - s.mag_dev_norm_ut);
+            s.mag_dev_dip_ut += k_field_dev_ * (dd - s.mag_dev_dip_ut);
+            const double v = 0.5 * (s.mag_dev_norm_ut * s.mag_dev_norm_ut + s.mag_dev_dip_ut * s.mag_dev_dip_ut);
+            s.mag_var_ut2 += k_mag_ref_ * (v - s.mag_var_ut2);
         }
     } else {
         if (!mag_rejected() && s.mag_ref_norm > 0.0) ++s.mag_disturbances;
@@ -459,9 +495,8 @@ void MocapFilter::accept_candidate_field() {
     s.mag_ref_dip_rad = s.mag_candidate_dip_rad;
     s.mag_disturbed = false;
     s.mag_heading_disturbed = false;
-    // The new field may point elsewhere: let the heading converge to it before the
-    // disagreement test applies again.
-    s.mag_heading_converging = true;
+    // The new field may point elsewhere: the disagreement test follows the heading converging to it.
+    s.mag_dis_drift_rad = s.mag_dis_lp_rad;
     s.mag_undisturbed_time_s = params_.mag_min_undisturbed_time_s;
     ++s.mag_fields_accepted;
 }
@@ -482,23 +517,82 @@ void MocapFilter::update_heading_guard() {
     const double lp_sigma = std::sqrt(s.mag_dis_var * 0.5 * s.ts_s / p.mag_heading_tau_s);
     const double th_cfg = p.mag_heading_th_deg * kDeg;
     const double th = std::max(th_cfg, p.mag_noise_margin * lp_sigma);
-    if (s.mag_guard_blind || th > 2.0 * th_cfg) {  // noise hides a disturbance of that size
+    if (s.mag_guard_blind || th > 2.0 * th_cfg || s.k_mag_init != 0.0) {
+        // Noise hides a disturbance of that size, or the heading still converges from the first readings.
         s.mag_heading_disturbed = false;
+        s.mag_dis_drift_rad = s.mag_dis_lp_rad;
         return;
     }
-    const double dis = std::abs(s.mag_dis_lp_rad);
-    if (s.k_mag_init != 0.0) return;  // still converging from the first readings
-    if (s.mag_heading_converging) {   // following a newly accepted field
-        if (dis < 0.5 * th) s.mag_heading_converging = false;
-        return;
-    }
-    if (!s.mag_heading_disturbed && dis > th) {
+    // A disturbance is a jump of the disagreement. mag_dis_drift_rad follows it as far as the
+    // heading correction (which pulls it towards zero at 1 / tau_mag_s while the field is used)
+    // and a drift of the vertical bias within kDriftSigmas of what the rest measurements leave
+    // unknown can move it, and holds it while the field is flagged: a disagreement that grows
+    // steadily is an unlearned bias (update_heading_bias learns it meanwhile), and the heading
+    // converging to a newly accepted field is followed; a jump away from it is a disturbance,
+    // which ends when the disagreement is back near the level held. With the bias known from
+    // rest, nothing moves but the correction's pull: the test of the level it always was.
+    const double jump = math::wrap_pi(s.mag_dis_lp_rad - s.mag_dis_drift_rad);
+    if (!s.mag_heading_disturbed && std::abs(jump) > th) {
         if (!mag_rejected()) ++s.mag_disturbances;
         s.mag_heading_disturbed = true;
         s.mag_candidate_time_s = 0.0;  // a new field must prove itself from now on
-    } else if (s.mag_heading_disturbed && dis < 0.5 * th) {
+    } else if (s.mag_heading_disturbed && std::abs(jump) < 0.5 * th) {
         s.mag_heading_disturbed = false;
     }
+    if (s.mag_heading_disturbed) return;
+    const double drift = kDriftSigmas * std::sqrt(s.vertical_bias_var) * 0.01 * kDeg;
+    const bool used = !mag_rejected() || s.mag_reject_time_s > p.mag_max_rejection_time_s;
+    const double pull = used ? s.mag_dis_drift_rad / s.tau_mag_eff_s : 0.0;
+    s.mag_dis_drift_rad =
+        math::wrap_pi(s.mag_dis_drift_rad + std::clamp(jump, (-drift - pull) * s.ts_s, (drift - pull) * s.ts_s));
+}
+
+// Vertical gyro bias from the heading corrections. The accelerometer's corrections measure the
+// bias about the horizontal axes only; about the vertical, an unlearned bias turns the 6D frame
+// at r = (R·(b − b̂))_z, the field seen in it turns at −r, and a first-order heading correction
+// (gain k per sample) lags it by r·tau_mag_s for good: a constant disagreement that the heading
+// guard took for a disturbance. A loop like the heading correction's, run on the field while it
+// is trusted and restarted at each rejection (so a disturbance it did not see is not in it),
+// makes the same measurement as the accelerometer's corrections: its correction rate
+// c = k·d / ts obeys c_n = (1 − k)·c_{n−1} − k·r_n, so with m and n the same low-pass (started
+// at zero with the loop) of R's vertical row and of (R·b̂)_z, c = n − m·b exactly, and
+// e = n − c − m·b̂ = m·(b − b̂) is a Kalman measurement of the bias with the row m.
+void MocapFilter::update_heading_bias(const math::Vec3& h, const math::Mat3& r_e6_s, bool trusted) {
+    MocapFilterState& s = state_;
+    const double k = k_mag_;
+    if (!trusted || s.ts_s == 0.0 || k <= 0.0 || h.squaredNorm() == 0.0) {
+        s.hb_running = false;
+        return;
+    }
+    const math::Vec3 r_z = r_e6_s.row(2).transpose();
+    if (!s.hb_running || s.hb_k != k) {
+        s.hb_running = true;
+        s.hb_k = k;
+        s.hb_delta_rad = std::atan2(h.x(), h.y());
+        s.hb_r_lp.setZero();
+        s.hb_rb_lp = 0.0;
+        return;
+    }
+    s.hb_r_lp += k * (r_z - s.hb_r_lp);
+    s.hb_rb_lp += k * (r_z.dot(s.bias_rad_s) - s.hb_rb_lp);
+    const double d = math::wrap_pi(std::atan2(h.x(), h.y()) - s.hb_delta_rad);
+    s.hb_delta_rad = math::wrap_pi(s.hb_delta_rad + k * d);
+    const double clip = params_.bias_clip_deg_s * kDeg;
+    const double e = std::clamp(s.hb_rb_lp - k * d / s.ts_s - s.hb_r_lp.dot(s.bias_rad_s), -clip, clip);
+    // The field's own heading error (σ_ψ, from how much its norm and dip vary, update_mag_guard)
+    // moves this loop's correction rate by about σ_ψ / tau_mag_s for about tau_mag_s: one
+    // independent value per tau_mag_s, a variance of 2·σ_ψ² / (tau_mag_s·ts) per sample. In a
+    // clean field the measurement weighs what the accelerometer's corrections weigh
+    // (bias_sigma_motion_deg_s); where the field varies from place to place, far less.
+    const double h2 = h.squaredNorm();
+    const double var_psi = s.mag_var_ut2 / h2;
+    const double w = bias_motion_w_ + 2.0 * var_psi / (s.tau_mag_eff_s * s.ts_s) * kRadS2ToBiasUnits;
+    const math::Vec3 ph = s.bias_p * s.hb_r_lp;
+    const math::Vec3 gain = ph / (s.hb_r_lp.dot(ph) + w);
+    s.bias_rad_s += gain * e;
+    s.bias_p -= gain * ph.transpose();
+    s.bias_rad_s = s.bias_rad_s.cwiseMax(-clip).cwiseMin(clip);
+    ++s.heading_bias_samples;
 }
 
 // A magnet carried by the sensor adds a constant offset b to every reading in the sensor
@@ -563,17 +657,8 @@ void MocapFilter::update_mag(const math::Vec3& mag_raw, const math::Vec3& rate, 
     const math::Vec3 mag_e = math::rotate(q6, mag);
     if (p.mag_guard) update_mag_guard(mag_e);
 
-    // Heading disagreement from the horizontal component only, measured as the cross
-    // product with the expected direction over the mean horizontal field strength. Unlike
-    // the angle of each reading, this is unbiased under noise as large as the field itself
-    // (the per-reading angle wraps around and pulls the average towards zero).
     const math::Vec3 h(mag_e.x(), mag_e.y(), 0.0);
-    const double u_x = std::sin(s.delta_rad), u_y = std::cos(s.delta_rad);
-    const double h_ref = s.mag_horizontal_lp.norm();
-    const double dot = h.x() * u_x + h.y() * u_y;
-    s.last_mag_disagreement_rad = dot > 0.0 && h_ref > 0.0 ? std::clamp((h.x() * u_y - h.y() * u_x) / h_ref,
-                                                                        -0.5 * std::numbers::pi, 0.5 * std::numbers::pi)
-                                                           : math::wrap_pi(std::atan2(h.x(), h.y()) - s.delta_rad);
+    s.last_mag_disagreement_rad = heading_disagreement(h, s.delta_rad, s.mag_horizontal_lp.norm());
     if (p.mag_guard) update_heading_guard();
     double k = k_mag_;
     if (p.mag_guard && s.ts_s > 0.0) {
@@ -587,6 +672,10 @@ void MocapFilter::update_mag(const math::Vec3& mag_raw, const math::Vec3& rate, 
         } else {
             s.mag_reject_time_s = std::max(s.mag_reject_time_s - p.mag_rejection_factor * s.ts_s, 0.0);
         }
+    }
+    if (p.motion_bias) {
+        const bool trusted = k == k_mag_ && !(p.mag_guard && (s.mag_guard_blind || s.mag_ref_norm == 0.0));
+        update_heading_bias(h, q6.toRotationMatrix(), trusted);
     }
     // Fast start: for the N-th reading the heading is that of the vector mean of the first
     // N horizontal fields, until 1/N falls below the steady-state gain.

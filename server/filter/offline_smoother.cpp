@@ -180,7 +180,8 @@ OfflineResult OfflineSmoother::smooth(OrientationFilter& filter, std::span<const
             // wander by half of that, turning a segment against its neighbours.
             const math::Quat d = fwd.q[i] * result.orientation[i].conjugate();
             const double h = std::atan2(d.z(), d.w());  // half the turn about the vertical
-            result.orientation[i] = (math::Quat(std::cos(h), 0.0, 0.0, std::sin(h)) * result.orientation[i]).normalized();
+            result.orientation[i] =
+                (math::Quat(std::cos(h), 0.0, 0.0, std::sin(h)) * result.orientation[i]).normalized();
         }
         result.mag_used[i] = static_cast<char>(fwd.mag_used[i] || bwd.mag_used[i]);
     }
