@@ -148,6 +148,7 @@ void ChainEstimator::reset() {
         j.axes_estimated = false;
     }
     psi_.fill(0.0);
+    field_seen_.fill(false);
     last_us_ = -1;
 }
 
@@ -329,20 +330,31 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
 }
 
 void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p,
-                                  const SegmentInput& c) {
+                                  const SegmentInput& c, bool fields_seen) {
     HeadingFilter& f = j.filter;
     f.predict(dt_s);
     if (!p.fresh || !c.fresh) return;
     if (params_.mode == HeadingMode::kMagnetometer) return;
     learn_axes(j, t_us, p, c);
+    const bool fields_alike =
+        params_.mode == HeadingMode::kAuto && p.mag_available && c.mag_available && fields_agree(p, c);
+    const bool fields_ok = fields_alike && p.mag_trusted && c.mag_trusted;
+    // A 2-DoF joint's axes from the body model are only as good as the calibration pose held
+    // them (a T-pose with the upper arm turned 30° about its length turns the elbow's flexion
+    // axis by as much, and biases δ by about that): auto takes agreeing fields over them and
+    // uses the joint where the fields fail. Hinges (the knee's axis is well defined) and axes
+    // learned from the motion are used throughout. Fields alike in norm and dip that a filter
+    // has not trusted yet (its start) hold δ on the gyros rather than hand it to the joint; a
+    // field rejected after it was trusted is a disturbance, and the joint holds δ then.
+    const bool model_two_dof = j.def.type == JointType::kTwoDof && !j.axes_estimated;
+    const bool field_first = model_two_dof && fields_alike && (fields_ok || !fields_seen);
     const bool joint_recent =
-        j.last_joint_us >= 0 && static_cast<double>(t_us - j.last_joint_us) * 1e-6 < params_.hold_s;
-    if (constrain(j, t_us, dt_s, p, c)) {
+        !field_first && j.last_joint_us >= 0 && static_cast<double>(t_us - j.last_joint_us) * 1e-6 < params_.hold_s;
+    if (!field_first && constrain(j, t_us, dt_s, p, c)) {
         j.last_joint_us = t_us;
         ++j.stats.joint_updates;
     }
-    if (params_.mode != HeadingMode::kAuto || !p.mag_available || !c.mag_available) return;
-    if (!p.mag_trusted || !c.mag_trusted || !fields_agree(p, c)) return;
+    if (!fields_ok) return;
     const double z = math::wrap_pi(c.mag_heading_rad - p.mag_heading_rad);
     if (!f.initialised()) {
         f.init(z, 20.0 * kDeg);
@@ -402,11 +414,13 @@ void ChainEstimator::update(std::int64_t t_us, std::span<const SegmentInput> in,
         step_.search_decay = dt_s > 0.0 ? std::exp(-dt_s / params_.search_s) : 1.0;
         step_.noise_gain = dt_s > 0.0 ? 1.0 - std::exp(-dt_s / params_.noise_tau_s) : 0.0;
     }
+    for (std::size_t s = 0; s < segment_count_; ++s)
+        if (in[s].fresh && in[s].mag_trusted) field_seen_[s] = true;
     std::array<JointHeading, kMaxSegments> headings{};
     for (std::size_t i = 0; i < joints_.size(); ++i) {
         Joint& j = joints_[i];
-        update_joint(j, t_us, dt_s, in[static_cast<std::size_t>(j.def.parent)],
-                     in[static_cast<std::size_t>(j.def.child)]);
+        const auto p = static_cast<std::size_t>(j.def.parent), c = static_cast<std::size_t>(j.def.child);
+        update_joint(j, t_us, dt_s, in[p], in[c], field_seen_[p] && field_seen_[c]);
         headings[i] = {j.filter.initialised(), j.filter.delta_rad(), source_of(j, t_us)};
     }
     compose(in, std::span<const JointHeading>(headings.data(), joints_.size()), out);

@@ -218,7 +218,9 @@ private:
         bool axes_estimated = false;
         JointStatus stats;
     };
-    void update_joint(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c);
+    /// fields_seen: both segments' filters have trusted their fields at some time.
+    void update_joint(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c,
+                      bool fields_seen);
     /// Constraint measurements of one step; true if one was taken.
     bool constrain(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c);
     void learn_axes(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c);
@@ -235,6 +237,7 @@ private:
     std::array<int, kMaxSegments> joint_of_child_{};  // joint index per segment, -1 = a root
     std::array<int, kMaxSegments> order_{};           // segments, parents before children
     std::array<double, kMaxSegments> psi_{};          // heading applied to each segment's q6
+    std::array<bool, kMaxSegments> field_seen_{};     // the segment's filter has trusted its field
     std::int64_t last_us_ = -1;
     bool solved_this_step_ = false;  // one axis or centre solve per step at most (their cost)
     struct StepCoefficients {

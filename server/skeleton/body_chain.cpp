@@ -93,6 +93,10 @@ void BodyChain::on_calibration(const Calibration& calibration, bool anchor) {
         const BodyJoint& b = joints_[j];
         const auto p = static_cast<std::size_t>(b.def.parent), c = static_cast<std::size_t>(b.def.child);
         if (!calibration.calibrated[p] || !calibration.calibrated[c]) continue;
+        // A calibration made elsewhere (another host, a file) says nothing of this chain's δ; a
+        // joint that already has one (its fields agreed, or it had axes) keeps it rather than
+        // restart from the constraints alone.
+        const bool keep = anchor || estimator_.status(j).initialised;
         // The centre as the model puts it, each sensor at its segment's middle (as the
         // simulator places them; a real mounting elsewhere is corrected once the motion shows it).
         const auto& sp = model_.segments[p];
@@ -100,14 +104,14 @@ void BodyChain::on_calibration(const Calibration& calibration, bool anchor) {
         estimator_.set_centre(j, math::rotate(calibration.q_sensor_segment[p], Vec3(sc.offset_m - 0.5 * sp.end_m)),
                               math::rotate(calibration.q_sensor_segment[c], Vec3(-0.5 * sc.end_m)));
         if (b.def.type == fusion::JointType::kBall) {
-            if (anchor) estimator_.anchor(j, 10.0 * kDeg);
+            if (keep) estimator_.anchor(j, 10.0 * kDeg);
             continue;
         }
         estimator_.set_axes(j, math::rotate(calibration.q_sensor_segment[p], b.axis_parent_segment),
                             math::rotate(calibration.q_sensor_segment[c], b.axis_child_segment));
         // The mountings were taken from what the chain showed: start δ there, so the
         // constraints refine it rather than pick one of a 2-DoF joint's two roots anew.
-        if (anchor) estimator_.anchor(j, 10.0 * kDeg);
+        if (keep) estimator_.anchor(j, 10.0 * kDeg);
     }
 }
 

@@ -64,7 +64,8 @@ public:
     /// A calibration was installed: the joints' axes in the sensor frames from its mountings
     /// (segments it did not calibrate keep theirs unknown). anchor: the calibration was taken
     /// from this chain's own output a moment ago, so each joint's δ starts from the relative
-    /// heading shown then (ChainEstimator::anchor); false for one loaded or made elsewhere.
+    /// heading shown then (ChainEstimator::anchor); false for one loaded or made elsewhere, where
+    /// only the joints that already had a δ keep it.
     void on_calibration(const Calibration& calibration, bool anchor);
 
     /// One frame: replaces q_earth_sensor[i] (the filters' own, filled by the caller) with the
