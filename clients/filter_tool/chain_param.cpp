@@ -49,7 +49,11 @@ std::string apply_chain_params(const filter::FilterParamList& pairs, fusion::Cha
         double v = 0.0;
         const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
         if (r.ec != std::errc() || r.ptr != text.data() + text.size() || !std::isfinite(v) || v < 0.0) {
-            return "--chain-param " + key + ": '" + text + "' is not a non-negative number";
+            return std::string("--chain-param ")
+                .append(key)
+                .append(": '")
+                .append(text)
+                .append("' is not a non-negative number");
         }
         bool found = false;
         for (const auto& [name, member] : numeric_keys()) {

@@ -54,8 +54,8 @@ bool split_params(const std::vector<std::string>& args, mocap::filter::FilterPar
     return true;
 }
 
-int run_chain_mode(const std::string& chain_path, const std::string& out_dir, mocap::tools::ChainRunOptions options,
-                   bool eval) {
+int run_chain_mode(const std::string& chain_path, const std::string& out_dir,
+                   const mocap::tools::ChainRunOptions& options, bool eval) {
     std::string error;
     const auto chain = mocap::tools::load_chain(chain_path, &error);
     if (!chain) return fail(1, error);

@@ -389,7 +389,7 @@ private:
     void update_mag_guard(const math::Vec3& mag_earth);
     void update_bias(const math::Vec3& acc_earth_unit);
     void update_heading_guard();
-    void update_heading_bias(const math::Vec3& mag_e6, const math::Mat3& r_e6_s, bool trusted);
+    void update_heading_bias(const math::Vec3& h, const math::Mat3& r_e6_s, bool trusted);
     void update_mag_offset(const math::Vec3& mag_s, const math::Mat3& r_e_s);
     void adapt_time_constants();
     void accept_candidate_field();
