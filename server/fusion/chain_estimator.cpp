@@ -219,14 +219,14 @@ bool ChainEstimator::centre_pair(Joint& j, std::int64_t t_us, const SegmentInput
         const Vec3 dw_c = (c.gyro_rad_s - older.c.gyro_rad_s) / span_s;
         const SegmentInput& pp = prev.p;
         const SegmentInput& pc = prev.c;
-        const bool solved = j.centre && j.centre->add(prev.t_us, pp.gyro_rad_s, dw_p, pp.accel_m_s2, pc.gyro_rad_s,
+        if (j.centre && j.def.centre_known) j.centre->compare_with(j.def.r_parent, j.def.r_child);
+        const bool worked = j.centre && j.centre->add(prev.t_us, pp.gyro_rad_s, dw_p, pp.accel_m_s2, pc.gyro_rad_s,
                                                       dw_c, pc.accel_m_s2, !solved_this_step_);
-        solved_this_step_ = solved_this_step_ || solved;
+        solved_this_step_ = solved_this_step_ || worked;
         // A learned centre replaces a given one (the body model's guess) only where it
         // explains the motion clearly better: a sensor mounted off the segment's middle.
-        if (solved && j.centre->ready() &&
-            (!j.def.centre_known || j.centre->cost(j.centre->r_parent(), j.centre->r_child()) <
-                                        0.7 * j.centre->cost(j.def.r_parent, j.def.r_child))) {
+        if (worked && j.centre->take_solution() && j.centre->ready() &&
+            (!j.def.centre_known || j.centre->solution_cost() < 0.7 * j.centre->reference_cost())) {
             j.def.r_parent = j.centre->r_parent();
             j.def.r_child = j.centre->r_child();
             j.def.centre_known = true;

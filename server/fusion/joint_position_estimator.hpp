@@ -12,14 +12,18 @@
 // ω̇ is the caller's (a central difference of the rates, one sample late).
 //
 // Samples: those where either segment turns or accelerates in rotation enough for Γ to matter
-// (|ω|² + |ω̇| above min_gamma), one per sample_spacing_s, in a ring of `capacity`. solve() at
-// most every solve_interval_s of sample time. Ready: enough samples, a residual small against
+// (|ω|² + |ω̇| above min_gamma), one per sample_spacing_s, in a ring of `capacity`. A solution
+// at most every solve_interval_s of sample time, computed one pass over the samples per add()
+// (the normal equations, or a trial step's cost): a solve is spread over a few dozen steps, so
+// no step of the live chain pays for a whole one (its p99, docs/fusion.md "Cost"); samples that
+// arrive meanwhile join the passes that follow. Ready: enough samples, a residual small against
 // the specific forces, and motion that identifies all six unknowns (a segment that only ever
 // turns about one axis leaves the centre's place along it open: not ready, so a hinge whose
 // segments turn only about it needs its other constraints).
 //
 // Memory: the ring at construction. Not thread-safe (one per joint, on the chain's thread).
-// Cost: add() O(1); solve() O(capacity × 15 iterations) (~1 ms for 600 samples).
+// Cost: add() O(1), or one pass O(capacity) (~20-40 µs for 600 samples) while a solve runs;
+// solve() all passes at once, O(capacity × 2 × iterations).
 #pragma once
 
 #include <cstdint>
@@ -50,10 +54,18 @@ public:
 
     void reset();
     /// One step (sensor frames): rates, angular accelerations and specific forces of both
-    /// segments. Returns true when a new solution was computed in this call.
-    /// may_solve false: collect only (the caller spreads several estimators' solves over its steps).
+    /// segments. Returns true when it made a pass of a solve (the step's budget).
+    /// may_solve false: collect only (the caller spreads several estimators' passes over its steps).
     bool add(std::int64_t t_us, const Vec3& w_p, const Vec3& dw_p, const Vec3& f_p, const Vec3& w_c, const Vec3& dw_c,
              const Vec3& f_c, bool may_solve = true);
+    /// True once after each solve has finished (then ready(), the centre and the costs are new).
+    bool take_solution();
+    /// A centre to compare each solution with (a body model's guess): its cost over the same
+    /// samples comes with the solution (reference_cost()), one more pass after the solve.
+    void compare_with(const Vec3& r_parent, const Vec3& r_child);
+    [[nodiscard]] double reference_cost() const { return reference_cost_; }
+    /// Σ e² of the solution over the samples of its last pass.
+    [[nodiscard]] double solution_cost() const { return data_cost_; }
 
     [[nodiscard]] bool ready() const { return ready_; }
     [[nodiscard]] const Vec3& r_parent() const { return r_p_; }
@@ -61,6 +73,7 @@ public:
     [[nodiscard]] double relative_residual() const { return relative_residual_; }
     [[nodiscard]] std::size_t samples() const { return count_; }
 
+    /// The whole solve (every pass) now; false with too few samples.
     bool solve();
 
     /// Σ e² of the stored samples for a candidate centre (to compare a given one with the
@@ -68,10 +81,29 @@ public:
     [[nodiscard]] double cost(const Vec3& r_parent, const Vec3& r_child) const;
 
 private:
+    using Mat6 = Eigen::Matrix<double, 6, 6>;
+    using Vec6 = Eigen::Matrix<double, 6, 1>;
     struct Sample {
         Eigen::Matrix3d g_p, g_c;  // Γ of each sensor
         Vec3 f_p, f_c;
     };
+    enum class Phase : std::uint8_t { kIdle, kEvaluate, kTrial, kReference };
+    // Levenberg–Marquardt, one pass per step.
+    struct GaussNewton {
+        Phase phase = Phase::kIdle;
+        Vec6 x = Vec6::Zero(), prior = Vec6::Zero(), step = Vec6::Zero(), jte = Vec6::Zero();
+        Mat6 jtj = Mat6::Zero();
+        double cost = 0.0, lambda = -1.0, ridge = 0.0, f2 = 0.0;
+        int it = 0, iterations = 0;
+        bool was_ready = false, finishing = false;
+    };
+    bool begin();
+    void pass();
+    void next_step();
+    void finish();
+    void publish();
+    /// Cost at v (with the ridge); with jacobian, also the normal equations, f2 and the ridge.
+    double evaluate(const Vec6& v, bool jacobian);
 
     JointPositionParams params_;
     std::vector<Sample> ring_;
@@ -82,6 +114,11 @@ private:
     double relative_residual_ = 0.0;
     double interval_s_;
     bool was_solved_ = false;
+    GaussNewton gn_;
+    bool new_solution_ = false;
+    bool reference_ = false;
+    Vec3 ref_p_ = Vec3::Zero(), ref_c_ = Vec3::Zero();
+    double reference_cost_ = 0.0, data_cost_ = 0.0;
 };
 
 /// Γ = [ω̇]× + [ω]×²: f at a point r from the sensor is f + Γ r.

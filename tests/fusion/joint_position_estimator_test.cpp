@@ -73,6 +73,38 @@ TEST(JointPositionEstimator, FindsTheCentreOfABallJoint) {
     EXPECT_LT((est.r_child() - m.r_c).norm(), 0.005) << est.r_child().transpose();
 }
 
+// The live chain gets its solutions one pass per step (no step pays for a whole solve): spread
+// over the steps, a solve gives exactly what it gives at once on the same samples.
+TEST(JointPositionEstimator, ASolveSpreadOverStepsGivesTheSolutionOfOneSolve) {
+    const Motion m = ball_joint();
+    JointPositionEstimator collected;
+    for (int k = 0; k < 3000; ++k) {
+        const double t = 0.01 * k + 0.1;
+        collected.add(static_cast<std::int64_t>(std::llround(t * 1e6)), m.rate(true, t), m.rate_dot(true, t),
+                      m.specific_force(true, t), m.rate(false, t), m.rate_dot(false, t), m.specific_force(false, t),
+                      false);
+    }
+    JointPositionEstimator at_once = collected;
+    ASSERT_TRUE(at_once.solve());
+    ASSERT_TRUE(at_once.ready());
+    // Steps that add no sample (nothing turns): each does one pass of the solve.
+    JointPositionEstimator spread = collected;
+    int steps = 0;
+    for (; steps < 200 && !spread.take_solution(); ++steps) {
+        EXPECT_TRUE(spread.add(40'000'000 + steps * 10'000, Vec3::Zero(), Vec3::Zero(), Vec3(0, 0, 9.81), Vec3::Zero(),
+                               Vec3::Zero(), Vec3(0, 0, 9.81)));
+    }
+    EXPECT_GT(steps, 4) << "a solve is more than a few passes";
+    EXPECT_LT(steps, 200) << "the solve never finished";
+    ASSERT_TRUE(spread.ready());
+    EXPECT_LT((spread.r_parent() - at_once.r_parent()).norm(), 1e-12);
+    EXPECT_LT((spread.r_child() - at_once.r_child()).norm(), 1e-12);
+    EXPECT_LT((spread.r_parent() - m.r_p).norm(), 0.005);
+    // The next step has nothing to do until the next solve is due.
+    EXPECT_FALSE(spread.add(40'000'000 + steps * 10'000, Vec3::Zero(), Vec3::Zero(), Vec3(0, 0, 9.81), Vec3::Zero(),
+                            Vec3::Zero(), Vec3(0, 0, 9.81)));
+}
+
 // A parent that only ever turns about one axis: its centre's position along that axis changes
 // nothing the sensors see, so the estimate is not trusted.
 TEST(JointPositionEstimator, NotReadyWhenThePositionIsUnobservable) {
