@@ -136,7 +136,7 @@ void ChainEstimator::reset() {
         j.filter.reset();
         j.search = TrigQuad{};
         j.noise_ratio.fill(1.0);
-        j.last_joint_us = j.last_mag_us = j.refused_since_us = -1;
+        j.last_joint_us = j.last_mag_us = j.refused_since_us = j.still_since_us = -1;
         j.stats = JointStatus{};
         if (j.axis) j.axis->reset();
         if (j.centre) {
@@ -280,6 +280,23 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
     const bool mag_recent = j.last_mag_us >= 0 && static_cast<double>(t_us - j.last_mag_us) * 1e-6 < params_.hold_s;
     const bool axes_free = d.type == JointType::kBall || !d.axes_known;
     if (!axes_free) j.past[1].t_us = -1;  // not followed: a later centre pair starts afresh
+    // A joint without axes that does not move: both segments turn as one body, so their
+    // angular velocities are one earth vector (a vector pair). Taken where the two rates have
+    // agreed in their vertical parts and their horizontal lengths (which δ does not change)
+    // for still_s without a break: a moving joint's rates agree so only for moments.
+    if (axes_free) {
+        const Vec3 u = math::rotate(p.q6, p.gyro_rad_s);
+        const Vec3 v = math::rotate(c.q6, c.gyro_rad_s);
+        const double hu = std::hypot(u.x(), u.y()), hv = std::hypot(v.x(), v.y());
+        const double tol = params_.still_rate_rad_s + params_.sigma_rate_rel * 0.5 * (u.norm() + v.norm());
+        if (std::abs(u.z() - v.z()) >= tol || std::abs(hu - hv) >= tol) {
+            j.still_since_us = -1;
+        } else if (j.still_since_us < 0) {
+            j.still_since_us = t_us;
+        } else if (!mag_recent && static_cast<double>(t_us - j.still_since_us) * 1e-6 >= params_.still_s) {
+            take(pair_measurement(u, v, f.delta_rad(), tol, params_.min_rate_horizontal_rad_s), kStillPair);
+        }
+    }
     if (Vec3 fa, fb; axes_free && centre_pair(j, t_us, p, c, fa, fb) && !mag_recent) {
         const double h = 0.5 * (std::hypot(fa.x(), fa.y()) + std::hypot(fb.x(), fb.y()));
         take(pair_measurement(fa, fb, f.delta_rad(), params_.sigma_acc_m_s2 + params_.sigma_acc_rel * h,
@@ -346,8 +363,12 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
     // learned from the motion are used throughout. Fields alike in norm and dip that a filter
     // has not trusted yet (its start) hold δ on the gyros rather than hand it to the joint; a
     // field rejected after it was trusted is a disturbance, and the joint holds δ then.
+    // The same for a joint without axes (a ball joint, a joint whose axes are not known yet):
+    // its constraints (a joint centre's specific force, the rates of a still joint) are weaker
+    // than fields that agree.
     const bool model_two_dof = j.def.type == JointType::kTwoDof && !j.axes_estimated;
-    const bool field_first = model_two_dof && fields_alike && (fields_ok || !fields_seen);
+    const bool axes_free = j.def.type == JointType::kBall || !j.def.axes_known;
+    const bool field_first = (model_two_dof || axes_free) && fields_alike && (fields_ok || !fields_seen);
     const bool joint_recent =
         !field_first && j.last_joint_us >= 0 && static_cast<double>(t_us - j.last_joint_us) * 1e-6 < params_.hold_s;
     if (!field_first && constrain(j, t_us, dt_s, p, c)) {

@@ -91,6 +91,9 @@ struct ChainParams {
     double sigma_rate_rel = 0.05;    ///< ... plus this fraction of its size
     double min_axis_horizontal = 0.2;        ///< a pair whose horizontal part is shorter says nothing
     double min_rate_horizontal_rad_s = 0.3;  ///< same for the shared angular velocity, rad/s
+    double still_rate_rad_s = 0.05;          ///< a joint without axes whose segments' rates agree this well
+                                             ///< (plus sigma_rate_rel of their size) is taken as still, rad/s
+    double still_s = 0.5;                    ///< ... once they have agreed this long without a break, s
     double sigma_two_dof_axis = 0.035;       ///< 2dof axis-angle constraint noise (cosine units)
     double sigma_two_dof_rate_rad_s = 0.05;  ///< 2dof rate constraint noise, rad/s
     double gate_sigma = 5.0;                 ///< innovations beyond this many σ are refused
@@ -197,13 +200,14 @@ public:
     [[nodiscard]] const ChainParams& params() const { return params_; }
 
 private:
-    enum Stream : std::uint8_t { kAxisPair, kRatePair, kTwoDofAxis, kTwoDofRate, kAccPair, kMag, kStreams };
+    enum Stream : std::uint8_t { kAxisPair, kRatePair, kTwoDofAxis, kTwoDofRate, kAccPair, kStillPair, kMag, kStreams };
     struct Joint {
         JointDef def;
         HeadingFilter filter;
         std::int64_t last_joint_us = -1;                 // last constraint measurement taken
         std::int64_t last_mag_us = -1;                   // last magnetometer difference taken
         std::int64_t refused_since_us = -1;              // first of the refusals in a row (-1: none)
+        std::int64_t still_since_us = -1;                // the rates have agreed since (no axes; -1: they do not)
         std::unique_ptr<HingeAxisEstimator> axis;        // estimate_axes hinges only
         std::unique_ptr<JointPositionEstimator> centre;  // joints whose centre is learned
         // The two previous steps of both segments: the joint centre's specific force needs

@@ -318,6 +318,38 @@ TEST(ChainEstimatorAuto, TakesAgreeingFieldsAndRefusesADisturbedOne) {
     EXPECT_GT(r.status.mag_disagreements, 1000u);
 }
 
+// A joint without axes and without a magnetometer (a ball joint, or a hinge before its axes
+// are learned): while it does not move, both segments turn as one body, and their rates show δ
+// (the base of a hand-held arm moved alone). Once the joint moves, the rates differ and are not
+// taken: δ, a property of the two 6D frames, stays where the still period put it.
+TEST(ChainEstimatorBall, AStillJointShowsItsHeadingAndAMovingOneIsNotTakenForStill) {
+    TwoSegmentMotion m;
+    m.q_parent = [](double t) {
+        return rz(0.5 * std::sin(0.3 * t)) * axis_angle(Vec3(1, 0, 0), 0.6 * std::sin(0.8 * t)) *
+               axis_angle(Vec3(0, 1, 0), 0.5 * std::sin(0.55 * t + 1.0));
+    };
+    const Quat mount = axis_angle(Vec3(0.2, 0.4, 1.0), 1.9);
+    m.q_child = [mount](double t, const Quat& qp) {
+        const double bend = t < 20.0 ? 0.0 : 1.0 * std::sin(2.0 * (t - 20.0));
+        const double twist = t < 20.0 ? 0.0 : 0.7 * std::sin(1.3 * (t - 20.0));
+        return qp * axis_angle(Vec3(0, 1, 0), bend) * axis_angle(Vec3(0, 0, 1), twist) * mount;
+    };
+    m.h_parent = [](double) { return 0.4; };
+    m.h_child = [](double) { return -1.6; };
+    JointDef def;
+    def.parent = 0;
+    def.child = 1;
+    def.type = JointType::kBall;
+    def.estimate_centre = false;
+    ChainParams p;
+    p.mode = HeadingMode::kJoints;
+    const RunResult r = run(m, def, p, 90.0);
+    EXPECT_LT(max_error_deg(r, 5.0, 20.0), 1.0);
+    EXPECT_LT(max_error_deg(r, 20.0), 1.5);
+    EXPECT_EQ(r.source[static_cast<std::size_t>(15 * 100)], HeadingSource::kJoints);
+    EXPECT_EQ(r.source.back(), HeadingSource::kGyro);
+}
+
 TEST(ChainEstimatorCheck, RefusesBadChains) {
     JointDef a;
     a.parent = 0;
