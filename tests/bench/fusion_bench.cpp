@@ -2,7 +2,8 @@
 // in its synchronous mode (pipeline.hpp: the same routing, filters, assembly and solve as a
 // live run, on one thread) over 60 s of the simulator's walk, 15 segments at 100 Hz with
 // MEMS noise, once with [fusion] heading = "magnetometer" (the chain off) and once with
-// "auto" (and "auto" with learned axes), side by side in one binary.
+// "auto" (and "auto" with learned axes), side by side in one binary; in a clean field and over
+// the simulator's steel floor (where auto holds more joints by their constraints).
 //
 // Each benchmark iteration is one whole take; the counters are per SYNC instant (15 samples
 // and one solved frame): ns_per_instant (mean) and p99_us (the 99th percentile of one
@@ -20,6 +21,7 @@
 
 #include "core/clock.hpp"
 #include "pipeline/pipeline.hpp"
+#include "sim/magnetic_env.hpp"
 #include "sim/stream_motion.hpp"
 #include "sim/stream_node.hpp"
 
@@ -35,8 +37,9 @@ constexpr double kRateHz = 100.0;
 constexpr double kTakeS = 60.0;
 
 /// The walk's samples for every segment, instant by instant (T-pose first, so the subject
-/// calibrates itself as in a live run).
-std::vector<SegmentSample> walk_samples() {
+/// calibrates itself as in a live run), in the magnetic environment `env` (a mocap-sim preset).
+std::vector<SegmentSample> walk_samples(const char* env_name) {
+    const sim::MagneticEnv env(*sim::make_magnetic_env_spec(env_name, 1));
     const skeleton::BodyModel model = skeleton::default_body_model(1.75, "mocap");
     const sim::StreamMotion motion = sim::StreamMotion::walk(model, 2.0);
     std::mt19937 rng(1);
@@ -67,7 +70,7 @@ std::vector<SegmentSample> walk_samples() {
                 (next.sensor_position_m[i] - 2.0 * now.sensor_position_m[i] + prev.sensor_position_m[i]) / (dt * dt);
             const sim::SensorReading r =
                 sim::ideal_reading(prev.q_earth_segment[i] * mount[i], now.q_earth_segment[i] * mount[i], dt, acc,
-                                   sim::stream_mag_earth_ut());
+                                   env.uniform() ? sim::stream_mag_earth_ut() : env.field_ut(now.sensor_position_m[i]));
             SegmentSample s;
             s.subject_id = 1;
             s.segment_index = static_cast<std::uint16_t>(i);
@@ -84,13 +87,14 @@ std::vector<SegmentSample> walk_samples() {
     return out;
 }
 
-const std::vector<SegmentSample>& samples() {
-    static const std::vector<SegmentSample> s = walk_samples();
-    return s;
+const std::vector<SegmentSample>& samples(bool steel_floor) {
+    static const std::vector<SegmentSample> clean = walk_samples("clean");
+    static const std::vector<SegmentSample> steel = walk_samples("steel-floor");
+    return steel_floor ? steel : clean;
 }
 
-void run(benchmark::State& state, fusion::HeadingMode mode, bool estimate_axes) {
-    const std::vector<SegmentSample>& all = samples();
+void run(benchmark::State& state, fusion::HeadingMode mode, bool estimate_axes, bool steel_floor = false) {
+    const std::vector<SegmentSample>& all = samples(steel_floor);
     FixedClock clock;
     std::vector<double> instant_us;
     instant_us.reserve(all.size() / 15);
@@ -137,9 +141,17 @@ void BM_WalkChainAuto(benchmark::State& state) {
 void BM_WalkChainAutoEstimateAxes(benchmark::State& state) {
     run(state, fusion::HeadingMode::kAuto, true);
 }
+void BM_SteelFloorWalkChainOff(benchmark::State& state) {
+    run(state, fusion::HeadingMode::kMagnetometer, false, true);
+}
+void BM_SteelFloorWalkChainAuto(benchmark::State& state) {
+    run(state, fusion::HeadingMode::kAuto, false, true);
+}
 BENCHMARK(BM_WalkChainOff)->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_WalkChainAuto)->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_WalkChainAutoEstimateAxes)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(BM_SteelFloorWalkChainOff)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(BM_SteelFloorWalkChainAuto)->Unit(benchmark::kMillisecond)->Iterations(3);
 
 }  // namespace
 }  // namespace mocap
