@@ -7,12 +7,19 @@
 #include "fusion/joint_constraints.hpp"
 
 namespace mocap::fusion {
+
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 Quat rz(double a_rad) {
     return Quat(std::cos(0.5 * a_rad), 0.0, 0.0, std::sin(0.5 * a_rad));
+}
+
+/// A joint without axes (a ball joint, or one whose axes are not known yet): no per-sample
+/// axis constraint; the joint centre and a still joint's rates are all it has.
+bool axes_free(const JointDef& d) {
+    return d.type == JointType::kBall || !d.axes_known;
 }
 
 }  // namespace
@@ -105,7 +112,7 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
         }
         // Only a joint the centre constraint may serve (no axes) learns its centre: the
         // estimate costs more than all the other constraints together.
-        if (!d.centre_known && d.estimate_centre && (d.type == JointType::kBall || !d.axes_known)) {
+        if (!d.centre_known && d.estimate_centre && axes_free(d)) {
             JointPositionParams cp = params_.centre;
             if (d.type == JointType::kHinge) cp.free_directions = 1;  // any point of the axis is a centre
             j.centre = std::make_unique<JointPositionEstimator>(cp);
@@ -278,13 +285,13 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
     // constraint: used only where neither axes nor agreeing fields (auto) see δ. A single
     // sample of it is noisy, so a start from it is given at least 20°.
     const bool mag_recent = j.last_mag_us >= 0 && static_cast<double>(t_us - j.last_mag_us) * 1e-6 < params_.hold_s;
-    const bool axes_free = d.type == JointType::kBall || !d.axes_known;
-    if (!axes_free) j.past[1].t_us = -1;  // not followed: a later centre pair starts afresh
+    const bool no_axes = axes_free(d);
+    if (!no_axes) j.past[1].t_us = -1;  // not followed: a later centre pair starts afresh
     // A joint without axes that does not move: both segments turn as one body, so their
     // angular velocities are one earth vector (a vector pair). Taken where the two rates have
     // agreed in their vertical parts and their horizontal lengths (which δ does not change)
     // for still_s without a break: a moving joint's rates agree so only for moments.
-    if (axes_free) {
+    if (no_axes) {
         const Vec3 u = math::rotate(p.q6, p.gyro_rad_s);
         const Vec3 v = math::rotate(c.q6, c.gyro_rad_s);
         const double hu = std::hypot(u.x(), u.y()), hv = std::hypot(v.x(), v.y());
@@ -297,13 +304,13 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
             take(pair_measurement(u, v, f.delta_rad(), tol, params_.min_rate_horizontal_rad_s), kStillPair);
         }
     }
-    if (Vec3 fa, fb; axes_free && centre_pair(j, t_us, p, c, fa, fb) && !mag_recent) {
+    if (Vec3 fa, fb; no_axes && centre_pair(j, t_us, p, c, fa, fb) && !mag_recent) {
         const double h = 0.5 * (std::hypot(fa.x(), fa.y()) + std::hypot(fb.x(), fb.y()));
         take(pair_measurement(fa, fb, f.delta_rad(), params_.sigma_acc_m_s2 + params_.sigma_acc_rel * h,
                               params_.min_acc_horizontal_m_s2),
              kAccPair, 20.0 * kDeg);
     }
-    if (!d.axes_known || d.type == JointType::kBall) return taken;
+    if (no_axes) return taken;
     const Vec3 a = math::rotate(p.q6, d.axis_parent);
     const Vec3 b = math::rotate(c.q6, d.axis_child);
     const Vec3 u = math::rotate(p.q6, p.gyro_rad_s);
@@ -367,8 +374,7 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
     // its constraints (a joint centre's specific force, the rates of a still joint) are weaker
     // than fields that agree.
     const bool model_two_dof = j.def.type == JointType::kTwoDof && !j.axes_estimated;
-    const bool axes_free = j.def.type == JointType::kBall || !j.def.axes_known;
-    const bool field_first = (model_two_dof || axes_free) && fields_alike && (fields_ok || !fields_seen);
+    const bool field_first = (model_two_dof || axes_free(j.def)) && fields_alike && (fields_ok || !fields_seen);
     const bool joint_recent =
         !field_first && j.last_joint_us >= 0 && static_cast<double>(t_us - j.last_joint_us) * 1e-6 < params_.hold_s;
     if (!field_first && constrain(j, t_us, dt_s, p, c)) {

@@ -76,10 +76,6 @@ public:
     /// The whole solve (every pass) now; false with too few samples.
     bool solve();
 
-    /// Σ e² of the stored samples for a candidate centre (to compare a given one with the
-    /// learned one). O(samples).
-    [[nodiscard]] double cost(const Vec3& r_parent, const Vec3& r_child) const;
-
 private:
     using Mat6 = Eigen::Matrix<double, 6, 6>;
     using Vec6 = Eigen::Matrix<double, 6, 1>;
@@ -102,6 +98,8 @@ private:
     void next_step();
     void finish();
     void publish();
+    /// Σ e² of the stored samples for a candidate centre (the reference pass). O(samples).
+    [[nodiscard]] double cost(const Vec3& r_parent, const Vec3& r_child) const;
     /// Cost at v (with the ridge); with jacobian, also the normal equations, f2 and the ridge.
     double evaluate(const Vec6& v, bool jacobian);
 

@@ -103,12 +103,10 @@ void BodyChain::on_calibration(const Calibration& calibration, bool anchor) {
         const auto& sc = model_.segments[c];
         estimator_.set_centre(j, math::rotate(calibration.q_sensor_segment[p], Vec3(sc.offset_m - 0.5 * sp.end_m)),
                               math::rotate(calibration.q_sensor_segment[c], Vec3(-0.5 * sc.end_m)));
-        if (b.def.type == fusion::JointType::kBall) {
-            if (keep) estimator_.anchor(j, 10.0 * kDeg);
-            continue;
+        if (b.def.type != fusion::JointType::kBall) {
+            estimator_.set_axes(j, math::rotate(calibration.q_sensor_segment[p], b.axis_parent_segment),
+                                math::rotate(calibration.q_sensor_segment[c], b.axis_child_segment));
         }
-        estimator_.set_axes(j, math::rotate(calibration.q_sensor_segment[p], b.axis_parent_segment),
-                            math::rotate(calibration.q_sensor_segment[c], b.axis_child_segment));
         // The mountings were taken from what the chain showed: start δ there, so the
         // constraints refine it rather than pick one of a 2-DoF joint's two roots anew.
         if (keep) estimator_.anchor(j, 10.0 * kDeg);
