@@ -673,6 +673,14 @@ void MocapFilter::update_mag(const math::Vec3& mag_raw, const math::Vec3& rate, 
             s.mag_reject_time_s = std::max(s.mag_reject_time_s - p.mag_rejection_factor * s.ts_s, 0.0);
         }
     }
+    // After a rejection the heading the gyro held meanwhile comes back to the field at
+    // 1 / tau_mag_s: it is the field's again (heading_split().mag_trusted) once the
+    // disagreement is within the guard's threshold.
+    if (p.mag_guard && mag_rejected()) {
+        s.mag_settled = false;
+    } else if (std::abs(s.mag_dis_lp_rad) < p.mag_heading_th_deg * kDeg) {
+        s.mag_settled = true;
+    }
     if (p.motion_bias) {
         const bool trusted = k == k_mag_ && !(p.mag_guard && (s.mag_guard_blind || s.mag_ref_norm == 0.0));
         update_heading_bias(h, q6.toRotationMatrix(), trusted);
@@ -712,7 +720,7 @@ HeadingSplit MocapFilter::heading_split() const {
     h.q6 = orientation_6d();
     h.mag_heading_rad = state_.delta_rad;
     h.has_mag_heading = state_.samples > state_.no_mag_samples;
-    h.mag_trusted = h.has_mag_heading && !(params_.mag_guard && mag_rejected());
+    h.mag_trusted = h.has_mag_heading && !(params_.mag_guard && mag_rejected()) && state_.mag_settled;
     h.field_norm_ut = state_.mag_norm;
     h.field_dip_rad = state_.mag_dip_rad;
     return h;

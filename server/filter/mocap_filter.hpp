@@ -321,6 +321,7 @@ struct MocapFilterState {
     double mag_undisturbed_time_s = 0.0;
     double mag_reject_time_s = 0.0;
     bool mag_disturbed = true;  ///< norm / dip off the reference (true until one exists)
+    bool mag_settled = true;    ///< the heading agrees with the field again since the last rejection
     double k_mag_init = 1.0;    ///< initial-convergence gain 1/N (0 when done)
     double last_mag_disagreement_rad = 0.0;
     math::Vec3 mag_horizontal_lp = math::Vec3::Zero();  ///< horizontal field in the 6D earth frame, averaged

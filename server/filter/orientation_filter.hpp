@@ -33,7 +33,8 @@ struct HeadingSplit {
     math::Quat q6 = math::Quat::Identity();  ///< inclination, and a heading the gyro alone keeps
     double mag_heading_rad = 0.0;            ///< orientation() = Rz(mag_heading_rad) ⊗ q6
     bool has_mag_heading = false;            ///< the filter corrects its heading from the field
-    bool mag_trusted = false;                ///< ... and uses the field now (not rejected)
+    bool mag_trusted = false;                ///< ... uses the field now (not rejected) and, after a
+                                             ///< rejection, its heading is back on the field
     double field_norm_ut = 0.0;              ///< the field it sees, filtered (0: unknown)
     double field_dip_rad = 0.0;              ///< its dip, positive down
 };
