@@ -100,7 +100,6 @@ private:
     bool connect();
     void open_bucket();
     void close_bucket();
-    void start_watch();
     void do_work();
     void put(std::uint32_t subject_id, const skeleton::Calibration& calibration);
     void get(std::uint32_t subject_id);

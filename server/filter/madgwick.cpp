@@ -1,9 +1,7 @@
 #include "filter/madgwick.hpp"
 
-#include <cmath>
-#include <numbers>
-
 #include "filter/mocap_filter.hpp"
+#include "math/nwu_frame.hpp"
 
 namespace mocap::filter {
 namespace {
@@ -19,21 +17,6 @@ math::Vec4 alignment_gradient(const math::Quat& q, const math::Vec3& d, const ma
 
 }  // namespace
 
-math::Quat q_enu_nwu() {
-    return math::Quat(std::numbers::sqrt2 / 2.0, 0.0, 0.0, std::numbers::sqrt2 / 2.0);
-}
-
-math::Quat nwu_initial_attitude(const MargReading& r, bool from_reading) {
-    const math::Quat q_enu_sensor =
-        from_reading && r.accel_ok ? attitude_from_accel_mag(r.accel_m_s2, r.mag_ut, r.mag_ok) : math::Quat::Identity();
-    return q_enu_nwu().conjugate() * q_enu_sensor;
-}
-
-math::Vec3 nwu_field_reference(const math::Quat& q_nwu_sensor, const math::Vec3& mag_unit) {
-    const math::Vec3 h = math::rotate(q_nwu_sensor, mag_unit);
-    return {std::hypot(h.x(), h.y()), 0.0, h.z()};
-}
-
 std::string MadgwickParams::check() const {
     if (!(beta >= 0.0)) return "beta must be >= 0";
     if (!(max_step_s > 0.0)) return "max_step_s must be > 0";
@@ -47,7 +30,7 @@ MadgwickFilter::MadgwickFilter(const MadgwickParams& params) : params_(params) {
 void MadgwickFilter::reset() {
     state_ = MadgwickState{};
     state_.clock = SampleClock(params_.max_step_s);
-    state_.q_nwu_sensor = nwu_initial_attitude(MargReading{}, false);  // ENU identity
+    state_.q_nwu_sensor = math::nwu_from_enu(math::Quat::Identity());
 }
 
 void MadgwickFilter::update(const ImuSample& sample) {
@@ -56,7 +39,10 @@ void MadgwickFilter::update(const ImuSample& sample) {
     const MargReading m = read_marg(sample);
     if (!st.initialised) {
         st.initialised = true;
-        st.q_nwu_sensor = nwu_initial_attitude(m, params_.init_from_first_sample);
+        // The closed-form attitude of the first reading if wanted and possible, else the ENU identity.
+        const bool closed_form = params_.init_from_first_sample && m.accel_ok;
+        st.q_nwu_sensor = math::nwu_from_enu(closed_form ? attitude_from_accel_mag(m.accel_m_s2, m.mag_ut, m.mag_ok)
+                                                         : math::Quat::Identity());
         return;
     }
     if (dt <= 0.0) return;
@@ -68,7 +54,7 @@ void MadgwickFilter::update(const ImuSample& sample) {
         math::Vec4 grad = alignment_gradient(q, math::Vec3::UnitZ(), m.accel_m_s2.normalized());
         if (m.mag_ok) {
             const math::Vec3 mag = m.mag_ut.normalized();
-            grad += alignment_gradient(q, nwu_field_reference(q, mag), mag);
+            grad += alignment_gradient(q, math::nwu_field_reference(q, mag), mag);
         }
         const double n = grad.norm();
         if (n > 0.0) q_dot -= params_.beta * grad / n;
@@ -77,7 +63,7 @@ void MadgwickFilter::update(const ImuSample& sample) {
 }
 
 math::Quat MadgwickFilter::orientation() const {
-    return (q_enu_nwu() * state_.q_nwu_sensor).normalized();
+    return (math::q_enu_nwu() * state_.q_nwu_sensor).normalized();
 }
 
 }  // namespace mocap::filter

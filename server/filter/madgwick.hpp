@@ -19,19 +19,6 @@
 
 namespace mocap::filter {
 
-/// q_enu_nwu: +90° about z, from the published baselines' north-west-up earth frame
-/// (x = magnetic north, z up) to ENU. Shared with mahony.cpp.
-math::Quat q_enu_nwu();
-
-struct MargReading;
-/// The baselines' start: q_nwu_sensor from the closed-form attitude of one reading if
-/// wanted and possible, else the ENU identity.
-math::Quat nwu_initial_attitude(const MargReading& reading, bool from_reading);
-
-/// The published algorithms' earth-field reference b = [|h_xy|, 0, h_z], h the unit field
-/// mag_unit rotated into the NWU frame by q_nwu_sensor.
-math::Vec3 nwu_field_reference(const math::Quat& q_nwu_sensor, const math::Vec3& mag_unit);
-
 struct MadgwickParams {
     double beta = 0.041;                 ///< key "beta": gradient step gain, rad/s (the paper's MARG value
                                          ///< sqrt(3/4)·gyro error of 2.7 °/s; larger trusts accel/mag more)

@@ -1,7 +1,7 @@
 #include "filter/mahony.hpp"
 
-#include "filter/madgwick.hpp"
 #include "filter/mocap_filter.hpp"
+#include "math/nwu_frame.hpp"
 
 namespace mocap::filter {
 std::string MahonyParams::check() const {
@@ -19,7 +19,7 @@ MahonyFilter::MahonyFilter(const MahonyParams& params) : params_(params) {
 void MahonyFilter::reset() {
     state_ = MahonyState{};
     state_.clock = SampleClock(params_.max_step_s);
-    state_.q_nwu_sensor = nwu_initial_attitude(MargReading{}, false);  // ENU identity
+    state_.q_nwu_sensor = math::nwu_from_enu(math::Quat::Identity());
 }
 
 void MahonyFilter::update(const ImuSample& sample) {
@@ -28,7 +28,10 @@ void MahonyFilter::update(const ImuSample& sample) {
     const MargReading m = read_marg(sample);
     if (!st.initialised) {
         st.initialised = true;
-        st.q_nwu_sensor = nwu_initial_attitude(m, params_.init_from_first_sample);
+        // The closed-form attitude of the first reading if wanted and possible, else the ENU identity.
+        const bool closed_form = params_.init_from_first_sample && m.accel_ok;
+        st.q_nwu_sensor = math::nwu_from_enu(closed_form ? attitude_from_accel_mag(m.accel_m_s2, m.mag_ut, m.mag_ok)
+                                                         : math::Quat::Identity());
         return;
     }
     if (dt <= 0.0) return;
@@ -40,7 +43,7 @@ void MahonyFilter::update(const ImuSample& sample) {
         math::Vec3 e = m.accel_m_s2.normalized().cross(math::rotate(q.conjugate(), math::Vec3::UnitZ()));
         if (m.mag_ok) {
             const math::Vec3 mag = m.mag_ut.normalized();
-            e += mag.cross(math::rotate(q.conjugate(), nwu_field_reference(q, mag)));
+            e += mag.cross(math::rotate(q.conjugate(), math::nwu_field_reference(q, mag)));
         }
         if (params_.ki > 0.0) {
             const double c = params_.bias_clip_rad_s;
@@ -56,7 +59,7 @@ void MahonyFilter::update(const ImuSample& sample) {
 }
 
 math::Quat MahonyFilter::orientation() const {
-    return (q_enu_nwu() * state_.q_nwu_sensor).normalized();
+    return (math::q_enu_nwu() * state_.q_nwu_sensor).normalized();
 }
 
 }  // namespace mocap::filter

@@ -16,7 +16,6 @@ bool FilterProcessor::accepts(const ImuSample& s) {
 }
 
 bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
-    if (reset_.exchange(false, std::memory_order_relaxed)) filter_->reset();
     if (in.has_node_quat) {
         const auto& q = in.node_q_wxyz;
         const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);

@@ -5,12 +5,10 @@
 // own quaternion (on-node attitude mode) pass through, flagged kSegmentFromNode.
 // A sample with non-finite values is rejected (returns false: the pool counts it) and never
 // reaches the filter, so one bad frame cannot poison a segment's state.
-// Threading: called only from the segment's worker thread. reset_requested() may be set
-// from any thread (reload): the worker resets the filter before its next sample.
+// Threading: called only from the segment's worker thread.
 // Cost: the filter's update; no allocation.
 #pragma once
 
-#include <atomic>
 #include <memory>
 
 #include "core/segment_processor.hpp"
@@ -28,14 +26,10 @@ public:
     /// What process() rejects otherwise; the offline replay (daemon/replay.hpp) asks the same.
     [[nodiscard]] static bool accepts(const ImuSample& s);
 
-    /// Any thread: the filter restarts (re-initialises from its next sample).
-    void request_reset() { reset_.store(true, std::memory_order_relaxed); }
-
     [[nodiscard]] const filter::OrientationFilter& filter() const { return *filter_; }
 
 private:
     std::unique_ptr<filter::OrientationFilter> filter_;
-    std::atomic<bool> reset_{false};
 };
 
 }  // namespace mocap::pipeline

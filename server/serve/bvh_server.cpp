@@ -12,12 +12,7 @@ constexpr std::size_t kMaxClientLine = 64;  // "subject <id>" fits easily
 }  // namespace
 
 BvhServerCounters::BvhServerCounters() {
-    group.add("connections_accepted", connections_accepted);
-    group.add("connections_rejected_full", connections_rejected_full);
-    group.add("connections_refused_per_address", connections_refused_per_address);
-    group.add("connections_evicted", connections_evicted);
-    group.add("connections_closed", connections_closed);
-    group.add("accept_errors", accept_errors);
+    connections.register_in(group);
     group.add("frames_published", frames_published);
     group.add("frames_sent", frames_sent);
     group.add("frames_dropped", frames_dropped);
@@ -176,15 +171,13 @@ BvhServer::BvhServer(BvhServerConfig config, const BvhFrameEncoder& encoder)
     : config_(std::move(config)),
       encoder_(encoder),
       serve_({"bvh", "mocap-bvh", "live BVH"},
-             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes, config_.threads},
-             {counters_.connections_accepted, counters_.connections_rejected_full,
-              counters_.connections_refused_per_address, counters_.connections_evicted, counters_.accept_errors},
+             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes, config_.threads}, counters_.connections,
              {[this](std::size_t lane, asio::ip::tcp::socket s, ServeThread::SlotPtr slot) {
                   admit(lane, std::move(s), std::move(slot));
               },
               [this](std::size_t lane, std::uint64_t id) { sessions_[lane]->close(id); },
               [this](std::size_t lane) { sessions_[lane]->close_all(); }}),
-      sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections_closed)),
+      sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections.closed)),
       backlog_(serve_.ios(), config_.publish_backlog_frames,
                [this](std::size_t lane, const SubjectText& line) { deliver(lane, line); }) {
     if (encoder_.fixed_frame_time()) fixed_greeting_ = greeting(0.0);

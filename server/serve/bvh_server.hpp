@@ -68,21 +68,16 @@ struct BvhServerConfig {
 };
 
 struct BvhServerCounters {
-    Counter connections_accepted;
-    Counter connections_rejected_full;        ///< every slot held by a client making progress
-    Counter connections_refused_per_address;  ///< [limits] bvh_per_address reached
-    Counter connections_evicted;              ///< closed to give their slot to a new client
-    Counter connections_closed;
-    Counter accept_errors;     ///< failed accepts (EMFILE...), retried after a pause
-    Counter frames_published;  ///< frames handed to publish() while clients were connected
-    Counter frames_sent;       ///< lines written (sum over clients)
-    Counter frames_dropped;    ///< oldest lines dropped from lagging clients
-    Counter backlog_dropped;   ///< the serve thread fell behind publish()
-    Counter bad_client_lines;  ///< client input that is not "subject <id>"
+    ConnectionCounters connections;  ///< connections_* and accept_errors (connection_counters.hpp)
+    Counter frames_published;        ///< frames handed to publish() while clients were connected
+    Counter frames_sent;             ///< lines written (sum over clients)
+    Counter frames_dropped;          ///< oldest lines dropped from lagging clients
+    Counter backlog_dropped;         ///< the serve thread fell behind publish()
+    Counter bad_client_lines;        ///< client input that is not "subject <id>"
     Counter write_errors;
 
-    /// Component "bvh_live": every counter above by its member name (the metrics registry's
-    /// entry, core/metrics_registry.hpp).
+    /// Component "bvh_live": every counter above by its member name, the connections' as
+    /// connection_counters.hpp names them (the metrics registry's entry, core/metrics_registry.hpp).
     CounterGroup group{"bvh_live"};
 
     BvhServerCounters();

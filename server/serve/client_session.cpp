@@ -429,7 +429,7 @@ void ClientSession::close() {
     socket_.close(ignored);
     unsubscribe();
     replies_.clear();
-    ctx_.counters.connections_closed.add();
+    ctx_.counters.connections.closed.add();
     ctx_.on_closed(lane_, id_);
 }
 

@@ -13,12 +13,7 @@
 namespace mocap::serve {
 
 HttpServerCounters::HttpServerCounters() {
-    group.add("connections_accepted", connections_accepted);
-    group.add("connections_rejected_full", connections_rejected_full);
-    group.add("connections_refused_per_address", connections_refused_per_address);
-    group.add("connections_evicted", connections_evicted);
-    group.add("connections_closed", connections_closed);
-    group.add("accept_errors", accept_errors);
+    connections.register_in(group);
     group.add("requests", requests);
     group.add("bad_requests", bad_requests);
     group.add("metrics_scrapes", metrics_scrapes);
@@ -46,15 +41,13 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
       description_(std::move(description)),
       handlers_(std::move(handlers)),
       serve_({"http", "mocap-http", "viewer, /metrics and /healthz"},
-             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes, config_.threads},
-             {counters_.connections_accepted, counters_.connections_rejected_full,
-              counters_.connections_refused_per_address, counters_.connections_evicted, counters_.accept_errors},
+             {{config_.max_clients, config_.limits}, config_.send_buffer_bytes, config_.threads}, counters_.connections,
              {[this](std::size_t lane, asio::ip::tcp::socket s, ServeThread::SlotPtr slot) {
                   admit(lane, std::move(s), std::move(slot));
               },
               [this](std::size_t lane, std::uint64_t id) { sessions_[lane]->close(id); },
               [this](std::size_t lane) { sessions_[lane]->close_all(); }}),
-      sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections_closed)),
+      sessions_(make_session_tables<Session>(serve_.lanes(), counters_.connections.closed)),
       ws_sessions_(serve_.lanes()),
       backlog_(serve_.ios(), config_.publish_backlog_frames,
                [this](std::size_t lane, const SubjectText& frame) { deliver(lane, frame); }),

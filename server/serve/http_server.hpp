@@ -133,12 +133,7 @@ struct HttpHandlers {
 };
 
 struct HttpServerCounters {
-    Counter connections_accepted;
-    Counter connections_rejected_full;        ///< every slot held by a connection making progress
-    Counter connections_refused_per_address;  ///< [limits] http_per_address reached
-    Counter connections_evicted;              ///< closed to give their slot to a new connection
-    Counter connections_closed;
-    Counter accept_errors;  ///< failed accepts (EMFILE...), retried after a pause
+    ConnectionCounters connections;  ///< connections_* and accept_errors (connection_counters.hpp)
     Counter requests;
     Counter bad_requests;  ///< unparseable, unknown path or method (4xx)
     Counter metrics_scrapes;
@@ -158,8 +153,8 @@ struct HttpServerCounters {
     Counter takes_deleted;
     ControlCounters control;  ///< http.control_* (control_access.hpp)
 
-    /// Component "http": every counter above by its member name (the metrics registry's
-    /// entry, core/metrics_registry.hpp).
+    /// Component "http": every counter above by its member name, the connections' as
+    /// connection_counters.hpp names them (the metrics registry's entry, core/metrics_registry.hpp).
     CounterGroup group{"http"};
 
     HttpServerCounters();

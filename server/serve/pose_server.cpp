@@ -97,7 +97,8 @@ bool PoseServer::start(std::string& error) {
     if (!acceptor_) return false;
     boost::system::error_code ec;
     bound_port_ = acceptor_->local_endpoint(ec).port();
-    accept_backoff_ = std::make_unique<AcceptBackoff>(lanes_[0]->io.get_executor(), "serve", counters_.accept_errors);
+    accept_backoff_ =
+        std::make_unique<AcceptBackoff>(lanes_[0]->io.get_executor(), "serve", counters_.connections.accept_errors);
     running_ = true;
     do_accept();
     for (std::size_t i = 0; i < lanes_.size(); ++i) {
@@ -158,7 +159,7 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
     std::uint64_t suppressed = 0;
     switch (a.verdict) {
         case ConnectionSlots::Verdict::kRefusedPerAddress:
-            counters_.connections_refused_per_address.add();
+            counters_.connections.refused_per_address.add();
             if (log_.allow(LogLimiter::kClientFull, suppressed)) {
                 spdlog::warn("serve: connection from {} refused: {} connections from that address ({} suppressed)",
                              peer.ip, config_.limits.max_per_address, suppressed);
@@ -166,7 +167,7 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
             reject(socket, *goodbye_per_address_);
             break;
         case ConnectionSlots::Verdict::kRefusedFull:
-            counters_.connections_rejected_full.add();
+            counters_.connections.rejected_full.add();
             if (log_.allow(LogLimiter::kClientFull, suppressed)) {
                 spdlog::warn(
                     "serve: client limit {} reached, every client making progress, connection refused ({} "
@@ -176,7 +177,7 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
             reject(socket, *goodbye_full_);
             break;
         case ConnectionSlots::Verdict::kAdmittedEvicting:
-            counters_.connections_evicted.add();
+            counters_.connections.evicted.add();
             if (log_.allow(LogLimiter::kClientFull, suppressed)) {
                 spdlog::warn("serve: client limit {} reached, closing a client without progress for {} ({} suppressed)",
                              config_.max_clients, peer.ip, suppressed);
@@ -185,7 +186,7 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
             [[fallthrough]];
         case ConnectionSlots::Verdict::kAdmitted:
             active_clients_.fetch_add(1);
-            counters_.connections_accepted.add();
+            counters_.connections.accepted.add();
             asio::post(lanes_[lane]->io, [this, lane, s = std::move(socket), slot = std::move(a.slot)]() mutable {
                 start_session(lane, std::move(s), std::move(slot));
             });

@@ -5,12 +5,7 @@
 namespace mocap::serve {
 
 ServeCounters::ServeCounters() {
-    group.add("connections_accepted", connections_accepted);
-    group.add("connections_rejected_full", connections_rejected_full);
-    group.add("connections_refused_per_address", connections_refused_per_address);
-    group.add("connections_evicted", connections_evicted);
-    group.add("connections_closed", connections_closed);
-    group.add("accept_errors", accept_errors);
+    connections.register_in(group);
     group.add("frames_published", frames_published);
     group.add("frames_encoded", frames_encoded);
     group.add("frames_sent", frames_sent);

@@ -10,23 +10,19 @@
 #include <chrono>
 #include <cstdint>
 
+#include "serve/connection_counters.hpp"
 #include "serve/control_access.hpp"
 #include "serve/serve_config.hpp"
 
 namespace mocap::serve {
 
 struct ServeCounters {
-    Counter connections_accepted;
-    Counter connections_rejected_full;        ///< every slot held by a client making progress
-    Counter connections_refused_per_address;  ///< [limits] pose_per_address reached
-    Counter connections_evicted;              ///< closed to give their slot to a new client
-    Counter connections_closed;
-    Counter accept_errors;     ///< failed accepts (EMFILE...), retried after a pause
-    Counter frames_published;  ///< frames handed to publish()
-    Counter frames_encoded;    ///< encodings (one per frame and field selection in use)
-    Counter frames_sent;       ///< frame deliveries written to clients (sum over clients)
-    Counter frames_dropped;    ///< oldest frames dropped from lagging clients' queues
-    Counter backlog_dropped;   ///< frames dropped because a serve thread fell behind publish()
+    ConnectionCounters connections;  ///< connections_* and accept_errors (connection_counters.hpp)
+    Counter frames_published;        ///< frames handed to publish()
+    Counter frames_encoded;          ///< encodings (one per frame and field selection in use)
+    Counter frames_sent;             ///< frame deliveries written to clients (sum over clients)
+    Counter frames_dropped;          ///< oldest frames dropped from lagging clients' queues
+    Counter backlog_dropped;         ///< frames dropped because a serve thread fell behind publish()
     Counter bytes_sent;
     Counter subscriptions;
     Counter malformed_messages;  ///< unparseable message or garbage length prefix
@@ -40,8 +36,8 @@ struct ServeCounters {
     Counter requests_deferred;            ///< requests that waited for their serve thread's next turn
     ControlCounters control;              ///< serve.control_* (control_access.hpp)
 
-    /// Component "serve": every counter above by its member name (the metrics registry's
-    /// entry, core/metrics_registry.hpp).
+    /// Component "serve": every counter above by its member name, the connections' as
+    /// connection_counters.hpp names them (the metrics registry's entry, core/metrics_registry.hpp).
     CounterGroup group{"serve"};
 
     ServeCounters();

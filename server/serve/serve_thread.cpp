@@ -28,7 +28,7 @@ std::vector<std::unique_ptr<Lane>> make_lanes(std::size_t threads) {
 }
 }  // namespace
 
-ServeThread::ServeThread(Names names, const Options& options, const Counters& counters, Hooks hooks)
+ServeThread::ServeThread(Names names, const Options& options, ConnectionCounters& counters, Hooks hooks)
     : names_(std::move(names)),
       options_(options),
       counters_(counters),

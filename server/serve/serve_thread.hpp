@@ -45,18 +45,12 @@
 #include "core/asio.hpp"
 #include "core/connection_slots.hpp"
 #include "core/counters.hpp"
+#include "serve/connection_counters.hpp"
 
 namespace mocap::serve {
 
 class ServeThread {
 public:
-    struct Counters {
-        Counter& accepted;
-        Counter& rejected_full;
-        Counter& refused_per_address;
-        Counter& evicted;
-        Counter& accept_errors;
-    };
     struct Names {
         std::string service;      ///< prefix of the log line and errors: "bvh", "http"
         std::string thread_name;  ///< at most 15 characters: "mocap-bvh"
@@ -77,7 +71,8 @@ public:
         std::size_t threads = 1;                       ///< lanes (0 is taken as 1)
     };
 
-    ServeThread(Names names, const Options& options, const Counters& counters, Hooks hooks);
+    /// `counters` (the server's; this object counts all but `closed`) must outlive it.
+    ServeThread(Names names, const Options& options, ConnectionCounters& counters, Hooks hooks);
     /// Calls stop().
     ~ServeThread();
     ServeThread(const ServeThread&) = delete;
@@ -115,7 +110,7 @@ private:
 
     Names names_;
     Options options_;
-    Counters counters_;
+    ConnectionCounters& counters_;
     Hooks hooks_;
     struct Lane {
         asio::io_context io{1};

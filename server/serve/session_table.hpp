@@ -25,7 +25,7 @@ namespace mocap::serve {
 template <class Session>
 class SessionTable {
 public:
-    /// `closed_counter` (e.g. connections_closed) must outlive the table.
+    /// `closed_counter` (e.g. ConnectionCounters::closed) must outlive the table.
     explicit SessionTable(Counter& closed_counter) : closed_counter_(closed_counter) {}
 
     /// Lists `session` under `id`, or replaces the one listed there (an HTTP connection

@@ -162,7 +162,6 @@ public:
     /// Returns still(). Pass gyro_norm_rad_s = 0 when only orientations are known.
     bool update(std::int64_t t_us, const Quat& q_earth_sensor, double gyro_norm_rad_s = 0.0);
     bool still() const { return started_ && last_us_ - since_us_ >= params_.window_us; }
-    std::int64_t still_for_us() const { return started_ ? last_us_ - since_us_ : 0; }
     void reset() { started_ = false; }
 
 private:

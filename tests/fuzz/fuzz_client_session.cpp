@@ -153,6 +153,6 @@ MOCAP_FUZZ_ENTRY(client_session) {
     MOCAP_FUZZ_CHECK(h->closed == closed_before + 1, "session did not close exactly once");
 
     const serve::ServeCounters& c = h->counters;
-    MOCAP_FUZZ_CHECK(c.connections_closed.value() == h->closed, "connections_closed");
+    MOCAP_FUZZ_CHECK(c.connections.closed.value() == h->closed, "connections_closed");
     return 0;
 }

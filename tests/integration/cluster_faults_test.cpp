@@ -23,8 +23,7 @@ protected:
     void start_host(const std::string& password) {
         HostConfig h{.sink_port = sink_port_, .pose_port = pose_port_, .calibration_dir = dir_.path().string()};
         h.workers = 1;
-        h.cluster = "[cluster]\nnats_url = \"nats://127.0.0.1:" + std::to_string(nats_port_) + "\"\nsite = \"" + kSite +
-                    "\"\nhost_id = \"h\"\nuser = \"" + kUser + "\"\npassword = \"" + password + "\"\n";
+        h.cluster = cluster_section(nats_port_, kSite, "h", cluster_credentials(kUser, password), kDefaultQueueFrames);
         daemon_ = start_mocapd(MOCAPD_BIN, h, dir_);
         ASSERT_FALSE(HasFailure());
         sim_ = std::make_unique<Process>(

@@ -159,9 +159,7 @@ protected:
         h.pose_port = free_port();
         HostConfig c{.sink_port = h.sink_port, .pose_port = h.pose_port, .calibration_dir = dir_.path().string()};
         c.workers = 1;
-        c.cluster = "[cluster]\nnats_url = \"nats://127.0.0.1:" + std::to_string(client_ports_[0]) + "\"\nsite = \"" +
-                    kSite + "\"\nhost_id = \"" + host_id + "\"\nuser = \"" + kUser + "\"\npassword = \"" + kPassword +
-                    "\"\n";
+        c.cluster = cluster_section(client_ports_[0], kSite, host_id, cluster_credentials(), kDefaultQueueFrames);
         h.daemon = start_mocapd(MOCAPD_BIN, c, dir_, host_id);
         ASSERT_FALSE(HasFailure());
         h.sim = std::make_unique<Process>(

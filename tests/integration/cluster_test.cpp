@@ -479,10 +479,9 @@ TEST(ClusterZones, SinksWithOneSinkIdOnHostsOfTwoZonesAreTwoSubjectsOfTheSite) {
 TEST(ClusterConfig, AnonymousIsRefusedAtCheckAndStartUnlessAllowed) {
     TempDir dir;
     const std::uint16_t port = free_port();  // nothing listens: nothing must be needed to refuse
-    const std::string base = "[serve]\npose_listen = \"127.0.0.1:" + std::to_string(free_port()) +
-                             "\"\n[ingest]\nsink_listen = \"127.0.0.1:" + std::to_string(free_port()) +
-                             "\"\n[http]\nenabled = false\n[outputs]\nbvh_live = false\n";
-    write_file(dir.file("anon.toml"), base + cluster_section(port, ""));
+    HostConfig h{.sink_port = free_port(), .pose_port = free_port(), .calibration_dir = dir.path().string()};
+    h.cluster = cluster_section(port, "");
+    write_file(dir.file("anon.toml"), daemon_config(h));
     Process check({MOCAPD_BIN, "--check-config", dir.file("anon.toml")}, dir.file("check.log"));
     EXPECT_NE(check.wait(10s).value_or(0), 0);
     EXPECT_NE(check.log().find("cluster.nats_url: set credentials"), std::string::npos) << check.log();
@@ -491,7 +490,8 @@ TEST(ClusterConfig, AnonymousIsRefusedAtCheckAndStartUnlessAllowed) {
     EXPECT_NE(start.log().find("allow_anonymous"), std::string::npos) << start.log();
 
     // allow_anonymous = true passes, and an unreachable cluster does not stop the daemon.
-    write_file(dir.file("ok.toml"), base + cluster_section(port, "allow_anonymous = true\n"));
+    h.cluster = cluster_section(port, "allow_anonymous = true\n");
+    write_file(dir.file("ok.toml"), daemon_config(h));
     Process ok({MOCAPD_BIN, "--check-config", dir.file("ok.toml")}, dir.file("ok.log"));
     EXPECT_EQ(ok.wait(10s).value_or(-1), 0) << ok.log();
 }

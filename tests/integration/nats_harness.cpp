@@ -118,16 +118,17 @@ std::unique_ptr<Process> start_mocapd(const char* mocapd_bin, const HostConfig& 
 }
 
 std::string cluster_section(std::uint16_t nats_port, const std::string& site, const std::string& host_id,
-                            const std::string& more) {
+                            const std::string& more, std::size_t queue_frames) {
     std::ostringstream s;
     s << "[cluster]\nnats_url = \"nats://127.0.0.1:" << nats_port << "\"\nsite = \"" << site << "\"\nhost_id = \""
-      << host_id << "\"\nqueue_frames = 64\n"
-      << more;
+      << host_id << "\"\n";
+    if (queue_frames != kDefaultQueueFrames) s << "queue_frames = " << queue_frames << "\n";
+    s << more;
     return s.str();
 }
 
-std::string cluster_credentials() {
-    return std::string("user = \"") + kNatsUser + "\"\npassword = \"" + kNatsPassword + "\"\n";
+std::string cluster_credentials(const std::string& user, const std::string& password) {
+    return "user = \"" + user + "\"\npassword = \"" + password + "\"\n";
 }
 
 std::unique_ptr<Process> stream_sim(const char* sim_bin, std::uint16_t sink_port, int subjects, int seconds,

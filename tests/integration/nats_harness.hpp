@@ -6,6 +6,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -98,12 +99,14 @@ std::string daemon_config(const HostConfig& host);
 std::unique_ptr<Process> start_mocapd(const char* mocapd_bin, const HostConfig& host, const TempDir& dir,
                                       const std::string& name = "mocapd");
 
-/// "[cluster]" with nats_url on the port, site, host_id, queue_frames = 64, then `more`
-/// (credentials and other keys, one per line).
+/// cluster_section()'s queue_frames that writes no line: the daemon's default queue.
+inline constexpr std::size_t kDefaultQueueFrames = 0;
+/// "[cluster]" with nats_url on the port, site, host_id, queue_frames (64 unless given), then
+/// `more` (credentials and other keys, one per line).
 std::string cluster_section(std::uint16_t nats_port, const std::string& site, const std::string& host_id,
-                            const std::string& more);
-/// user = kNatsUser, password = kNatsPassword, as config lines.
-std::string cluster_credentials();
+                            const std::string& more, std::size_t queue_frames = 64);
+/// user and password as config lines: kNatsUser and kNatsPassword unless given.
+std::string cluster_credentials(const std::string& user = kNatsUser, const std::string& password = kNatsPassword);
 
 /// `mocap-sim stream` (the binary `sim_bin`) to 127.0.0.1:sink_port: `subjects` at 100 Hz
 /// for `seconds`, with its rate statistics (sim_syncs_skipped) in `log`.

@@ -289,7 +289,7 @@ TEST(BvhServer, ClientsOnSeveralServeThreadsEachGetEveryLineInOrder) {
     // stop() with every client connected: each lane closes its own, the threads join.
     server.stop();
     EXPECT_EQ(server.client_count(), 0u);
-    EXPECT_EQ(server.counters().connections_closed.value(), kClients);
+    EXPECT_EQ(server.counters().connections.closed.value(), kClients);
     for (auto& conn : conns)
         EXPECT_EQ(conn->read_until_lines(0, 1), "") << "closed: EOF";
 }

@@ -232,14 +232,14 @@ TEST(PoseServer, ClientLimitRejectsWithReasonAndFreesSlotsOnClose) {
     PoseClient idle = s.connect();
     PoseClient a = s.connect();
     PoseClient b = s.connect();
-    EXPECT_EQ(s.server.counters().connections_evicted.value(), 1u);
+    EXPECT_EQ(s.server.counters().connections.evicted.value(), 1u);
     ASSERT_TRUE(a.subscribe({{1}, 1, 0}, 2s, error)) << error;
     ASSERT_TRUE(b.subscribe({{1}, 1, 0}, 2s, error)) << error;
     PoseClient c;
     EXPECT_FALSE(c.connect("127.0.0.1", s.server.port(), 2s, error));
     ASSERT_TRUE(c.goodbye().has_value()) << error;
     EXPECT_EQ(c.goodbye()->reason(), v1::GOODBYE_SERVER_FULL);
-    EXPECT_EQ(s.server.counters().connections_rejected_full.value(), 1u);
+    EXPECT_EQ(s.server.counters().connections.rejected_full.value(), 1u);
 
     a.close();
     ASSERT_TRUE(wait_until([&] { return s.server.client_count() == 1; }));
@@ -364,7 +364,7 @@ TEST(PoseServer, FortyPipelinedRequestsWithTheDefaultLimitsAreAllAnswered) {
     EXPECT_EQ(pongs, 40);
     EXPECT_FALSE(c.goodbye().has_value());
     EXPECT_EQ(s.server.counters().rate_limited.value(), 0u);
-    EXPECT_EQ(s.server.counters().connections_closed.value(), 0u);
+    EXPECT_EQ(s.server.counters().connections.closed.value(), 0u);
 }
 
 // ... and the 41st and later requests of the burst get a Goodbye that names the limit. The

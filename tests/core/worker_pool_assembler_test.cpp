@@ -52,7 +52,7 @@ public:
     std::uint64_t out_of_order = 0, stale = 0, wrong = 0, bad_times = 0;
 };
 
-TEST(Pipeline, IngestWorkersAssemblerDeliverEveryFrameInOrder) {
+TEST(WorkerPoolAssembler, IngestWorkersAssemblerDeliverEveryFrameInOrder) {
     constexpr std::uint32_t kSubjects = 4;
     constexpr std::uint16_t kSegments = 15;
     constexpr std::uint64_t kSyncs = 200;
