@@ -69,6 +69,8 @@ struct SegmentPose {
     std::int64_t sample_us = 0;
     std::uint8_t flags = kSegmentNeverSeen;
     SegmentMag mag = SegmentMag::kNone;
+    std::uint8_t frame_epoch = 0;       ///< changes when the filter's 6D heading frame starts again
+                                        ///< (its attitude restarted after a gap), modulo 256
     float mag_heading_rad = 0.0f;       ///< the filter's heading correction about the vertical
     float field_norm_ut = 0.0f;         ///< the field the filter sees (0: unknown)
     float field_dip_rad = 0.0f;         ///< its dip, positive down

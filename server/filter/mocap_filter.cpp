@@ -240,6 +240,7 @@ void MocapFilter::update(const ImuSample& sample) {
     const double dt = s.clock.step_s(sample.t_us);
     const math::Vec3 gyro = math::to_vec3(sample.gyro_rad_s);
     ++s.samples;
+    if (s.clock.skipped()) restart_attitude();
     if (!s.initialised) {
         s.initialised = true;  // dt == 0: the first sample sets attitude, not motion
     } else if (dt > 0.0) {
@@ -266,6 +267,47 @@ void MocapFilter::update(const ImuSample& sample) {
         ++s.no_mag_samples;
         if (params_.mag_delay_s < 0.0) s.mag_delay.update(rate, m.mag_ut, false, dt, false, mag_delay_forgetting_);
     }
+}
+
+// A gap (samples missing for longer than max_step_s): the motion in it was not followed, so
+// after it the attitude is off by whatever the sensor turned meanwhile, and everything
+// averaged along the attitude is in a frame that no longer holds. Kept, the accelerometer's
+// low-pass and the bias measurement built on it took the inclination's catching up for gyro
+// bias, and the heading guard took the heading's for a disturbed field: a 2.5 s gap while
+// walking left a pelvis 1-2 °/s off about the vertical, its field refused for a minute and the
+// hips up to 100° off. So the attitude starts again as at the first sample (inclination from
+// the accelerometer, heading from the field's fast start), with what belongs to the sensor and
+// its place kept: the gyro bias and its uncertainty, the gyro's noise floor, the sample period
+// and time constants, the reference field's norm and dip, the magnetometer's lag.
+// heading_split().frame_epoch tells the chain stage that q6's heading frame changed.
+void MocapFilter::restart_attitude() {
+    MocapFilterState& s = state_;
+    s.q_i_sensor = math::Quat::Identity();
+    s.q_e6_i = math::Quat::Identity();
+    s.delta_rad = 0.0;
+    s.initialised = false;  // this sample sets the attitude, not motion
+    s.gyro_history = 0;     // second differences across the gap are not noise
+    s.acc_lp = {};
+    s.acc_clip = 1.0;
+    s.bias_r_lp = {};
+    s.bias_b_lp = {};
+    s.rest_time_s = 0.0;
+    s.rest_detected = false;
+    // The field in the 6D frame, and the heading's statistics against it, start again.
+    s.mag_lp = {};
+    s.mag_dis_lp_rad = s.mag_dis_drift_rad = 0.0;
+    s.mag_heading_disturbed = false;
+    s.mag_settled = true;
+    s.k_mag_init = 1.0;
+    s.last_mag_disagreement_rad = 0.0;
+    s.mag_horizontal_lp.setZero();
+    s.mag_reject_time_s = 0.0;
+    s.hb_running = false;
+    s.mag_off_n = 0.0;
+    s.mag_off_r.setZero();
+    s.mag_off_sum_e.setZero();
+    s.mag_off_sum_s.setZero();
+    ++s.attitude_restarts;
 }
 
 void MocapFilter::update_gyro(const math::Vec3& gyro, double dt_s) {
@@ -723,6 +765,7 @@ HeadingSplit MocapFilter::heading_split() const {
     h.mag_trusted = h.has_mag_heading && !(params_.mag_guard && mag_rejected()) && state_.mag_settled;
     h.field_norm_ut = state_.mag_norm;
     h.field_dip_rad = state_.mag_dip_rad;
+    h.frame_epoch = state_.attitude_restarts;
     return h;
 }
 

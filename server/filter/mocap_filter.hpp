@@ -356,6 +356,7 @@ struct MocapFilterState {
     std::uint64_t zero_acc_samples = 0;      ///< samples with a zero accelerometer reading
     std::uint64_t acc_samples_clipped = 0;   ///< accelerometer deviations clipped as linear acceleration
     std::uint64_t heading_bias_samples = 0;  ///< heading corrections used as a measurement of the bias
+    std::uint32_t attitude_restarts = 0;     ///< attitude started again after a gap (restart_attitude)
 
     SampleClock clock = SampleClock(0.5);  ///< time base (max step set from Params)
 };
@@ -383,6 +384,7 @@ public:
 private:
     void compute_coeffs(double ts_s);
     void update_gyro(const math::Vec3& gyro, double dt_s);
+    void restart_attitude();
     void update_acc(const math::Vec3& acc);
     void clip_acc_deviation(math::Vec3& acc_i);
     void update_mag(const math::Vec3& mag, const math::Vec3& rate_rad_s, double dt_s);

@@ -9,6 +9,7 @@
 // one worker. Cost: documented per filter (tens of ns to µs per update).
 #pragma once
 
+#include <cstdint>
 #include <string_view>
 
 #include "core/imu_sample.hpp"
@@ -37,6 +38,8 @@ struct HeadingSplit {
                                              ///< rejection, its heading is back on the field
     double field_norm_ut = 0.0;              ///< the field it sees, filtered (0: unknown)
     double field_dip_rad = 0.0;              ///< its dip, positive down
+    std::uint32_t frame_epoch = 0;           ///< changes when q6's heading frame starts again (the
+                                             ///< filter restarted its attitude after a gap)
 };
 
 class OrientationFilter {
@@ -92,7 +95,8 @@ public:
         const std::int64_t d_us = t_us - last_us_;
         last_us_ = t_us;
         const double dt = static_cast<double>(d_us) * 1e-6;
-        if (d_us <= 0 || dt > max_step_s_) {
+        skipped_ = d_us > 0 && dt > max_step_s_;
+        if (d_us <= 0 || skipped_) {
             ++gaps_;
             return 0.0;
         }
@@ -100,15 +104,19 @@ public:
     }
     void reset() {
         started_ = false;
+        skipped_ = false;
         last_us_ = 0;
         gaps_ = 0;
     }
     [[nodiscard]] bool started() const { return started_; }
+    /// The last step went forward by more than max_step_s: time the samples do not cover.
+    [[nodiscard]] bool skipped() const { return skipped_; }
     [[nodiscard]] std::uint64_t gaps() const { return gaps_; }
 
 private:
     double max_step_s_;
     bool started_ = false;
+    bool skipped_ = false;
     std::int64_t last_us_ = 0;
     std::uint64_t gaps_ = 0;
 };

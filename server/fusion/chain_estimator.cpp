@@ -138,24 +138,41 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
     reset();
 }
 
+void ChainEstimator::forget_delta(Joint& j) {
+    j.filter.reset();
+    j.search = TrigQuad{};
+    j.last_joint_us = j.last_mag_us = j.refused_since_us = j.still_since_us = -1;
+    j.past = {};
+}
+
+void ChainEstimator::restart_delta(Joint& j, const SegmentInput& p, const SegmentInput& c) {
+    const bool known = j.filter.initialised();
+    forget_delta(j);
+    ++j.stats.restarts;
+    if (!known) return;
+    // Rz(δ) ≈ q6_p · (q_p⁻¹ q_c)_last · q6_c⁻¹; its twist about the vertical is δ.
+    const auto pi = static_cast<std::size_t>(j.def.parent), ci = static_cast<std::size_t>(j.def.child);
+    const Quat m = p.q6 * last_out_[pi].conjugate() * last_out_[ci] * c.q6.conjugate();
+    j.filter.init(math::wrap_pi(2.0 * std::atan2(m.z(), m.w())), params_.restart_sigma_deg * kDeg);
+}
+
 void ChainEstimator::reset() {
     for (Joint& j : joints_) {
-        j.filter.reset();
-        j.search = TrigQuad{};
+        forget_delta(j);
         j.noise_ratio.fill(1.0);
-        j.last_joint_us = j.last_mag_us = j.refused_since_us = j.still_since_us = -1;
         j.stats = JointStatus{};
         if (j.axis) j.axis->reset();
         if (j.centre) {
             j.centre->reset();
             j.def.centre_known = false;
         }
-        j.past = {};
         if (j.axes_estimated) j.def.axes_known = false;  // learned in the run that is forgotten
         j.axes_estimated = false;
     }
     psi_.fill(0.0);
     field_seen_.fill(false);
+    epoch_.fill(-1);
+    last_out_.fill(Quat::Identity());
     last_us_ = -1;
 }
 
@@ -441,12 +458,20 @@ void ChainEstimator::update(std::int64_t t_us, std::span<const SegmentInput> in,
         step_.search_decay = dt_s > 0.0 ? std::exp(-dt_s / params_.search_s) : 1.0;
         step_.noise_gain = dt_s > 0.0 ? 1.0 - std::exp(-dt_s / params_.noise_tau_s) : 0.0;
     }
-    for (std::size_t s = 0; s < segment_count_; ++s)
-        if (in[s].fresh && in[s].mag_trusted) field_seen_[s] = true;
+    // A segment whose filter restarted its attitude (after a gap) has a new 6D heading frame:
+    // the relative headings to it, and their drift, are unknown again.
+    std::array<bool, kMaxSegments> restarted{};
+    for (std::size_t s = 0; s < segment_count_; ++s) {
+        if (!in[s].fresh) continue;
+        if (in[s].mag_trusted) field_seen_[s] = true;
+        restarted[s] = epoch_[s] >= 0 && epoch_[s] != in[s].frame_epoch;
+        epoch_[s] = in[s].frame_epoch;
+    }
     std::array<JointHeading, kMaxSegments> headings{};
     for (std::size_t i = 0; i < joints_.size(); ++i) {
         Joint& j = joints_[i];
         const auto p = static_cast<std::size_t>(j.def.parent), c = static_cast<std::size_t>(j.def.child);
+        if (restarted[p] || restarted[c]) restart_delta(j, in[p], in[c]);
         update_joint(j, t_us, dt_s, in[p], in[c], field_seen_[p] && field_seen_[c]);
         headings[i] = {j.filter.initialised(), j.filter.delta_rad(), source_of(j, t_us)};
     }
@@ -479,6 +504,7 @@ void ChainEstimator::compose(std::span<const SegmentInput> in, std::span<const J
             source = h.source;
         }
         out[s].q_earth_sensor = (rz(psi_[s]) * x.q6).normalized();
+        last_out_[s] = out[s].q_earth_sensor;
         out[s].source = source;
     }
 }

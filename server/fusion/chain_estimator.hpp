@@ -108,6 +108,9 @@ struct ChainParams {
     double noise_tau_s = 30.0;               ///< time over which each constraint's real error is learned, s
     double min_noise_ratio = 0.01;           ///< a constraint counts at most this much better than its model
     double lost_s = 3.0;                     ///< the gate refused every constraint for this long: restart δ
+    double restart_sigma_deg = 30.0;         ///< a segment's 6D frame started again (its filter restarted after
+                                             ///< a gap): δ starts where the joint's last relative orientation
+                                             ///< puts it, with this uncertainty, °
     HingeAxisParams axis{};                  ///< axes learned from the motion
     JointPositionParams centre{};            ///< joint centres learned from the motion
     double sigma_acc_m_s2 = 0.3;             ///< error of the joint centre's specific force, m/s² ...
@@ -126,6 +129,8 @@ struct SegmentInput {
     bool mag_trusted = false;        ///< the filter uses the field now (not rejected)
     double field_norm_ut = 0.0;      ///< the field the filter sees (0: unknown)
     double field_dip_rad = 0.0;
+    std::uint8_t frame_epoch = 0;  ///< changes when q6's heading frame starts again (the filter
+                                   ///< restarted after a gap): the joints' δ to it start again
 };
 
 /// One joint's relative heading as compose() applies it.
@@ -151,7 +156,7 @@ struct JointStatus {
     std::uint64_t mag_updates = 0;        ///< magnetometer differences taken
     std::uint64_t mag_disagreements = 0;  ///< differences refused: fields or joint disagree
     std::uint64_t refused = 0;            ///< outliers refused by the filter's gate
-    std::uint64_t restarts = 0;           ///< δ restarted from the constraints (lost, or new axes)
+    std::uint64_t restarts = 0;           ///< δ restarted (lost, new axes, a segment's frame restarted)
     bool axes_known = false;
     bool axes_estimated = false;  ///< the axes in use were learned from the motion
     Vec3 axis_parent = Vec3::UnitX(), axis_child = Vec3::UnitX();
@@ -222,6 +227,11 @@ private:
         bool axes_estimated = false;
         JointStatus stats;
     };
+    /// Forgets δ and what was measured of it in the segments' old 6D frames.
+    static void forget_delta(Joint& j);
+    /// One of the joint's segments has a new 6D frame: δ again from the relative orientation
+    /// the joint had at the last step (a joint turns little about the vertical in a short gap).
+    void restart_delta(Joint& j, const SegmentInput& p, const SegmentInput& c);
     /// fields_seen: both segments' filters have trusted their fields at some time.
     void update_joint(Joint& j, std::int64_t t_us, double dt_s, const SegmentInput& p, const SegmentInput& c,
                       bool fields_seen);
@@ -242,6 +252,8 @@ private:
     std::array<int, kMaxSegments> order_{};           // segments, parents before children
     std::array<double, kMaxSegments> psi_{};          // heading applied to each segment's q6
     std::array<bool, kMaxSegments> field_seen_{};     // the segment's filter has trusted its field
+    std::array<int, kMaxSegments> epoch_{};           // the segment's last frame_epoch (-1: none yet)
+    std::array<Quat, kMaxSegments> last_out_{};       // q_earth_sensor composed at the last step
     std::int64_t last_us_ = -1;
     bool solved_this_step_ = false;  // one axis or centre solve per step at most (their cost)
     struct StepCoefficients {

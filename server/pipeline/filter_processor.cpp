@@ -37,6 +37,7 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
         out.field_norm_ut = static_cast<float>(h.field_norm_ut);
         out.field_dip_rad = static_cast<float>(h.field_dip_rad);
     }
+    out.frame_epoch = static_cast<std::uint8_t>(h.frame_epoch);
     const math::Vec3 rate = math::to_vec3(s.gyro_rad_s) - filter_->gyro_bias_rad_s();
     out.rate_rad_s = {static_cast<float>(rate.x()), static_cast<float>(rate.y()), static_cast<float>(rate.z())};
     out.accel_m_s2 = {static_cast<float>(s.accel_m_s2[0]), static_cast<float>(s.accel_m_s2[1]),

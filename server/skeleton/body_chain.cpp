@@ -126,6 +126,7 @@ void BodyChain::apply(const SubjectFrame& frame, std::span<Quat> q_earth_sensor,
         x.mag_available = s.mag != SegmentMag::kNone;
         x.mag_trusted = s.mag == SegmentMag::kTrusted;
         x.mag_heading_rad = s.mag_heading_rad;
+        x.frame_epoch = s.frame_epoch;
         x.field_norm_ut = s.field_norm_ut;
         x.field_dip_rad = s.field_dip_rad;
         x.gyro_rad_s = Vec3(s.rate_rad_s[0], s.rate_rad_s[1], s.rate_rad_s[2]);

@@ -12,6 +12,7 @@ than in the first.
     body_fusion.py eval DIR --heading magnetometer|joints|auto [--axis model|estimate]
                             [--offline] [--skip-s S]
     body_fusion.py table ROOT [--axes model,estimate] [--offline] [--breakdown] [--jobs N]
+    body_fusion.py gap DIR OUT --at S --for S
 
 record: a fresh mocapd on free loopback ports (generated config: raw recorder on, HTTP and
 live BVH off, its calibration saved in DIR/calibration, [fusion] heading = "auto") fed by
@@ -36,6 +37,11 @@ the recording; the largest RMSE and its angle; knee and elbow flexion (the worse
 right); "first_min_deg" and "last_min_deg", the largest per-angle RMSE over the first and the
 last minute; "goal": each threshold and "pass"; and "timing", how regularly the simulator
 sent (the share of steps more than 2 ms off its period: a busy host makes it late).
+
+gap: copies recording DIR to OUT without every node's samples from --at S to --at + --for S
+(seconds after the first sample): a sink that lost its link for a while. The raw file is
+otherwise byte-identical; truth.csv, record.json and mocapd.toml are copied. Needs
+python3-protobuf and protoc (as body_real_convert.py).
 
 table: eval of every recording in ROOT or its subdirectories (truth.csv + raw files)
 x heading {magnetometer, joints, auto} x --axes; writes a markdown table (one row per
@@ -360,6 +366,47 @@ def evaluate(bins, rec_dir, heading, axis="model", offline=False, skip_s=None):
 
 
 # --------------------------------------------------------------------------------------
+# gap
+# --------------------------------------------------------------------------------------
+
+def cut_gap(rec_dir, out_dir, at_s, for_s):
+    """Writes rec_dir's recording to out_dir without the samples in [at_s, at_s + for_s)."""
+    from body_real_convert import load_pb2, read_varint  # noqa: E402 (protobuf only for this command)
+    pb2 = load_pb2(None)
+    files = raw_files(rec_dir)
+    if not files:
+        raise SystemExit(f"body_fusion: no raw-*.mocapraw in {rec_dir}")
+    os.makedirs(out_dir, exist_ok=False)
+    for name in ("truth.csv", "record.json", "mocapd.toml"):
+        if os.path.isfile(os.path.join(rec_dir, name)):
+            shutil.copy(os.path.join(rec_dir, name), out_dir)
+    t0, dropped, kept = None, 0, 0
+    for path in files:
+        with open(path, "rb") as f:
+            data = f.read()
+        if data[:8] != b"MOCAPRAW":
+            raise SystemExit(f"body_fusion: {path}: no MOCAPRAW magic")
+        out, pos = [data[:8]], 8
+        while pos < len(data):
+            start = pos
+            n, pos = read_varint(data, pos)
+            rec = pb2.RawRecord()
+            rec.ParseFromString(data[pos:pos + n])
+            pos += n
+            if rec.HasField("sample"):
+                t0 = rec.sample.t_us if t0 is None else t0
+                if at_s <= (rec.sample.t_us - t0) * 1e-6 < at_s + for_s:
+                    dropped += 1
+                    continue
+                kept += 1
+            out.append(data[start:pos])
+        with open(os.path.join(out_dir, os.path.basename(path)), "wb") as f:
+            f.write(b"".join(out))
+    return {"recording": os.path.abspath(rec_dir), "out": os.path.abspath(out_dir), "at_s": at_s, "for_s": for_s,
+            "samples_dropped": dropped, "samples_kept": kept}
+
+
+# --------------------------------------------------------------------------------------
 # table
 # --------------------------------------------------------------------------------------
 
@@ -455,7 +502,15 @@ def main():
                     "configuration and of every heading = auto one")
     tb.add_argument("--json", default="", help="write every eval's JSON here")
     tb.add_argument("--jobs", type=int, default=1, help="replays at once")
+    gp = sub.add_parser("gap", help="a copy of a recording without every node's samples for a while")
+    gp.add_argument("dir")
+    gp.add_argument("out", help="directory for the copy (created; must not exist)")
+    gp.add_argument("--at", type=float, required=True, help="start of the gap, s after the first sample")
+    gp.add_argument("--for", dest="for_s", type=float, required=True, help="its length, s")
     a = ap.parse_args()
+    if a.command == "gap":
+        print(json.dumps(cut_gap(a.dir, a.out, a.at, a.for_s)))
+        return 0
     bins = binaries(a)
 
     if a.command == "record":

@@ -440,6 +440,18 @@ def convert(data, out, trunk="upper_back", subject=1, pb2_dir=None, quiet=False,
 # Self-test: a synthetic subject standing in the anatomical position
 # --------------------------------------------------------------------------------------
 
+def read_varint(data, pos):
+    """(value, position after it) of the base-128 varint at data[pos]."""
+    n, shift = 0, 0
+    while True:
+        b = data[pos]
+        pos += 1
+        n |= (b & 0x7F) << shift
+        shift += 7
+        if not b & 0x80:
+            return n, pos
+
+
 def read_raw(path, pb2):
     """[RawSample] of a raw recording (after the magic and the header)."""
     with open(path, "rb") as f:
@@ -448,14 +460,7 @@ def read_raw(path, pb2):
         fail(f"{path}: no MOCAPRAW magic")
     pos, out, first = 8, [], True
     while pos < len(data):
-        n, shift = 0, 0
-        while True:
-            b = data[pos]
-            pos += 1
-            n |= (b & 0x7F) << shift
-            shift += 7
-            if not b & 0x80:
-                break
+        n, pos = read_varint(data, pos)
         rec = pb2.RawRecord()
         rec.ParseFromString(data[pos:pos + n])
         pos += n

@@ -322,12 +322,25 @@ TEST(ChainEstimatorAuto, TakesAgreeingFieldsAndRefusesADisturbedOne) {
 // are learned): while it does not move, both segments turn as one body, and their rates show δ
 // (the base of a hand-held arm moved alone). Once the joint moves, the rates differ and are not
 // taken: δ, a property of the two 6D frames, stays where the still period put it.
+/// A ball joint between segments 0 and 1 whose centre is not learned.
+JointDef ball_def() {
+    JointDef def;
+    def.parent = 0;
+    def.child = 1;
+    def.type = JointType::kBall;
+    def.estimate_centre = false;
+    return def;
+}
+
+/// A parent swaying about both horizontal axes and turning about the vertical.
+Quat swaying_parent(double t) {
+    return rz(0.5 * std::sin(0.3 * t)) * axis_angle(Vec3(1, 0, 0), 0.6 * std::sin(0.8 * t)) *
+           axis_angle(Vec3(0, 1, 0), 0.5 * std::sin(0.55 * t + 1.0));
+}
+
 TEST(ChainEstimatorBall, AStillJointShowsItsHeadingAndAMovingOneIsNotTakenForStill) {
     TwoSegmentMotion m;
-    m.q_parent = [](double t) {
-        return rz(0.5 * std::sin(0.3 * t)) * axis_angle(Vec3(1, 0, 0), 0.6 * std::sin(0.8 * t)) *
-               axis_angle(Vec3(0, 1, 0), 0.5 * std::sin(0.55 * t + 1.0));
-    };
+    m.q_parent = swaying_parent;
     const Quat mount = axis_angle(Vec3(0.2, 0.4, 1.0), 1.9);
     m.q_child = [mount](double t, const Quat& qp) {
         const double bend = t < 20.0 ? 0.0 : 1.0 * std::sin(2.0 * (t - 20.0));
@@ -336,11 +349,7 @@ TEST(ChainEstimatorBall, AStillJointShowsItsHeadingAndAMovingOneIsNotTakenForSti
     };
     m.h_parent = [](double) { return 0.4; };
     m.h_child = [](double) { return -1.6; };
-    JointDef def;
-    def.parent = 0;
-    def.child = 1;
-    def.type = JointType::kBall;
-    def.estimate_centre = false;
+    const JointDef def = ball_def();
     ChainParams p;
     p.mode = HeadingMode::kJoints;
     const RunResult r = run(m, def, p, 90.0);
@@ -348,6 +357,31 @@ TEST(ChainEstimatorBall, AStillJointShowsItsHeadingAndAMovingOneIsNotTakenForSti
     EXPECT_LT(max_error_deg(r, 20.0), 1.5);
     EXPECT_EQ(r.source[static_cast<std::size_t>(15 * 100)], HeadingSource::kJoints);
     EXPECT_EQ(r.source.back(), HeadingSource::kGyro);
+}
+
+// After a gap the child's filter starts its attitude again (SegmentInput::frame_epoch changes):
+// its 6D frame is turned by whatever it turned unseen (here 70°), so the δ learned in the old
+// frame is wrong by as much. A moving ball joint has no constraint to relearn it; δ starts again
+// from the joint's relative orientation at the last step, which a short gap changes little.
+// Without the restart: 70° off for good.
+TEST(ChainEstimatorBall, ASegmentWhoseFrameStartsAgainKeepsTheJointsRelativeHeading) {
+    TwoSegmentMotion m;
+    m.q_parent = swaying_parent;
+    const Quat mount = axis_angle(Vec3(0.2, 0.4, 1.0), 1.9);
+    m.q_child = [mount](double t, const Quat& qp) {
+        const double bend = t < 20.0 ? 0.0 : 1.0 * std::sin(2.0 * (t - 20.0));
+        return qp * axis_angle(Vec3(0, 1, 0), bend) * mount;
+    };
+    m.h_parent = [](double) { return 0.4; };
+    m.h_child = [](double t) { return t < 40.0 ? -1.6 : -1.6 + 70.0 * kDeg; };
+    const JointDef def = ball_def();
+    ChainParams p;
+    p.mode = HeadingMode::kJoints;
+    const RunResult r =
+        run(m, def, p, 60.0, [](double t, SegmentInput&, SegmentInput& c) { c.frame_epoch = t < 40.0 ? 3 : 4; });
+    EXPECT_LT(max_error_deg(r, 5.0, 39.99), 1.5);
+    EXPECT_LT(max_error_deg(r, 40.0), 2.0);
+    EXPECT_EQ(r.status.restarts, 1u);
 }
 
 TEST(ChainEstimatorCheck, RefusesBadChains) {
