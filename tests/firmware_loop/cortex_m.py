@@ -52,6 +52,7 @@ class CortexM:
         self.ticks_per_cycle = ticks_per(8_000_000)  # HSI after reset
         self.fault = None
         self.resets = 0
+        self.exceptions_taken = {}  # exception number -> entries
         self.on_reset = []  # peripheral reset callbacks (system reset request)
         self.uc.hook_add(UC_HOOK_INTR, self._on_intr)
 
@@ -82,7 +83,8 @@ class CortexM:
         self.scs.reset()
         for callback in self.on_reset:
             callback()
-        self.set_sysclk(8_000_000)
+        self.set_sysclk(8_000_000)  # the RCC is back on the HSI
+        self.scs.set_hclk(8_000_000)
         self.reset()
 
     def _set_fault(self, text):
@@ -137,6 +139,7 @@ class CortexM:
         uc.reg_write(UC_ARM_REG_SP, frame)
         uc.reg_write(UC_ARM_REG_LR, 0xFFFFFFF1 if self.scs.active else 0xFFFFFFF9)
         self.scs.entered(exc)
+        self.exceptions_taken[exc] = self.exceptions_taken.get(exc, 0) + 1
         handler = int.from_bytes(uc.mem_read(self.scs.vtor + 4 * exc, 4), "little")
         if not handler & 1:
             self._set_fault(f"vector {exc} = 0x{handler:08X} without the Thumb bit")

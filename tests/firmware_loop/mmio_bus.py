@@ -38,6 +38,7 @@ class MmioBus:
         self.peripherals = []
         self.error = None
         self._pages = set()
+        self._cache = {}  # address -> peripheral
 
     def attach(self, peripheral):
         self.peripherals.append(peripheral)
@@ -49,10 +50,12 @@ class MmioBus:
                 self.uc.mmio_map(page, PAGE, self._read, page, self._write, page)
 
     def _find(self, address):
-        for p in self.peripherals:
-            if p.base <= address < p.base + p.size:
-                return p
-        return None
+        p = self._cache.get(address)
+        if p is None:
+            p = next((p for p in self.peripherals if p.base <= address < p.base + p.size), None)
+            if p is not None:
+                self._cache[address] = p
+        return p
 
     def _fail(self, what, address):
         pc = self.uc.reg_read(UC_ARM_REG_PC)

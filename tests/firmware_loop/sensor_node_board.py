@@ -24,10 +24,10 @@ class SensorNodeBoard:
     def __init__(self, elf_path, motion=None, who_am_i=0x71, hse_present=True):
         cpu = self.cpu = CortexM(0x08000000, 64 * 1024, 0x20000000, 20 * 1024)
         clock = cpu.clock
-        self.rcc = Rcc(clock, cpu.set_sysclk, hse_present=hse_present)
+        self.rcc = Rcc(clock, self._hclk_changed, hse_present=hse_present)
         self.flash = FlashInterface()
         self.rcc.flash_latency = self.flash.latency
-        cpu.scs = SystemControl(clock, self.rcc.hclk_hz, irq_count=43)
+        cpu.scs = SystemControl(clock, irq_count=43)
         self.gpioa = GpioPort("GPIOA", 0x40010800, self.rcc, 2)
         self.gpiob = GpioPort("GPIOB", 0x40010C00, self.rcc, 3)
         self.gpioc = GpioPort("GPIOC", 0x40011000, self.rcc, 4)
@@ -49,6 +49,10 @@ class SensorNodeBoard:
         """Puts the CAN transceiver on `bus` (a can_bus.CanBus on this board's clock)."""
         self.can.bus = bus
         bus.attach(self.can)
+
+    def _hclk_changed(self, hz):
+        self.cpu.set_sysclk(hz)
+        self.cpu.scs.set_hclk(hz)
 
     def _spi_pins_routed(self):
         return self.gpioa.pin_mode(SCK_PIN) == "af" and self.gpioa.pin_mode(MOSI_PIN) == "af"

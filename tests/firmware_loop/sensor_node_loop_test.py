@@ -84,6 +84,10 @@ def test_constant_motion_arrives_as_sent():
     assert statuses and int(statuses[-1][2]) == STATE_RUNNING and int(statuses[-1][6]) == 1
     assert int(statuses[-1][3]) & ERRF_IMU == 0
     assert rig.board.led_on()
+    # SysTick (exception 15) entered and returned from once per millisecond since board_init.
+    ms = rig.cpu.clock.ticks * 1000 // TICK_HZ
+    assert ms - 5 <= rig.cpu.exceptions_taken.get(15, 0) <= ms
+    assert rig.cpu.scs.active == []
 
     # Cycles from the SYNC's arrival in the RX FIFO to the third frame's transmit request.
     tx = rig.board.can.tx_log

@@ -25,11 +25,14 @@ class SystemControl(Peripheral):
     base = 0xE000E000
     size = 0x1000
 
-    def __init__(self, clock, sysclk_hz, irq_count):
+    def __init__(self, clock, irq_count):
         self.clock = clock
-        self.sysclk_hz = sysclk_hz  # callable: the core clock from the RCC model
         self.irq_count = irq_count
+        self.hclk_hz = 8_000_000  # the core clock; the RCC model reports changes (set_hclk)
         self.reset()
+
+    def set_hclk(self, hz):
+        self.hclk_hz = hz
 
     def reset(self):
         self.st_ctrl = 0
@@ -47,7 +50,7 @@ class SystemControl(Peripheral):
 
     # --- SysTick (ARMv7-M B3.3): counts down from LOAD, wraps to LOAD, pends on 1 -> 0 ---
     def _st_period(self):
-        hz = self.sysclk_hz() if self.st_ctrl & 4 else self.sysclk_hz() // 8
+        hz = self.hclk_hz if self.st_ctrl & 4 else self.hclk_hz // 8
         return ticks_per(hz)
 
     def _st_counts(self):
