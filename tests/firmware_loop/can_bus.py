@@ -75,6 +75,7 @@ class CanBus:
         self.nodes = []
         self.idle_at = 0  # tick from which the bus is idle
         self.log = []  # (start tick, end tick, sender index, can_id, data)
+        self.errors = []  # (start tick, sender index, can_id) of attempts nobody acknowledged
 
     def attach(self, node):
         self.nodes.append(node)
@@ -105,6 +106,7 @@ class CanBus:
                 # Wrong bit rate or TX pin not on the bus: nobody acknowledges, an error frame
                 # (6 dominant + 8 delimiter bits) follows the first bits.
                 self.idle_at = start + 20 * self.bit_ticks
+                self.errors.append((start, sender, can_id))
                 node.transmitted(frame, False)
                 continue
             data = frame[2]

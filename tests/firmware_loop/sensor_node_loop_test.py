@@ -38,9 +38,9 @@ def inputs():
         pytest.fail(f"FIRMWARE_F103_ELF ({ELF!r}) and CAN_FRAME_DECODE ({DECODE!r}) must name the built files")
 
 
-def run_node(motion, who_am_i=0x71):
-    rig = SensorNodeRig(ELF, motion=motion, who_am_i=who_am_i, rate_hz=RATE_HZ)
-    rig.run(SYNC_START_US / 1e6 + (SYNCS + 0.5) / RATE_HZ, sync_start_us=SYNC_START_US, sync_count=SYNCS)
+def run_node(motion, who_am_i=0x71, hse_present=True, seconds=None):
+    rig = SensorNodeRig(ELF, motion=motion, who_am_i=who_am_i, rate_hz=RATE_HZ, hse_present=hse_present)
+    rig.run(seconds or SYNC_START_US / 1e6 + (SYNCS + 0.5) / RATE_HZ, sync_start_us=SYNC_START_US, sync_count=SYNCS)
     assert rig.cpu.fault is None, rig.cpu.fault
     assert rig.board.all_violations() == []
     assert rig.cpu.resets == 0
@@ -113,3 +113,15 @@ def test_wrong_who_am_i_sends_no_samples():
     assert statuses, "the node reports its fault"
     assert all(int(l[2]) == STATE_FAULT and int(l[3]) & ERRF_IMU for l in statuses), statuses
     assert not rig.board.led_on()
+
+
+def test_no_crystal_stays_off_the_bus():
+    # Without the 8 MHz crystal the clock set-up stays on the 8 MHz HSI: the bit timing made
+    # for a 36 MHz APB1 would give 222 kbit/s on a 1 Mbit/s bus, where every frame the node
+    # starts is an error for the other nodes. The node must stay off the bus (the sink then
+    # reports it lost). 1.8 s covers its start-up (1.6 s), whose waits take 9 times longer on SysTick
+    # counts meant for 72 MHz.
+    rig = run_node(Motion(), hse_present=False, seconds=1.8)
+    assert rig.board.rcc.sysclk_hz() == 8_000_000
+    assert [e for e in rig.bus.errors if e[1] == 0] == [], "the node disturbed the bus"
+    assert rig.node_frames() == []

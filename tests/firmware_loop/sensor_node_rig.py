@@ -17,9 +17,9 @@ SYNC_ID = 0x000
 
 
 class SensorNodeRig:
-    def __init__(self, elf_path, motion=None, who_am_i=0x71, rate_hz=100):
+    def __init__(self, elf_path, motion=None, who_am_i=0x71, rate_hz=100, hse_present=True):
         self.rate_hz = rate_hz
-        self.board = SensorNodeBoard(elf_path, motion=motion, who_am_i=who_am_i)
+        self.board = SensorNodeBoard(elf_path, motion=motion, who_am_i=who_am_i, hse_present=hse_present)
         self.cpu = self.board.cpu
         # One emulated MCU per bus for now: the bus runs on its clock.
         self.bus = CanBus(self.cpu.clock, BITRATE)
