@@ -21,7 +21,8 @@ until ST2 is read; ST2.HOFL when |X|+|Y|+|Z| exceeds 4912 uT; output H = true /
 MPU's y, its y the MPU's x, its z the MPU's -z.
 
 The motion is constant (a `Motion` of specific force in g, rate in deg/s and field in uT,
-MPU axes); `who_am_i` can be set to a wrong value for fault tests.
+MPU axes); for fault tests `who_am_i` can be set to a wrong value and `answering` cleared
+(MISO then floats high: every byte reads 0xFF, as on the breakout with its pull-up).
 """
 
 from dataclasses import dataclass
@@ -116,6 +117,7 @@ class Mpu9250:
         self.violations = []
         self.transactions = 0
         self.selected = False
+        self.answering = True  # False: unpowered or cut off, nothing drives MISO (reads 0xFF)
         self.reset()
 
     def reset(self):
@@ -137,7 +139,7 @@ class Mpu9250:
         self.selected = selected
 
     def exchange(self, byte, cpol, cpha, sck_hz):
-        if not self.selected:
+        if not self.selected or not self.answering:
             return 0xFF
         if cpol != cpha:
             self.violations.append(f"SPI mode {2 * cpol + cpha} (the MPU-9250 takes mode 0 or 3)")

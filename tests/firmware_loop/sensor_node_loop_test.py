@@ -125,3 +125,21 @@ def test_no_crystal_stays_off_the_bus():
     assert rig.board.rcc.sysclk_hz() == 8_000_000
     assert [e for e in rig.bus.errors if e[1] == 0] == [], "the node disturbed the bus"
     assert rig.node_frames() == []
+
+
+def test_sensor_lost_mid_stream_sends_no_samples():
+    # Three good samples, then the MPU-9250 stops answering (MISO floats high): the 0xFF
+    # bytes must not go out as samples (-1 counts would pass for real ones); the node
+    # reports FAULT and will initialise the sensor again before trusting it
+    # (firmware_sensor_node_test covers the return).
+    rig = SensorNodeRig(ELF, motion=Motion(), rate_hz=RATE_HZ)
+    rig.run(SYNC_START_US / 1e6 + 2.5 / RATE_HZ, sync_start_us=SYNC_START_US, sync_count=SYNCS)
+    rig.board.mpu.answering = False
+    rig.run(SYNC_START_US / 1e6 + (SYNCS + 0.5) / RATE_HZ, sync_start_us=SYNC_START_US, sync_count=SYNCS)
+    assert rig.cpu.fault is None, rig.cpu.fault
+    assert rig.board.all_violations() == []
+    lines = decode(rig.node_frames())
+    counters = sorted({int(l[2]) for l in lines if l[0] in ("ACCEL", "GYRO", "MAG")})
+    assert counters == [0, 1, 2], lines
+    statuses = [l for l in lines if l[0] == "STATUS"]
+    assert int(statuses[-1][2]) == STATE_FAULT and int(statuses[-1][3]) & ERRF_IMU, statuses
