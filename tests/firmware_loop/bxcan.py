@@ -50,7 +50,7 @@ class BxCan(Peripheral):
         self.fovr = [False, False]
         self.fmr, self.fm1r, self.fs1r, self.ffa1r, self.fa1r = 0x2A1C0E01, 0, 0, 0, 0
         self.fr = [[0, 0] for _ in range(self.banks)]
-        self.tx_log = []  # (request tick, mailbox) per TXRQ
+        self.tx_log = []  # (request tick, mailbox, identifier) per TXRQ
         self.violations = []
 
     def clocked(self):
@@ -238,7 +238,7 @@ class BxCan(Peripheral):
             self.mailbox[i][reg] = value
             if reg == 0 and value & 1:
                 self.request_tick[i] = self.clock.ticks
-                self.tx_log.append((self.clock.ticks, i))
+                self.tx_log.append((self.clock.ticks, i, (value >> 21) & 0x7FF))
                 if not self._normal():
                     pass  # stays pending until the controller is on the bus
         elif offset == 0x200:

@@ -18,12 +18,36 @@ from virtual_clock import TICK_HZ  # noqa: E402
 
 ELF = os.environ.get("FIRMWARE_F103_ELF", "")
 DECODE = os.environ.get("CAN_FRAME_DECODE", "")
+ENCODE_CONFIG = os.environ.get("CAN_CONFIG_ENCODE", "")
 RATE_HZ = 100
 SYNCS = 8
 SYNC_START_US = 200_000  # after the node's ~150 ms MPU-9250 / AK8963 start-up
 G = 9.80665
 STATE_RUNNING, STATE_FAULT = 2, 3
 ERRF_IMU = 0x01
+
+
+def per_sample_cycles(rig, frames_per_sample):
+    """CPU cycles from each SYNC's arrival in the RX FIFO to the transmit request of the
+    sample's last frame (ACCEL, GYRO, MAG, ATT: functions 2 to 5)."""
+    requests = [t for t, _, can_id in rig.board.can.tx_log if 2 <= can_id >> 6 <= 5]
+    sync_ends = [end for (_, end, sender, can_id, _) in rig.bus.log if can_id == 0 and sender == 1]
+    cycles = []
+    for end in sync_ends:
+        after = [t for t in requests if t >= end][:frames_per_sample]
+        assert len(after) == frames_per_sample
+        cycles.append((after[-1] - end) * rig.board.rcc.hclk_hz() // TICK_HZ)
+    return cycles
+
+
+def report_cycles(rig, mode, frames_per_sample):
+    cycles = per_sample_cycles(rig, frames_per_sample)
+    period = rig.board.rcc.hclk_hz() // RATE_HZ
+    print(f"\n{mode} mode: cycles per sample (SYNC in FIFO -> last frame requested): max {max(cycles)}, "
+          f"mean {sum(cycles) // len(cycles)}, of {period} per SYNC period at {RATE_HZ} Hz "
+          f"({100 * max(cycles) / period:.2f} %); boot to first STATUS "
+          f"{min(t for t, _, _ in rig.board.can.tx_log) * 1000 // TICK_HZ} ms")
+    assert max(cycles) < period, "a sample must fit its SYNC slot"
 
 
 def decode(frames):
@@ -34,8 +58,9 @@ def decode(frames):
 
 @pytest.fixture(scope="module", autouse=True)
 def inputs():
-    if not os.path.isfile(ELF) or not os.access(DECODE, os.X_OK):
-        pytest.fail(f"FIRMWARE_F103_ELF ({ELF!r}) and CAN_FRAME_DECODE ({DECODE!r}) must name the built files")
+    if not os.path.isfile(ELF) or not os.access(DECODE, os.X_OK) or not os.access(ENCODE_CONFIG, os.X_OK):
+        pytest.fail(f"FIRMWARE_F103_ELF ({ELF!r}), CAN_FRAME_DECODE ({DECODE!r}) and CAN_CONFIG_ENCODE "
+                    f"({ENCODE_CONFIG!r}) must name the built files")
 
 
 def run_node(motion, who_am_i=0x71, hse_present=True, seconds=None):
@@ -89,20 +114,7 @@ def test_constant_motion_arrives_as_sent():
     assert ms - 5 <= rig.cpu.exceptions_taken.get(15, 0) <= ms
     assert rig.cpu.scs.active == []
 
-    # Cycles from the SYNC's arrival in the RX FIFO to the third frame's transmit request.
-    tx = rig.board.can.tx_log
-    sync_ends = [end for (_, end, sender, can_id, _) in rig.bus.log if can_id == 0 and sender == 1]
-    per_sample = []
-    for end in sync_ends:
-        requests = [t for t, _ in tx if t >= end][:3]
-        assert len(requests) == 3
-        per_sample.append((requests[-1] - end) * rig.board.rcc.hclk_hz() // TICK_HZ)
-    period = rig.board.rcc.hclk_hz() // RATE_HZ
-    print(f"\ncycles per sample (SYNC in FIFO -> 3rd frame requested): max {max(per_sample)}, "
-          f"mean {sum(per_sample) // len(per_sample)}, of {period} per SYNC period at {RATE_HZ} Hz "
-          f"({100 * max(per_sample) / period:.2f} %); boot to first STATUS "
-          f"{min(t for t, _ in tx) * 1000 // TICK_HZ} ms")
-    assert max(per_sample) < period
+    report_cycles(rig, "raw", 3)
 
 
 def test_wrong_who_am_i_sends_no_samples():
@@ -143,3 +155,26 @@ def test_sensor_lost_mid_stream_sends_no_samples():
     assert counters == [0, 1, 2], lines
     statuses = [l for l in lines if l[0] == "STATUS"]
     assert int(statuses[-1][2]) == STATE_FAULT and int(statuses[-1][3]) & ERRF_IMU, statuses
+
+
+def test_raw_attitude_mode_fits_the_sync_period():
+    # The node's worst case: raw + attitude (four frames and the soft-float filter per SYNC),
+    # switched on by a broadcast CONFIG as the sink sends it. A level node at rest: every ATT
+    # must say level (body z along earth up) within 1 degree.
+    mode_raw_attitude = 2
+    out = subprocess.run([ENCODE_CONFIG, "0", str(RATE_HZ), "3", "3", str(mode_raw_attitude), "1"],
+                         capture_output=True, text=True, check=True).stdout.split()
+    rig = SensorNodeRig(ELF, motion=Motion(accel_g=(0.0, 0.0, 1.0), mag_ut=(21.0, -6.0, -39.0)), rate_hz=RATE_HZ)
+    rig.host.send(int(SYNC_START_US * 0.95) * (TICK_HZ // 1_000_000), int(out[0], 16), bytes.fromhex(out[1]))
+    rig.run(SYNC_START_US / 1e6 + (SYNCS + 0.5) / RATE_HZ, sync_start_us=SYNC_START_US, sync_count=SYNCS)
+    assert rig.cpu.fault is None, rig.cpu.fault
+    assert rig.board.all_violations() == []
+    lines = decode(rig.node_frames())
+    att = [l for l in lines if l[0] == "ATT"]
+    assert sorted(int(l[2]) for l in att) == list(range(SYNCS)), lines
+    for l in att:
+        w, x, y, z = (float(v) for v in l[3:7])
+        up_z = 1 - 2 * (x * x + y * y)  # earth-up component of the body z axis
+        assert math.degrees(math.acos(max(-1.0, min(1.0, up_z)))) < 1.0, l
+    assert sorted({int(l[2]) for l in lines if l[0] == "ACCEL"}) == list(range(SYNCS))
+    report_cycles(rig, "raw + attitude", 4)
