@@ -11,8 +11,8 @@ FA1R 0x21C, filter banks at 0x240 (14 on the F103).
 Modes: sleep after reset (SLAK); INRQ enters initialisation (INAK); clearing INRQ and SLEEP
 joins the bus after 11 recessive bits at the configured bit rate. BTR is writable only in
 initialisation, filter banks only while FINIT is set or the bank is inactive. Three TX
-mailboxes: by request order with TXFP, else lowest identifier first; a frame sent by nobody
-else's acknowledgement (wrong bit rate, TX pin not routed) raises TEC by 8 and is retried
+mailboxes: by request order with TXFP, else lowest identifier first; a frame nobody
+acknowledges (wrong bit rate, TX pin not routed) raises TEC by 8 and is retried
 (NART = 0): error-passive above 127, bus-off above 255, recovered after 128 x 11 recessive bits
 with ABOM. RX FIFO 0 and 1, three frames each, filters in both scales and modes; with FMPIE0
 a non-empty FIFO 0 pends its interrupt.
