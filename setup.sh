@@ -35,7 +35,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
   nats-server libnats-dev
   liblo-dev liblo-tools python3-liblo
-  gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib
+  gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib python3-unicorn
   clang-14 libclang-rt-14-dev clang-tidy-14 clang-format-14 cppcheck ccache lld nlohmann-json3-dev
   assimp-utils qemu-system-x86 qemu-user busybox-static cpio kmod
   blender nodejs

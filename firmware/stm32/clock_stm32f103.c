@@ -12,7 +12,7 @@ void system_clock_init(void) {
     for (uint32_t n = 0; !(F1_RCC->CR & F1_RCC_CR_HSERDY); ++n) {
         if (n > F103_HSE_TIMEOUT) {
             return; /* no crystal: stay on the 8 MHz HSI; the CAN bit timing will be wrong
-                       and the node stays off the bus rather than disturbing it */
+                       and board_init() keeps the node off the bus rather than disturbing it */
         }
     }
     F1_RCC->CFGR = F1_RCC_CFGR_PLLSRC_HSE | F1_RCC_CFGR_PLLMUL(9u) | F1_RCC_CFGR_PPRE1_DIV2;

@@ -291,6 +291,32 @@ TEST_F(SensorNodeTest, MissingSensorFaultsThenRecovers) {
     EXPECT_EQ(samples(fake.take_tx()).size(), 3u);
 }
 
+TEST_F(SensorNodeTest, SensorLostMidStreamSendsNoSamplesAndIsInitialisedAgain) {
+    start(2);
+    fake.send_sync(1);
+    sensor_node_poll(&node);
+    ASSERT_EQ(samples(fake.take_tx()).size(), 3u);
+
+    fake.imu.present = false;  // MISO floats high: every byte reads 0xFF
+    fake.send_sync(2);
+    sensor_node_poll(&node);
+    auto sent = fake.take_tx();
+    EXPECT_TRUE(samples(sent).empty()) << "0xFF bytes are no sample";
+    EXPECT_EQ(node.state, MW_NODE_FAULT);
+    auto st = statuses(sent);
+    ASSERT_EQ(st.size(), 1u);
+    EXPECT_EQ(st[0].state, MW_NODE_FAULT);
+    EXPECT_TRUE(st[0].error_flags & MW_ERRF_IMU);
+
+    fake.imu.present = true;  // back, possibly after a power cycle: initialised again first
+    fake.now_us += SENSOR_NODE_IMU_RETRY_US;
+    sensor_node_poll(&node);
+    EXPECT_EQ(node.state, MW_NODE_WAITING);
+    fake.send_sync(3);
+    sensor_node_poll(&node);
+    EXPECT_EQ(samples(fake.take_tx()).size(), 3u);
+}
+
 TEST_F(SensorNodeTest, MissingMagnetometerKeepsAccelAndGyro) {
     fake.imu.mag_present = false;
     fake.imu.accel = {1, 2, 3};

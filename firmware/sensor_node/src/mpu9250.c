@@ -241,6 +241,13 @@ int mpu9250_read(mpu9250* dev, mpu9250_sample* out) {
     if (rc != MPU9250_OK) {
         return rc;
     }
+    uint8_t all = 0xFFu;
+    for (size_t i = 0; i < 14u; ++i) {
+        all &= raw[i];
+    }
+    if (all == 0xFFu) {
+        return MPU9250_ERR_NO_SENSOR;
+    }
     for (size_t i = 0; i < 3u; ++i) {
         out->accel[i] = be16(&raw[2u * i]);
         out->gyro[i] = be16(&raw[8u + 2u * i]);

@@ -192,8 +192,12 @@ static void on_sync(sensor_node* node, const mw_sync* sync) {
     node->state = MW_NODE_RUNNING;
     mpu9250_sample sample;
     if (mpu9250_read(&node->imu, &sample) != MPU9250_OK) {
+        /* The sensor stopped answering. It may come back reset (ranges, I2C master, sleep),
+         * so nothing it sends is trusted before it was initialised again. */
         ++node->counters.sensor_errors;
         node->event_flags |= MW_ERRF_IMU;
+        node->state = MW_NODE_FAULT;
+        node->next_imu_retry_us = now_us(node) + SENSOR_NODE_IMU_RETRY_US;
         return;
     }
     ++node->counters.samples;

@@ -125,6 +125,13 @@ int board_init(void) {
     f1_gpio_config(F1_GPIOB, 8u, F1_GPIO_IN_PULL);
     f1_gpio_config(F1_GPIOB, 9u, F1_GPIO_AF_PP_50MHZ);
 
+    /* The bit timing below needs APB1 at 36 MHz from the PLL. Without the crystal the clock
+     * set-up leaves the core on the 8 MHz HSI, where it would give 222 kbit/s: every frame
+     * the node started would be an error for the 1 Mbit/s bus, again after each bus-off
+     * recovery. The controller then stays asleep, off the bus (the sink reports the node lost). */
+    if ((F1_RCC->CFGR & F1_RCC_CFGR_SWS_MASK) != F1_RCC_CFGR_SWS_PLL) {
+        return -3;
+    }
     /* 1 Mbit/s from 36 MHz: prescaler 2, 1 + 15 + 2 = 18 tq, SJW 1. */
     static const bxcan_filter filters[] = {{0x000u, 0x780u}}; /* SYNC and CONFIG */
     return bxcan_start(CAN_BTR(1u, 14u, 1u, 0u), filters, 1u);

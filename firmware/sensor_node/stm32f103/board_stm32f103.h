@@ -14,7 +14,8 @@
 
 #include "sensor_node/sensor_node.h"
 
-/* Clocks, SysTick, GPIO, SPI1 and CAN. Returns 0, or negative if CAN did not join the bus. */
+/* Clocks, SysTick, GPIO, SPI1 and CAN. Returns 0, or negative if CAN did not join the bus
+ * (-3: the core is not on the PLL, e.g. no crystal, so CAN stays off the bus). */
 int board_init(void);
 
 /* The HAL over this board's peripherals (user pointer unused). */

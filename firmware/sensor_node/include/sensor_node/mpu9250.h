@@ -90,7 +90,8 @@ typedef enum {
     MPU9250_ERR_WHO_AM_I = -2, /* no MPU9250/9255 answered */
     MPU9250_ERR_I2C = -3,      /* AK8963 transaction NACKed or timed out */
     MPU9250_ERR_MAG_ID = -4,   /* AK8963 answered with a wrong WIA */
-    MPU9250_ERR_ARG = -5
+    MPU9250_ERR_ARG = -5,
+    MPU9250_ERR_NO_SENSOR = -6 /* a sample burst read all 0xFF: nothing drives MISO */
 } mpu9250_status;
 
 /* The bus: caller-owned, must outlive the driver. spi_transfer runs one chip-select-framed,
@@ -141,7 +142,9 @@ int mpu9250_set_dlpf(mpu9250* dev, uint8_t dlpf_cfg);
 /* The widest DLPF setting whose bandwidth stays under half of sample_rate_hz. */
 uint8_t mpu9250_dlpf_for_rate(uint16_t sample_rate_hz);
 
-/* Reads one nine-axis sample (one SPI burst from ACCEL_XOUT_H through EXT_SENS_DATA_07). */
+/* Reads one nine-axis sample (one SPI burst from ACCEL_XOUT_H through EXT_SENS_DATA_07).
+ * MPU9250_ERR_NO_SENSOR when the accelerometer, temperature and gyroscope bytes are all 0xFF:
+ * MISO floats high with no sensor driving it, and -1 counts would pass for a sample. */
 int mpu9250_read(mpu9250* dev, mpu9250_sample* out);
 
 /* Register helpers, exposed for the node core and tests. */
