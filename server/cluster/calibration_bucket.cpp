@@ -18,6 +18,10 @@ constexpr std::int64_t kOpenRetryUs = 1'000'000;
 constexpr std::int64_t kReconnectUs = 2'000'000;
 /// JetStream API requests (bucket lookup and creation, put, get) wait this long for the server.
 constexpr std::int64_t kApiWaitMs = 2000;
+/// Puts the server's permissions refused are tried again this often (each try is a refusal
+/// in the server's log).
+constexpr std::int64_t kRefusedPutRetryUs = 30'000'000;
+constexpr const char* kRefusedPrefix = "the NATS server refused it: ";
 /// The store thread looks at its queue at least this often while it waits for the watch.
 constexpr std::int64_t kWatchWaitMs = 100;
 
@@ -200,9 +204,8 @@ void CalibrationBucket::note_error(const std::string& what) {
 std::string CalibrationBucket::failure_text(int status) {
     const std::string refused = nats_errors_.take_violation();
     if (refused.empty()) return nats_error_text(status);
-    return "the NATS server refused it: " + refused +
-           " (the [cluster] user needs publish permission on $JS.API.> and $KV." + kCalibrationBucket +
-           ".>, config/nats/nats-server.conf)";
+    return kRefusedPrefix + refused + " (the [cluster] user needs publish permission on $JS.API.> and $KV." +
+           kCalibrationBucket + ".>, config/nats/nats-server.conf)";
 }
 
 bool CalibrationBucket::connect() {
@@ -346,7 +349,7 @@ void CalibrationBucket::do_work() {
         std::lock_guard lock(mutex_);
         saves.swap(local_saves_);
         gets.swap(pending_gets_);
-        if (kv_) puts.swap(pending_puts_);
+        if (kv_ && steady_us() >= next_put_us_) puts.swap(pending_puts_);
     }
     for (const auto& [id, calibration] : saves) {
         if (const std::string err = local_->save(model_, id, calibration); !err.empty())
@@ -367,7 +370,12 @@ void CalibrationBucket::put(std::uint32_t subject_id, const skeleton::Calibratio
     std::uint64_t rev = 0;
     const natsStatus s = kvStore_Put(&rev, kv_, key.c_str(), value.data(), static_cast<int>(value.size()));
     if (s != NATS_OK) {
-        note_error("cannot put " + key + ": " + failure_text(s) + "; put again when the bucket answers");
+        const std::string why = failure_text(s);
+        // A refusal lasts until the server's config changes: asked again every 30 s, not at once.
+        const bool refused = why.rfind(kRefusedPrefix, 0) == 0;
+        if (refused) next_put_us_ = steady_us() + kRefusedPutRetryUs;
+        note_error("cannot put " + key + ": " + why + "; put again " +
+                   (refused ? std::string("in 30 s") : std::string("when the bucket answers")));
         std::lock_guard lock(mutex_);
         pending_puts_.emplace(subject_id, calibration);  // unless a newer one came meanwhile
         return;

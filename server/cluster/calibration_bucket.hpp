@@ -162,7 +162,8 @@ private:
     std::string key_;                                // the site's calibration key ("" none)
     std::string key_error_;                          // the key file is set but unusable: nothing inbound is taken
     std::int64_t next_open_us_ = 0;
-    std::string last_problem_;  // logged once until it changes or the bucket opens
+    std::int64_t next_put_us_ = 0;  // puts wait until then after a permission refusal
+    std::string last_problem_;      // logged once until it changes or the bucket opens
     std::thread thread_;
 
     NatsErrors nats_errors_{std::string("calibration bucket ") + kCalibrationBucket};
