@@ -3,8 +3,9 @@
 // `allow_anonymous = true`. The host is told the site's calibration key (calibration_key_file)
 // and serves subjects 1..4. Anyone can put a well-formed value into the bucket; only a value
 // signed with the key, for a subject the host serves, and plausible (the body upright in the
-// pose it was taken in) is taken. Everything else is refused and counted, never applied, and
-// nothing of it reaches the calibration directory.
+// pose it was taken in) and newer than the last taken from its host is taken. Everything else
+// (a replayed value too) is refused and counted, never applied, and nothing of it reaches the
+// calibration directory.
 #include <gtest/gtest.h>
 #include <nats/nats.h>
 #include <sys/stat.h>
@@ -55,15 +56,21 @@ public:
     AnonymousBucket(const AnonymousBucket&) = delete;
     AnonymousBucket& operator=(const AnonymousBucket&) = delete;
 
-    /// Puts a value for `subject` as host `host_id` made it, signed with `key` ("" unsigned).
-    void put(std::uint32_t subject, const std::string& text, const std::string& key,
-             const std::string& host_id = "host-a") {
+    /// Puts a value for `subject` as host `host_id` made it, signed with `key` ("" unsigned);
+    /// returns it.
+    std::string put(std::uint32_t subject, const std::string& text, const std::string& key,
+                    const std::string& host_id = "host-a") {
         cluster::ClusterConfig c;
         c.site = kSite;
         c.host_id = host_id;
         const std::string value = cluster::calibration_value(c, subject, text, unix_us(), key);
+        put_value(subject, value);
+        return value;
+    }
+    /// Puts `value` as it is (a value seen before, put again).
+    void put_value(std::uint32_t subject, const std::string& value) {
         const std::string k = cluster::calibration_key(kSite, subject);
-        ASSERT_EQ(kvStore_Put(nullptr, kv_, k.c_str(), value.data(), static_cast<int>(value.size())), NATS_OK) << k;
+        EXPECT_EQ(kvStore_Put(nullptr, kv_, k.c_str(), value.data(), static_cast<int>(value.size())), NATS_OK) << k;
     }
 
 private:
@@ -131,18 +138,24 @@ TEST_F(CalibrationTrust, AnonymousPoisoningIsRefusedCountedAndNeverSavedWhileASi
                   pose_port_, "calibration_kv.refused", [](auto v) { return v >= 3; }, 30s),
               3u);
     // Subject 4: signed with the site's key, upright: the one value taken.
-    bucket_->put(4, calibration_text("1.0, 0.0, 0.0, 0.0"), kKey);
+    const std::string taken = bucket_->put(4, calibration_text("1.0, 0.0, 0.0, 0.0"), kKey);
     EXPECT_EQ(wait_stats_counter(
                   pose_port_, "calibration_kv.received", [](auto v) { return v >= 1; }, 30s),
               1u);
     EXPECT_TRUE(wait_until([&] { return std::filesystem::exists(calibrations_ + "/calibration-subject-4.toml"); }, 10s))
         << "the signed calibration is kept as the host's fallback";
-    EXPECT_EQ(stats_counter(pose_port_, "calibration_kv.refused"), 3u);
+    // The same signed value put again (a newer revision, an old time_us): a replay.
+    bucket_->put_value(4, taken);
+    EXPECT_EQ(wait_stats_counter(
+                  pose_port_, "calibration_kv.refused", [](auto v) { return v >= 4; }, 30s),
+              4u);
+    EXPECT_EQ(stats_counter(pose_port_, "calibration_kv.received"), 1u);
     EXPECT_EQ(calibration_files(), 1u) << "nothing of the refused values reaches the calibration directory";
     const std::string log = daemon_->log();
     EXPECT_NE(log.find("an unsigned value (calibration_key_file is set)"), std::string::npos) << log;
     EXPECT_NE(log.find("a signature that does not verify"), std::string::npos) << log;
     EXPECT_NE(log.find("the body would not stand upright"), std::string::npos) << log;
+    EXPECT_NE(log.find("(a replay)"), std::string::npos) << log;
 }
 
 TEST_F(CalibrationTrust, TwoThousandKeysForSubjectsNobodyConfiguredCreateNoFile) {
