@@ -25,6 +25,17 @@ constexpr const char* kRefusedPrefix = "the NATS server refused it: ";
 /// The store thread looks at its queue at least this often while it waits for the watch.
 constexpr std::int64_t kWatchWaitMs = 100;
 
+/// Text from a value, for the log: anyone may have written it, so at most 64 characters and
+/// no control character (a '?' instead).
+std::string loggable(const std::string& text) {
+    constexpr std::size_t kMax = 64;
+    std::string out = text.substr(0, kMax);
+    for (char& ch : out) {
+        if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f) ch = '?';
+    }
+    return text.size() > kMax ? out + "..." : out;
+}
+
 std::int64_t steady_us() {
     return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
         .count();
@@ -426,9 +437,9 @@ void CalibrationBucket::consider(kvEntry* entry) {
     const std::string value(static_cast<const char*>(kvEntry_Value(entry)),
                             static_cast<std::size_t>(kvEntry_ValueLen(entry)));
     const CalibrationValue v = parse_calibration_value(value);
+    const std::string made_on = loggable(v.fields.host_id);
     const std::string where = "bucket " + std::string(kCalibrationBucket) + " (key " + key + ", revision " +
-                              std::to_string(rev) + (v.fields.host_id.empty() ? "" : ", made on " + v.fields.host_id) +
-                              ")";
+                              std::to_string(rev) + (made_on.empty() ? "" : ", made on " + made_on) + ")";
     if (!v.error.empty()) {
         note_error("ignoring " + where + ": " + v.error);
         return;
