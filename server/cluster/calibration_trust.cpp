@@ -22,7 +22,7 @@ constexpr std::size_t kMaxKeyFileBytes = 4096;
 /// is ~1e-16; a tilt of a degree is a different world).
 constexpr double kMaxWorldTiltRad = 1.0 * M_PI / 180.0;
 
-std::string trimmed(std::string s) {
+std::string trimmed(const std::string& s) {
     const auto first = s.find_first_not_of(" \t\r\n");
     if (first == std::string::npos) return {};
     const auto last = s.find_last_not_of(" \t\r\n");
@@ -92,7 +92,7 @@ std::string calibration_signature(const std::string& key, const SignedFields& fi
         return {};
     static constexpr char kHex[] = "0123456789abcdef";
     std::string hex;
-    hex.reserve(2 * len);
+    hex.reserve(2 * static_cast<std::size_t>(len));
     for (unsigned int i = 0; i < len; ++i) {
         hex += kHex[mac[i] >> 4];
         hex += kHex[mac[i] & 15];
