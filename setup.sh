@@ -33,7 +33,7 @@ PACKAGES=(
   help2man lintian debootstrap
   libeigen3-dev libboost-dev libspdlog-dev libprotobuf-dev protobuf-compiler
   libgtest-dev libgmock-dev libbenchmark-dev libtomlplusplus-dev libcli11-dev libsystemd-dev
-  nats-server libnats-dev
+  nats-server libnats-dev libssl-dev
   liblo-dev liblo-tools python3-liblo
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib python3-unicorn
   clang-14 libclang-rt-14-dev clang-tidy-14 clang-format-14 cppcheck ccache lld nlohmann-json3-dev

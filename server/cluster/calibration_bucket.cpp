@@ -3,6 +3,7 @@
 #include <nats/nats.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <charconv>
 #include <chrono>
 #include <nlohmann/json.hpp>
@@ -17,8 +18,23 @@ constexpr std::int64_t kOpenRetryUs = 1'000'000;
 constexpr std::int64_t kReconnectUs = 2'000'000;
 /// JetStream API requests (bucket lookup and creation, put, get) wait this long for the server.
 constexpr std::int64_t kApiWaitMs = 2000;
+/// Puts the server's permissions refused are tried again this often (each try is a refusal
+/// in the server's log).
+constexpr std::int64_t kRefusedPutRetryUs = 30'000'000;
+constexpr const char* kRefusedPrefix = "the NATS server refused it: ";
 /// The store thread looks at its queue at least this often while it waits for the watch.
 constexpr std::int64_t kWatchWaitMs = 100;
+
+/// Text from a value, for the log: anyone may have written it, so at most 64 characters and
+/// no control character (a '?' instead).
+std::string loggable(const std::string& text) {
+    constexpr std::size_t kMax = 64;
+    std::string out = text.substr(0, kMax);
+    for (char& ch : out) {
+        if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f) ch = '?';
+    }
+    return text.size() > kMax ? out + "..." : out;
+}
 
 std::int64_t steady_us() {
     return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -37,14 +53,17 @@ std::string calibration_key(const std::string& site, std::uint32_t subject_id) {
 }
 
 std::string calibration_value(const ClusterConfig& config, std::uint32_t subject_id,
-                              const std::string& calibration_text, std::int64_t time_us) {
-    const nlohmann::ordered_json v{{"format", kFormat},
-                                   {"version", kCalibrationFormatVersion},
-                                   {"site", config.site},
-                                   {"subject", subject_id},
-                                   {"host_id", config.host_id},
-                                   {"time_us", time_us},
-                                   {"calibration", calibration_text}};
+                              const std::string& calibration_text, std::int64_t time_us, const std::string& key) {
+    nlohmann::ordered_json v{{"format", kFormat},
+                             {"version", kCalibrationFormatVersion},
+                             {"site", config.site},
+                             {"subject", subject_id},
+                             {"host_id", config.host_id},
+                             {"time_us", time_us},
+                             {"calibration", calibration_text}};
+    if (!key.empty())
+        v["hmac_sha256"] =
+            calibration_signature(key, {config.site, subject_id, config.host_id, time_us, calibration_text});
     return v.dump();
 }
 
@@ -69,17 +88,32 @@ CalibrationValue parse_calibration_value(const std::string& value) {
         out.error = "no calibration text";
         return out;
     }
-    out.calibration_text = v["calibration"].get<std::string>();
-    out.host_id = v.value("host_id", "");
+    const auto text = [&](const char* name) {
+        return v.contains(name) && v[name].is_string() ? v[name].get<std::string>() : std::string();
+    };
+    out.fields.calibration_text = v["calibration"].get<std::string>();
+    out.fields.site = text("site");
+    out.fields.host_id = text("host_id");
+    out.signature = text("hmac_sha256");
+    if (v.contains("subject") && v["subject"].is_number_unsigned() && v["subject"].get<std::uint64_t>() <= UINT32_MAX)
+        out.fields.subject = static_cast<std::uint32_t>(v["subject"].get<std::uint64_t>());
+    if (v.contains("time_us") && v["time_us"].is_number_integer())
+        out.fields.time_us = v["time_us"].get<std::int64_t>();
     return out;
 }
 
 CalibrationBucket::CalibrationBucket(ClusterConfig config, std::unique_ptr<skeleton::CalibrationStore> local)
     : config_(std::move(config)), local_(std::move(local)), key_prefix_(config_.site + ".") {
+    std::sort(config_.subject_ids.begin(), config_.subject_ids.end());
+    if (!config_.calibration_key_file.empty()) {
+        if (auto key = read_calibration_key(config_.calibration_key_file, &key_error_)) key_ = std::move(*key);
+    }
     group_.add("puts", puts_);
     group_.add("gets", gets_);
     group_.add("received", received_);
     group_.add("errors", errors_);
+    group_.add("refused", refused_);
+    group_.add("permission_errors", nats_errors_.permission_errors());
 }
 
 CalibrationBucket::~CalibrationBucket() {
@@ -130,6 +164,15 @@ std::string CalibrationBucket::save(const skeleton::BodyModel& /*model*/, std::u
 }
 
 void CalibrationBucket::bind(const skeleton::BodyModel& model, skeleton::OfferFn offer) {
+    if (!key_error_.empty()) {
+        spdlog::error("cluster: calibration_key_file {}; calibrations from the bucket are refused", key_error_);
+    } else if (config_.anonymous()) {
+        spdlog::warn(
+            "cluster: connected without credentials (allow_anonymous): any client of the NATS server may publish "
+            "to this site, which is for a lab bench only (docs/cluster.md); {}",
+            key_.empty() ? "calibrations from the bucket are refused (set calibration_key_file to share them)"
+                         : "calibrations from the bucket are taken only when signed with calibration_key_file");
+    }
     model_ = model;
     offer_ = std::move(offer);
     thread_ = std::thread([this] { run(); });
@@ -169,6 +212,13 @@ void CalibrationBucket::note_error(const std::string& what) {
     spdlog::warn("cluster: calibration bucket {}: {}", kCalibrationBucket, what);
 }
 
+std::string CalibrationBucket::failure_text(int status) {
+    const std::string refused = nats_errors_.take_violation();
+    if (refused.empty()) return nats_error_text(status);
+    return kRefusedPrefix + refused + " (the [cluster] user needs publish permission on $JS.API.> and $KV." +
+           kCalibrationBucket + ".>, config/nats/nats-server.conf)";
+}
+
 bool CalibrationBucket::connect() {
     if (!options_) {
         std::string error;
@@ -180,6 +230,7 @@ bool CalibrationBucket::connect() {
         (void)natsOptions_SetReconnectWait(options_, config_.reconnect_wait_ms);
         (void)natsOptions_SetReconnectedCB(options_, &CalibrationBucket::on_reconnected, this);
         (void)natsOptions_SetClosedCB(options_, &CalibrationBucket::on_closed, this);
+        nats_errors_.install(options_);
     }
     // The first attempt without the retry, so that its reason reaches the log.
     (void)natsOptions_SetRetryOnFailedConnect(options_, false, nullptr, nullptr);
@@ -221,7 +272,7 @@ void CalibrationBucket::open_bucket() {
     }
     if (s != NATS_OK) {
         const bool no_js = s == NATS_NO_RESPONDERS;
-        note_error("cannot open it on " + config_.nats_url + ": " + nats_error_text(s) +
+        note_error("cannot open it on " + config_.nats_url + ": " + failure_text(s) +
                    (no_js ? " (JetStream is not enabled on the server)" : "") +
                    "; calibrations stay local until it opens");
         return;
@@ -233,7 +284,7 @@ void CalibrationBucket::open_bucket() {
     const std::string keys = key_prefix_ + "*";
     if (s = kvStore_Watch(&watcher_, kv_, keys.c_str(), &wo); s != NATS_OK) {
         watcher_ = nullptr;
-        note_error("cannot watch " + keys + ": " + nats_error_text(s));
+        note_error("cannot watch " + keys + ": " + failure_text(s));
         close_bucket();
         return;
     }
@@ -309,7 +360,7 @@ void CalibrationBucket::do_work() {
         std::lock_guard lock(mutex_);
         saves.swap(local_saves_);
         gets.swap(pending_gets_);
-        if (kv_) puts.swap(pending_puts_);
+        if (kv_ && steady_us() >= next_put_us_) puts.swap(pending_puts_);
     }
     for (const auto& [id, calibration] : saves) {
         if (const std::string err = local_->save(model_, id, calibration); !err.empty())
@@ -324,12 +375,18 @@ void CalibrationBucket::do_work() {
 
 void CalibrationBucket::put(std::uint32_t subject_id, const skeleton::Calibration& calibration) {
     const std::string key = calibration_key(config_.site, subject_id);
+    const std::int64_t now_us = unix_us();
     const std::string value =
-        calibration_value(config_, subject_id, skeleton::serialize_calibration(model_, calibration), unix_us());
+        calibration_value(config_, subject_id, skeleton::serialize_calibration(model_, calibration), now_us, key_);
     std::uint64_t rev = 0;
     const natsStatus s = kvStore_Put(&rev, kv_, key.c_str(), value.data(), static_cast<int>(value.size()));
     if (s != NATS_OK) {
-        note_error("cannot put " + key + ": " + nats_error_text(s) + "; put again when the bucket answers");
+        const std::string why = failure_text(s);
+        // A refusal lasts until the server's config changes: asked again every 30 s, not at once.
+        const bool refused = why.rfind(kRefusedPrefix, 0) == 0;
+        if (refused) next_put_us_ = steady_us() + kRefusedPutRetryUs;
+        note_error("cannot put " + key + ": " + why + "; put again " +
+                   (refused ? std::string("in 30 s") : std::string("when the bucket answers")));
         std::lock_guard lock(mutex_);
         pending_puts_.emplace(subject_id, calibration);  // unless a newer one came meanwhile
         return;
@@ -337,6 +394,7 @@ void CalibrationBucket::put(std::uint32_t subject_id, const skeleton::Calibratio
     puts_.add();
     // Our own write comes back through the watch: not a newer calibration.
     revision_[subject_id] = std::max(revision_[subject_id], rev);
+    note_taken(subject_id, config_.host_id, now_us);
     spdlog::info("subject {}: calibration shared in bucket {} (key {}, revision {})", subject_id, kCalibrationBucket,
                  key, rev);
 }
@@ -350,7 +408,7 @@ void CalibrationBucket::get(std::uint32_t subject_id) {
         return;
     }
     if (s != NATS_OK) {
-        note_error("cannot get " + key + ": " + nats_error_text(s));
+        note_error("cannot get " + key + ": " + failure_text(s));
         return;
     }
     gets_.add();
@@ -365,22 +423,38 @@ void CalibrationBucket::consider(kvEntry* entry) {
     std::uint32_t id = 0;
     const char* first = key.data() + key_prefix_.size();
     const char* last = key.data() + key.size();
-    if (const auto r = std::from_chars(first, last, id); r.ec != std::errc() || r.ptr != last || id == 0) return;
+    if (const auto r = std::from_chars(first, last, id); r.ec != std::errc() || r.ptr != last || id == 0) {
+        refuse("a key that names no subject", key);
+        return;
+    }
+    if (!std::binary_search(config_.subject_ids.begin(), config_.subject_ids.end(), id)) {
+        refuse("a subject this host does not serve", key);
+        return;
+    }
     const std::uint64_t rev = kvEntry_Revision(entry);
     if (rev <= revision_[id]) return;  // known already (our own put, or the watch and a get both)
     revision_[id] = rev;
     const std::string value(static_cast<const char*>(kvEntry_Value(entry)),
                             static_cast<std::size_t>(kvEntry_ValueLen(entry)));
     const CalibrationValue v = parse_calibration_value(value);
+    const std::string made_on = loggable(v.fields.host_id);
     const std::string where = "bucket " + std::string(kCalibrationBucket) + " (key " + key + ", revision " +
-                              std::to_string(rev) + (v.host_id.empty() ? "" : ", made on " + v.host_id) + ")";
+                              std::to_string(rev) + (made_on.empty() ? "" : ", made on " + made_on) + ")";
     if (!v.error.empty()) {
         note_error("ignoring " + where + ": " + v.error);
         return;
     }
-    auto parsed = skeleton::parse_calibration(model_, v.calibration_text);
+    if (const std::string why = distrust(id, v); !why.empty()) {
+        refuse(why, where);
+        return;
+    }
+    auto parsed = skeleton::parse_calibration(model_, v.fields.calibration_text);
     if (!parsed.calibration) {
         note_error("ignoring " + where + ": " + parsed.error);
+        return;
+    }
+    if (const std::string why = implausible_calibration(*parsed.calibration); !why.empty()) {
+        refuse("an implausible calibration", where + ": " + why);
         return;
     }
     std::uint64_t saves_seen = 0;
@@ -390,12 +464,51 @@ void CalibrationBucket::consider(kvEntry* entry) {
         if (pending_puts_.count(id) != 0) return;
         saves_seen = saves_[id];
     }
+    note_taken(id, v.fields.host_id, v.fields.time_us);
     if (local_) {
         if (const std::string err = local_->save(model_, id, *parsed.calibration); !err.empty())
             spdlog::error("subject {}: {}", id, err);
     }
     received_.add();
     offer_(id, *parsed.calibration, where, saves_seen);
+}
+
+std::string CalibrationBucket::distrust(std::uint32_t subject_id, const CalibrationValue& v) {
+    if (v.fields.site != config_.site || v.fields.subject != subject_id)
+        return "a value whose site or subject is not its key's";
+    if (!key_error_.empty()) return "unusable calibration_key_file";
+    if (!key_.empty()) {
+        if (v.signature.empty()) return "an unsigned value (calibration_key_file is set)";
+        if (!signature_matches(key_, v.fields, v.signature))
+            return "a signature that does not verify with calibration_key_file";
+    } else if (config_.anonymous()) {
+        return "an unsigned value on an anonymous cluster (set calibration_key_file to share calibrations)";
+    }
+    if (const auto s = taken_us_.find(subject_id); s != taken_us_.end()) {
+        if (const auto h = s->second.find(v.fields.host_id); h != s->second.end() && v.fields.time_us <= h->second)
+            return "a value not newer than one taken before from its host (a replay)";
+    }
+    return {};
+}
+
+void CalibrationBucket::note_taken(std::uint32_t subject_id, const std::string& host_id, std::int64_t time_us) {
+    auto& hosts = taken_us_[subject_id];
+    auto& t = hosts[host_id];
+    t = std::max(t, time_us);
+    if (hosts.size() <= kHostsPerSubject) return;
+    hosts.erase(
+        std::min_element(hosts.begin(), hosts.end(), [](const auto& a, const auto& b) { return a.second < b.second; }));
+}
+
+void CalibrationBucket::refuse(const std::string& reason, const std::string& detail) {
+    refused_.add();
+    const std::uint64_t n = ++refusals_[reason];
+    std::uint64_t tenfold = 1;
+    while (tenfold < n)
+        tenfold *= 10;
+    if (n != tenfold) return;  // the 1st, 10th, 100th ... of each reason
+    spdlog::warn("cluster: calibration bucket {}: refused {} ({}; {} so far for this reason)", kCalibrationBucket,
+                 detail, reason, n);
 }
 
 }  // namespace mocap::cluster

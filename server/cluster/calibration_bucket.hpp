@@ -6,9 +6,10 @@
 //             kCalibrationHistory values of each key
 //   key       <site>.<subject id>
 //   value     JSON, {"format": "mocap-calibration", "version": 1, "site", "subject",
-//             "host_id", "time_us", "calibration"}; "calibration" is the text form of
-//             skeleton/calibration.hpp (what a calibration file holds), checked against the
-//             body model like a file
+//             "host_id", "time_us", "calibration", "hmac_sha256"}; "calibration" is the text
+//             form of skeleton/calibration.hpp (what a calibration file holds), checked against
+//             the body model like a file; "hmac_sha256" signs the rest with the site's
+//             calibration key (calibration_trust.hpp), present when the host has one
 //   conflicts last writer wins: the value with the highest KV revision is the subject's
 //             calibration on every host (two hosts that calibrate one subject at once both
 //             end with the later write)
@@ -19,6 +20,16 @@
 // put to the bucket when it is reachable again (then it is the newest write). Calibrations
 // from the bucket are also saved locally, so a host that restarts without the cluster starts
 // from the newest one it knew.
+//
+// Who may write a calibration (docs/cluster.md): anyone the NATS server lets publish to
+// $KV.mocap_calibration.>. So a value is used only if it is for a subject this host serves
+// (ClusterConfig::subject_ids: no other key touches the solver, the counters per subject or
+// the calibration directory), names this site and its key's subject, is newer (time_us) than
+// the last one taken for the subject from the same host (a replay is not), is plausible (calibration_trust.hpp) and is
+// authenticated: signed with the site's key when calibration_key_file is set; without a key,
+// only a cluster with credentials is trusted (its server decides who may publish), and an
+// anonymous one shares nothing inbound. Every refusal is counted and logged (once per reason,
+// then at every tenfold count).
 //
 // Nothing here runs on a real-time thread: save() and serving() (the solver's assembler
 // thread) queue work under a mutex held for a copy; one thread of this store does the NATS I/O
@@ -31,7 +42,9 @@
 //
 // Counters, component "calibration_kv": puts (values written), gets (keys read), received
 // (newer calibrations from the bucket offered to the solver), errors (failed connects, bucket
-// opens, puts, gets and watches, and values that do not parse).
+// opens, puts, gets and watches, and values that do not parse), refused (values distrusted as
+// above: nothing of them is applied or saved), permission_errors (publishes
+// and subscriptions the server refused the [cluster] user: named in the log as such).
 #pragma once
 
 #include <atomic>
@@ -44,7 +57,9 @@
 #include <thread>
 #include <vector>
 
+#include "cluster/calibration_trust.hpp"
 #include "cluster/cluster_config.hpp"
+#include "cluster/nats_errors.hpp"
 #include "core/counters.hpp"
 #include "skeleton/calibration_store.hpp"
 
@@ -62,14 +77,15 @@ inline constexpr int kCalibrationFormatVersion = 1;
 
 /// "<site>.<subject>".
 std::string calibration_key(const std::string& site, std::uint32_t subject_id);
-/// The bucket's value for a calibration made on host_id at time_us.
+/// The bucket's value for a calibration made on host_id at time_us, signed with `key`
+/// unless it is empty.
 std::string calibration_value(const ClusterConfig& config, std::uint32_t subject_id,
-                              const std::string& calibration_text, std::int64_t time_us);
-/// What a value says: the calibration text and the host that made it, or an error.
+                              const std::string& calibration_text, std::int64_t time_us, const std::string& key = {});
+/// What a value says, or an error.
 struct CalibrationValue {
-    std::string calibration_text;
-    std::string host_id;
-    std::string error;  ///< non-empty: not a calibration value this version reads
+    SignedFields fields;
+    std::string signature;  ///< "" unsigned
+    std::string error;      ///< non-empty: not a calibration value this version reads
 };
 CalibrationValue parse_calibration_value(const std::string& value);
 
@@ -106,6 +122,13 @@ private:
     /// A value from the bucket (watch or get): offered to the solver when it is newer.
     void consider(__kvEntry* entry);
     void note_error(const std::string& what);
+    /// A value refused (counted; the first of each reason logged, then every tenfold count).
+    void refuse(const std::string& reason, const std::string& detail);
+    /// "" when the value may be used, else the reason it is refused.
+    std::string distrust(std::uint32_t subject_id, const CalibrationValue& value);
+    /// Why a request failed: the server's permission violation when it reported one (a
+    /// refused publish only times out), else the status text.
+    std::string failure_text(int status);
 
     ClusterConfig config_;
     std::unique_ptr<skeleton::CalibrationStore> local_;
@@ -129,12 +152,22 @@ private:
     __jsCtx* js_ = nullptr;
     __kvStore* kv_ = nullptr;
     __kvWatcher* watcher_ = nullptr;
-    std::map<std::uint32_t, std::uint64_t> revision_;  // newest revision known per subject
+    std::map<std::uint32_t, std::uint64_t> revision_;  // newest revision known per served subject
+    /// Per served subject, the newest time_us taken from each host (a replay is not newer);
+    /// at most kHostsPerSubject hosts each, the oldest forgotten first.
+    static constexpr std::size_t kHostsPerSubject = 32;
+    std::map<std::uint32_t, std::map<std::string, std::int64_t>> taken_us_;
+    void note_taken(std::uint32_t subject_id, const std::string& host_id, std::int64_t time_us);
+    std::map<std::string, std::uint64_t> refusals_;  // per reason
+    std::string key_;                                // the site's calibration key ("" none)
+    std::string key_error_;                          // the key file is set but unusable: nothing inbound is taken
     std::int64_t next_open_us_ = 0;
-    std::string last_problem_;  // logged once until it changes or the bucket opens
+    std::int64_t next_put_us_ = 0;  // puts wait until then after a permission refusal
+    std::string last_problem_;      // logged once until it changes or the bucket opens
     std::thread thread_;
 
-    Counter puts_, gets_, received_, errors_;
+    NatsErrors nats_errors_{std::string("calibration bucket ") + kCalibrationBucket};
+    Counter puts_, gets_, received_, errors_, refused_;
     CounterGroup group_{"calibration_kv"};
 };
 

@@ -23,6 +23,9 @@ bool configure(const ClusterConfig& c, natsOptions* o, std::string* error) {
     if (!nats_ok(natsOptions_SetURL(o, c.nats_url.c_str()), "nats_url", error)) return false;
     const std::string client_name = "mocapd " + c.host_id;
     (void)natsOptions_SetName(o, client_name.c_str());
+    // Without a deadline a server that stops reading blocks the writer for good, and with it
+    // every call on the connection (the client holds its lock while it writes).
+    (void)natsOptions_SetWriteDeadline(o, kNatsWriteDeadlineMs);
     if (!c.user.empty() && !nats_ok(natsOptions_SetUserInfo(o, c.user.c_str(), c.password.c_str()), "user", error))
         return false;
     if (!c.creds_file.empty() &&

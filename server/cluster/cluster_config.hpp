@@ -38,11 +38,23 @@ struct ClusterConfig {
     /// waiting for the publisher thread (beyond it the oldest are dropped).
     std::uint32_t raw_replicas = 1;
     std::size_t raw_queue_samples = 65536;
+    /// Shared calibration (calibration_bucket.hpp): the subjects this host serves (sorted;
+    /// calibrations of any other subject are refused), and the site's calibration key file
+    /// ("" = values are not signed; calibration_trust.hpp).
+    std::vector<std::uint32_t> subject_ids;
+    std::string calibration_key_file;
+
+    /// No credentials: any client of the server could publish what this host reads.
+    [[nodiscard]] bool anonymous() const { return user.empty() && creds_file.empty() && nkey_seed_file.empty(); }
 };
 
-/// New client options with the URL, a client name, the credentials and TLS of `config`
-/// (the caller adds its reconnect policy and destroys them). False + *error for a bad
-/// setting (an unreadable credentials file, a seed file without its public key).
+/// A write to a server that has not drained the socket for this long fails, and the client
+/// drops the connection and reconnects (a server that stopped reading: docs/cluster.md).
+inline constexpr std::int64_t kNatsWriteDeadlineMs = 2000;
+
+/// New client options with the URL, a client name, the credentials and TLS of `config`, and
+/// the write deadline kNatsWriteDeadlineMs (the caller adds its reconnect policy and destroys them). False + *error for
+/// a bad setting (an unreadable credentials file, a seed file without its public key).
 bool make_nats_options(const ClusterConfig& config, __natsOptions** out, std::string* error);
 
 /// "cluster: <what>: <status text>" when s is not NATS_OK.

@@ -61,6 +61,7 @@ ClusterPublisher::ClusterPublisher(ClusterConfig config)
     group_.add("heartbeats", heartbeats_);
     group_.add("disconnects", disconnects_);
     group_.add("reconnects", reconnects_);
+    group_.add("permission_errors", nats_errors_.permission_errors());
 }
 
 ClusterPublisher::~ClusterPublisher() {
@@ -121,6 +122,25 @@ bool ClusterPublisher::start(std::string* error) {
     // The client runs callbacks on its own thread, after natsConnection_Close returns too:
     // stop() waits for this last one before `this` may go away.
     (void)natsOptions_SetClosedCB(options_, &ClusterPublisher::on_closed, this);
+    // A subject the server's permissions refuse is dropped there: the log names it, once.
+    nats_errors_.install(options_);
+    started_us_ = config_.wall_clock_us();
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = false;
+        closed_ = false;
+    }
+    // The first connect waits for the server's INFO up to the client's timeout, twice: on the
+    // publisher thread, so that a silent server never delays the daemon's start.
+    thread_ = std::thread([this] {
+        connect_first();
+        run();
+    });
+    return true;
+}
+
+void ClusterPublisher::connect_first() {
+    const auto& c = config_;
     // A cluster unreachable at start is retried like a lost one: the local pose service runs.
     // The first attempt is made without the retry so that its reason (refused credentials,
     // nothing listening, TLS) reaches the log; the retrying client would only say "not yet
@@ -138,17 +158,15 @@ bool ClusterPublisher::start(std::string* error) {
             connected_.store(true);
             spdlog::info("cluster: connected to {}", c.nats_url);
         } else if (s != NATS_NOT_YET_CONNECTED) {
-            return nats_ok(s, ("connect to " + c.nats_url).c_str(), error);
+            spdlog::error("cluster: cannot connect to {}: {}", c.nats_url, nats_error_text(s));
+            connection_ = nullptr;
+            std::lock_guard lock(mutex_);
+            closed_ = true;  // run() tries again as after a refusal
+            return;
         }
     }
-    if (!raw_.attach(connection_, error)) return false;
-    started_us_ = config_.wall_clock_us();
-    {
-        std::lock_guard lock(mutex_);
-        stopping_ = false;
-    }
-    thread_ = std::thread([this] { run(); });
-    return true;
+    std::string error;
+    if (!raw_.attach(connection_, &error)) spdlog::error("cluster: raw samples: {}", error);
 }
 
 bool ClusterPublisher::stop(std::string* /*error*/) {

@@ -14,7 +14,12 @@
 // own thread writes to the socket and reconnects by itself (forever, every reconnect_wait).
 // While the client is not connected the publisher thread leaves frames in the queue, so a
 // lost cluster shows as cluster.frames_dropped, never as a slower pipeline, and publishing
-// resumes with the newest frames once the client is back.
+// resumes with the newest frames once the client is back. A server that stops reading (its
+// socket full: a PING flood it never reads the PONGs of, a frozen process) fails the
+// client's writes after the write deadline (cluster_config.hpp), which drops the connection
+// and reconnects; so no write, publish or stop waits on a server for longer than that. The
+// first connect runs on the publisher thread too: a server that accepts and says nothing
+// never delays the daemon's start.
 //
 // Raw samples take the same path with their own bounded queue (raw_stream.hpp): on_sample()
 // copies the sample on the ingest thread, the publisher thread batches them per subject and
@@ -35,6 +40,7 @@
 #include <vector>
 
 #include "cluster/cluster_config.hpp"
+#include "cluster/nats_errors.hpp"
 #include "cluster/raw_stream.hpp"
 #include "core/counters.hpp"
 #include "pipeline/output.hpp"
@@ -78,6 +84,8 @@ private:
     static void on_connected(__natsConnection* nc, void* self);
     static void on_closed(__natsConnection* nc, void* self);
     void run();
+    /// Publisher thread, first: the connection (retrying in the background when it fails).
+    void connect_first();
     /// Publisher thread: replaces a connection the client closed for good.
     void reopen();
     void publish_frames(std::vector<Queued>& batch);
@@ -103,13 +111,14 @@ private:
     std::int64_t started_us_ = 0;
     std::uint64_t reopens_ = 0;  // publisher thread only
 
-    Counter frames_queued_;     // assembler thread
-    Counter frames_dropped_;    // assembler thread (drop-oldest)
-    Counter frames_published_;  // publisher thread
-    Counter publish_errors_;    // publisher thread
-    Counter heartbeats_;        // publisher thread
-    Counter disconnects_;       // NATS client thread
-    Counter reconnects_;        // NATS client thread
+    Counter frames_queued_;                        // assembler thread
+    Counter frames_dropped_;                       // assembler thread (drop-oldest)
+    Counter frames_published_;                     // publisher thread
+    Counter publish_errors_;                       // publisher thread
+    Counter heartbeats_;                           // publisher thread
+    Counter disconnects_;                          // NATS client thread
+    Counter reconnects_;                           // NATS client thread
+    NatsErrors nats_errors_{"cluster publisher"};  // permission_errors: NATS client thread
     CounterGroup group_{"cluster"};
     RawStreamPublisher raw_;  // after group_: registers its counters there
 };

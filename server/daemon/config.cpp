@@ -446,6 +446,7 @@ void read_cluster(TableReader& r, DaemonConfig& c) {
     r.read("creds_file", c.cluster_creds_file);
     r.read("nkey_seed_file", c.cluster_nkey_seed_file);
     read_bool(r, "allow_anonymous", c.cluster_allow_anonymous);
+    r.read("calibration_key_file", c.cluster_calibration_key_file);
     r.read("tls_ca_file", c.cluster_tls_ca_file);
     r.read("tls_cert_file", c.cluster_tls_cert_file);
     r.read("tls_key_file", c.cluster_tls_key_file);

@@ -138,6 +138,7 @@ struct DaemonConfig {
     std::string cluster_creds_file;
     std::string cluster_nkey_seed_file;
     bool cluster_allow_anonymous = false;
+    std::string cluster_calibration_key_file;  ///< signs and checks shared calibrations ("" = unsigned)
     std::string cluster_tls_ca_file;
     std::string cluster_tls_cert_file;
     std::string cluster_tls_key_file;

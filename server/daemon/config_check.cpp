@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "cluster/calibration_trust.hpp"
 #include "daemon/pipeline_config.hpp"
 #include "filter/filter_factory.hpp"
 #include "serve/vmc_rig.hpp"
@@ -126,6 +127,13 @@ bool check_cluster(const DaemonConfig& c, std::string* error) {
     for (const auto& [key, path] : files) {
         if (!path->empty() && !readable_file(*path)) {
             *error = std::string(key) + ": \"" + *path + "\" is not a readable file";
+            return false;
+        }
+    }
+    if (!c.cluster_calibration_key_file.empty()) {
+        std::string why;
+        if (!cluster::read_calibration_key(c.cluster_calibration_key_file, &why)) {
+            *error = "cluster.calibration_key_file: " + why;
             return false;
         }
     }

@@ -103,6 +103,8 @@ cluster::ClusterConfig cluster_config_from_config(const DaemonConfig& c) {
     cc.queue_frames = c.cluster_queue_frames;
     cc.raw_replicas = c.cluster_raw_replicas;
     cc.raw_queue_samples = c.cluster_raw_queue_samples;
+    cc.subject_ids = subject_ids_from_config(c);
+    cc.calibration_key_file = c.cluster_calibration_key_file;
     return cc;
 }
 

@@ -272,6 +272,7 @@ TEST(Config, HttpSectionDefaultsValuesAndErrors) {
 
 // ---- the one validation path of --check-config, start-up and reload (daemon/config_check.hpp)
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -569,6 +570,24 @@ TEST_F(ConfigCheck, ClusterRefusesAnonymousUnlessAllowed) {
                    "cluster.creds_file: \"" + missing + "\" is not a readable");
     EXPECT_REFUSED(url + "allow_anonymous = true\ntls_cert_file = \"/etc/hostname\"\n",
                    "cluster.tls_cert_file: tls_cert_file and tls_key_file go together");
+}
+
+TEST_F(ConfigCheck, ClusterCalibrationKeyFileMustBeLongAndPrivate) {
+    const std::string url = "[cluster]\nnats_url = \"nats://127.0.0.1:4222\"\nallow_anonymous = true\n";
+    const std::string key = (dir_ / "calibration.key").string();
+    const auto with_key = [&](const std::string& text, mode_t mode) {
+        std::ofstream(key) << text;
+        ::chmod(key.c_str(), mode);
+        return url + "calibration_key_file = \"" + key + "\"\n";
+    };
+    const std::string good(40, 'k');
+    EXPECT_EQ(refusal(with_key(good + "\n", 0600)), "");
+    EXPECT_EQ(refusal(with_key(good, 0640)), "") << "its group (mocapd's) may read it";
+    EXPECT_REFUSED(with_key(good, 0644), "cluster.calibration_key_file: " + key + ": others may read or write it");
+    EXPECT_REFUSED(with_key(good, 0660), "others may read or write it, or its group may write it (mode 660");
+    EXPECT_REFUSED(with_key("short", 0600), "the key is 5 bytes, at least 32 needed");
+    EXPECT_REFUSED(url + "calibration_key_file = \"" + (dir_ / "gone.key").string() + "\"\n",
+                   "cluster.calibration_key_file: cannot read");
 }
 
 TEST_F(ConfigCheck, ClusterSiteAndHostIdMustBeSubjectTokens) {

@@ -2,10 +2,13 @@
 // JetStream on a loopback port: a subject calibrated through the control plane of one mocapd
 // host is used by another host that serves the same subject (a simulated sink with the same
 // id connected to it), which never calibrates it itself; its poses match the simulator's
-// truth as a locally calibrated subject's do (daemon_test.cpp). A host that starts later
+// truth as a locally calibrated subject's do (daemon_test.cpp). The hosts share the site's
+// calibration key (calibration_key_file), so every value is signed and checked on the way
+// (calibration_security_test.cpp has the values that fail the check). A host that starts later
 // reads the calibration from the bucket. Without JetStream on the server the bucket cannot
 // be opened: the calibration stays local, the log says why, nothing crashes.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <filesystem>
 #include <sstream>
@@ -39,6 +42,9 @@ protected:
             GTEST_SKIP() << "no nats-server binary at " << nats_server_bin() << " (setup.sh installs it)";
         }
         nats_port_ = free_port();
+        key_file_ = dir_.file("calibration.key");
+        write_file(key_file_, "kv-test-site-key-0123456789abcdef0123\n");
+        ::chmod(key_file_.c_str(), 0600);
     }
 
     void TearDown() override {
@@ -65,7 +71,8 @@ protected:
         c.ingest = "sink_idle_timeout_s = 5.0\n";
         c.skeleton = "auto_calibrate = \"off\"\nheading = \"earth\"\nfacing = \"given\"\nfacing_heading_deg = 0.0\n";
         c.serve = "client_queue_frames = 4096\n[control]\ntoken = \"" + std::string(kToken) + "\"\n";
-        c.cluster = cluster_section(nats_port_, kSite, id, cluster_credentials());
+        c.cluster = cluster_section(nats_port_, kSite, id,
+                                    cluster_credentials() + "calibration_key_file = \"" + key_file_ + "\"\n");
         h.daemon = start_mocapd(MOCAPD_BIN, c, *h.dir);
         ASSERT_FALSE(HasFailure());
     }
@@ -128,6 +135,7 @@ protected:
 
     std::uint16_t nats_port_ = 0;
     TempDir dir_;
+    std::string key_file_;
     std::unique_ptr<Process> nats_;
     Host a_, b_, c_;
 };
@@ -166,6 +174,7 @@ TEST_F(CalibrationKv, ASubjectCalibratedOnOneHostIsSolvedWithThatCalibrationOnAn
     EXPECT_EQ(stats_counter(b_.pose_port, "skeleton.calibrations_shared"), 1u);
     EXPECT_GE(stats_counter(b_.pose_port, "calibration_kv.received"), 1u);
     EXPECT_EQ(stats_counter(b_.pose_port, "calibration_kv.errors"), 0u);
+    EXPECT_EQ(stats_counter(b_.pose_port, "calibration_kv.refused"), 0u) << "host A's signed value verifies on host B";
     EXPECT_NE(b_.daemon->log().find("subject 1: calibration from bucket mocap_calibration (key hall.1, revision"),
               std::string::npos)
         << b_.daemon->log();

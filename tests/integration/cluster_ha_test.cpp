@@ -1,13 +1,18 @@
 // A site on a real three-server NATS cluster (docs/cluster.md): three nats-server processes
-// routed into one cluster on loopback ports, two mocapd hosts each fed by its own simulated
-// sinks (sink ids 1-2 and 3-4), both publishing through server 0. A subscriber on another
-// server sees every subject of the site in one stream; killing server 0 moves both hosts to
-// the servers they learned from it, and each subscriber loses at most a second of frames.
+// run on the shipped config/nats/nats-server.conf (its users, permissions and JetStream; only
+// what must differ on one machine is given on the command line: names, loopback ports, routes,
+// the JetStream directory), routed into one cluster, and two mocapd hosts as its `mocapd`
+// user, each fed by its own simulated sinks (sink ids 1-2 and 3-4), both publishing through
+// server 0. A subscriber (the `viewer` user) on another server sees every subject of the site
+// in one stream; each host's calibrations reach the other through the bucket with no
+// permission refused; killing server 0 moves both hosts to the servers they learned from it,
+// and each subscriber loses at most a second of frames.
 #include <gtest/gtest.h>
 #include <nats/nats.h>
 
 #include <atomic>
 #include <csignal>
+#include <filesystem>
 #include <iostream>
 #include <map>
 #include <mutex>
@@ -23,15 +28,20 @@ namespace {
 
 using namespace std::chrono_literals;
 
-constexpr const char* kUser = kNatsUser;
-constexpr const char* kPassword = kNatsPassword;
-constexpr const char* kSite = "hall";
+// The shipped config's users and site.
+constexpr const char* kUser = "mocapd";
+constexpr const char* kPassword = "change-me-mocapd";
+constexpr const char* kViewer = "viewer";
+constexpr const char* kViewerPassword = "change-me-viewer";
+constexpr const char* kSite = "venue";
+constexpr const char* kShippedStoreDir = "store_dir: /var/lib/nats/jetstream";
 constexpr int kRateHz = 100;
 
 /// Every pose frame one subscriber gets, per subject, from a thread of its own.
 class Collector {
 public:
-    Collector(std::uint16_t port, const std::string& subject) : sub_(port, subject), thread_([this] { run(); }) {}
+    Collector(std::uint16_t port, const std::string& subject)
+        : sub_(port, subject, kViewer, kViewerPassword), thread_([this] { run(); }) {}
     ~Collector() { stop(); }
     Collector(const Collector&) = delete;
     Collector& operator=(const Collector&) = delete;
@@ -107,14 +117,25 @@ protected:
             client_ports_[i] = free_port();
             route_ports_[i] = free_port();
         }
+        const std::string shipped = read_file(NATS_SHIPPED_CONFIG);
+        const auto store = shipped.find(kShippedStoreDir);
+        ASSERT_NE(store, std::string::npos) << "the shipped config's JetStream store_dir moved";
         for (int i = 0; i < 3; ++i) {
+            const std::string name = "nats" + std::to_string(i);
+            // nats-server refuses -sd beside a store_dir in the file: the one line is replaced.
+            std::string conf = shipped;
+            conf.replace(store, std::string(kShippedStoreDir).size(), "store_dir: \"" + dir_.file(name + ".js") + "\"");
+            write_file(dir_.file(name + ".conf"), conf);
             std::vector<std::string> routes;
             for (int j = 0; j < 3; ++j)
                 if (j != i) routes.push_back("nats://127.0.0.1:" + std::to_string(route_ports_[j]));
-            servers_[i] = start_nats(
-                client_ports_[i], dir_.file("nats" + std::to_string(i) + ".log"),
-                {"--cluster_name", "itest", "--cluster", "nats://127.0.0.1:" + std::to_string(route_ports_[i]),
-                 "--routes", routes[0] + "," + routes[1]});
+            servers_[i] = std::make_unique<Process>(
+                std::vector<std::string>{
+                    nats_server_bin(), "-c", dir_.file(name + ".conf"), "-n", name, "-a", "127.0.0.1", "-p",
+                    std::to_string(client_ports_[i]), "-m", std::to_string(free_port()), "--cluster",
+                    "nats://127.0.0.1:" + std::to_string(route_ports_[i]), "--routes", routes[0] + "," + routes[1]},
+                dir_.file(name + ".log"));
+            ASSERT_TRUE(wait_for_port(client_ports_[i], 15s)) << servers_[i]->log();
         }
         ASSERT_TRUE(routed(0, 1) && routed(0, 2)) << "the three servers did not form one cluster:\n"
                                                   << servers_[0]->log();
@@ -134,7 +155,8 @@ protected:
     /// A message published on server `from` reaches a subscriber on server `to`: the routes
     /// are up and interest has propagated.
     bool routed(int from, int to) {
-        NatsSubscriber sub(client_ports_[to], "probe.routes");
+        const std::string probe = std::string("mocap.") + kSite + ".probe";
+        NatsSubscriber sub(client_ports_[to], probe, kViewer, kViewerPassword);
         natsOptions* o = nullptr;
         natsConnection* nc = nullptr;
         natsOptions_Create(&o);
@@ -146,7 +168,7 @@ protected:
         bool got = false;
         for (auto end = std::chrono::steady_clock::now() + 30s;
              connected && !got && std::chrono::steady_clock::now() < end;) {
-            natsConnection_PublishString(nc, "probe.routes", "ping");
+            natsConnection_PublishString(nc, probe.c_str(), "ping");
             natsConnection_FlushTimeout(nc, 2000);
             got = sub.next(200ms).has_value();
         }
@@ -157,9 +179,13 @@ protected:
     void start_host(Host& h, const std::string& host_id, int first_sink_id) {
         h.sink_port = free_port();
         h.pose_port = free_port();
-        HostConfig c{.sink_port = h.sink_port, .pose_port = h.pose_port, .calibration_dir = dir_.path().string()};
+        // Each host its own calibration directory: what it saves, it made or received.
+        const std::string calibrations = dir_.file(host_id + ".calibrations");
+        std::filesystem::create_directories(calibrations);
+        HostConfig c{.sink_port = h.sink_port, .pose_port = h.pose_port, .calibration_dir = calibrations};
         c.workers = 1;
-        c.cluster = cluster_section(client_ports_[0], kSite, host_id, cluster_credentials(), kDefaultQueueFrames);
+        c.cluster = cluster_section(client_ports_[0], kSite, host_id, cluster_credentials(kUser, kPassword),
+                                    kDefaultQueueFrames);
         h.daemon = start_mocapd(MOCAPD_BIN, c, dir_, host_id);
         ASSERT_FALSE(HasFailure());
         h.sim = std::make_unique<Process>(
@@ -190,7 +216,7 @@ protected:
 
 TEST_F(ThreeServerCluster, OneSubscriberSeesEverySubjectOfBothHostsAtItsRate) {
     Collector poses(client_ports_[2], std::string("mocap.") + kSite + ".*.pose");
-    NatsSubscriber beats(client_ports_[1], std::string("mocap.") + kSite + ".host.*");
+    NatsSubscriber beats(client_ports_[1], std::string("mocap.") + kSite + ".host.*", kViewer, kViewerPassword);
     ASSERT_TRUE(wait_until([&] { return poses.each_has(subjects_, 3 * kRateHz); }, 60s))
         << "every subject of both hosts, 3 s of frames each, through server 2";
     const std::uint64_t skipped = stop_sims();
@@ -206,6 +232,27 @@ TEST_F(ThreeServerCluster, OneSubscriberSeesEverySubjectOfBothHostsAtItsRate) {
         if (auto m = beats.next(1000ms)) hosts.insert(m->first);
     EXPECT_EQ(hosts, (std::set<std::string>{std::string("mocap.") + kSite + ".host.host-a",
                                             std::string("mocap.") + kSite + ".host.host-b"}));
+}
+
+TEST_F(ThreeServerCluster, TheShippedConfigLetsEachHostsCalibrationsReachTheOther) {
+    // Both hosts calibrate their two subjects from the simulators' opening T-pose
+    // (auto_calibrate) and put them to the bucket; each receives the other's two.
+    for (const Host& h : hosts_) {
+        EXPECT_GE(wait_stats_counter(
+                      h.pose_port, "calibration_kv.puts", [](auto v) { return v >= 2; }, 60s),
+                  2u)
+            << "each host puts its two subjects' calibrations";
+    }
+    for (const Host& h : hosts_) {
+        EXPECT_GE(wait_stats_counter(
+                      h.pose_port, "calibration_kv.received", [](auto v) { return v >= 2; }, 60s),
+                  2u)
+            << "each host receives the other's two calibrations";
+        EXPECT_EQ(stats_counter(h.pose_port, "calibration_kv.permission_errors"), 0u);
+        EXPECT_EQ(stats_counter(h.pose_port, "cluster.permission_errors"), 0u);
+    }
+    for (const auto& server : servers_)
+        EXPECT_EQ(server->log().find("Permissions Violation"), std::string::npos) << server->log();
 }
 
 TEST_F(ThreeServerCluster, KillingTheHostsServerCostsEachSubscriberAtMostASecond) {
