@@ -36,6 +36,7 @@ PACKAGES=(
   nats-server libnats-dev libssl-dev
   liblo-dev liblo-tools python3-liblo
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi gcc-multilib python3-unicorn
+  openocd stlink-tools
   clang-14 libclang-rt-14-dev clang-tidy-14 clang-format-14 cppcheck ccache lld nlohmann-json3-dev
   assimp-utils qemu-system-x86 qemu-user busybox-static cpio kmod
   blender nodejs

@@ -72,7 +72,7 @@ class Spi(Peripheral):
                 self._start(byte)
                 self.shift_end = end + self._byte_ticks()
 
-    def _enabled_master(self):
+    def enabled_master(self):
         return self.cr1 & (1 << 6) and self.cr1 & (1 << 2)
 
     def read(self, offset):
@@ -103,7 +103,7 @@ class Spi(Peripheral):
         elif offset == 0x04:
             self.cr2 = value & 0xFF
         elif offset == 0x0C:
-            if not self._enabled_master():
+            if not self.enabled_master():
                 return
             if self.shift_end is None:
                 self._start(value & 0xFF)
