@@ -10,7 +10,10 @@ if(NOT ARM_GCC OR NOT ARM_SIZE)
   message(FATAL_ERROR "arm-none-eabi-gcc/size not found: install gcc-arm-none-eabi (./setup.sh deps)")
 endif()
 
-execute_process(COMMAND ${CMAKE_COMMAND} -S ${SOURCE_DIR} -B ${BINARY_DIR} RESULT_VARIABLE rc)
+# Nodes 2 and 3 as well (sensor_node_f103_node2/3.elf): the firmware-in-the-loop bus test
+# puts three nodes on one bus.
+execute_process(COMMAND ${CMAKE_COMMAND} -S ${SOURCE_DIR} -B ${BINARY_DIR} -DMOCAP_SENSOR_NODE_IDS=2,3
+                RESULT_VARIABLE rc)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "configuring the firmware failed")
 endif()

@@ -9,8 +9,10 @@ dir="$1"
 out=$(cmake --build "$dir" --target flash-commands 2>&1) || { echo "$out"; exit 1; }
 mapfile -t openocd_lines < <(grep '^openocd ' <<<"$out")
 mapfile -t stflash_lines < <(grep '^st-flash ' <<<"$out")
-if ((${#openocd_lines[@]} != 2 || ${#stflash_lines[@]} != 2)); then
-    echo "expected two openocd and two st-flash lines, got:"; echo "$out"; exit 1
+# One board per "# ..." heading: the sink and one sensor node per id built.
+boards=$(grep -c '^# ' <<<"$out")
+if ((boards < 2 || ${#openocd_lines[@]} != boards || ${#stflash_lines[@]} != boards)); then
+    echo "expected one openocd and one st-flash line per board (sink + nodes), got:"; echo "$out"; exit 1
 fi
 status=0
 for line in "${openocd_lines[@]}"; do

@@ -162,6 +162,38 @@ TEST_F(SensorNodeTest, SyncProducesGoldenRawFrames) {
     EXPECT_EQ(node.state, MW_NODE_RUNNING);
 }
 
+TEST_F(SensorNodeTest, SyncsThatWaitedThroughTheSensorStartAreNotSampled) {
+    // A node reset mid-stream: while it brings its sensor up (144 ms), SYNCs pile up in the
+    // controller's receive FIFO. Sampling them after the start would tag a sample read now
+    // with the counters of instants long past.
+    fake.send_sync(7);
+    fake.send_sync(8);
+    mw_config config{};
+    config.node_id = MW_NODE_ID_BROADCAST;
+    config.rate_hz = 100;
+    config.accel_range = MW_ACCEL_8G;
+    config.gyro_range = MW_GYRO_1000DPS;
+    config.mode = MW_MODE_RAW;
+    config.status_period_s = 1;
+    fake.send_config(config);
+    start(2);
+    const auto sent = fake.take_tx();
+    EXPECT_TRUE(samples(sent).empty()) << "no sample for a SYNC that waited";
+    EXPECT_EQ(node.counters.syncs_stale, 2u);
+    EXPECT_EQ(node.config.accel_range, MW_ACCEL_8G) << "a CONFIG that waited still applies";
+    const auto st = statuses(sent);
+    ASSERT_FALSE(st.empty());
+    EXPECT_TRUE(st[0].error_flags & MW_ERRF_RESET);
+
+    fake.send_sync(9);
+    sensor_node_poll(&node);
+    const auto out = samples(fake.take_tx());
+    ASSERT_EQ(out.size(), 3u);
+    for (const auto& f : out) {
+        EXPECT_EQ(f.data[6] | (f.data[7] << 8), 9) << "the sample of the SYNC it was read for";
+    }
+}
+
 TEST_F(SensorNodeTest, ConfigChangesRangeRegistersAndIsAcknowledged) {
     start(7);
     fake.take_tx();

@@ -43,6 +43,7 @@ class BxCan(Peripheral):
         self.ier = 0
         self.tec = self.rec = 0
         self.bus_off_until = None
+        self.bus_offs = 0  # times the controller went bus-off since reset
         self.btr = 0x01230000
         self.mailbox = [[0, 0, 0, 0] for _ in range(3)]
         self.request_tick = [0, 0, 0]
@@ -112,6 +113,7 @@ class BxCan(Peripheral):
             return
         self.tec += 8
         if self.tec > 255 and self.bus_off_until is None:
+            self.bus_offs += 1
             # Bus-off; with ABOM it recovers after 128 occurrences of 11 recessive bits.
             self.bus_off_until = self.clock.ticks + 128 * 11 * self.bit_ticks() if self.mcr & ABOM else 1 << 62
         if self.mcr & NART:

@@ -1,7 +1,8 @@
 """A virtual CAN bus on virtual time: frames take their real length in bits (with bit
 stuffing, ISO 11898-1), the bus is idle in between, and when several senders have a frame
 ready the lowest identifier wins arbitration, as the wired-AND bit-by-bit arbitration decides
-it. Senders are bxCAN models (bxcan.py) and `HostPort`s (frames the test injects, e.g. the
+it. A frame that starts inside one of `error_windows` (a disturbed or shorted line) ends in
+an error frame, as one nobody acknowledges does. Senders are bxCAN models (bxcan.py) and `HostPort`s (frames the test injects, e.g. the
 sink's SYNC). Every frame on the bus is logged with its start and end tick.
 """
 
@@ -76,14 +77,21 @@ class CanBus:
         self.idle_at = 0  # tick from which the bus is idle
         self.log = []  # (start tick, end tick, sender index, can_id, data)
         self.errors = []  # (start tick, sender index, can_id) of attempts nobody acknowledged
+        self.error_windows = []  # (from tick, to tick): every frame started inside fails
+        self.next_event = None
 
     def attach(self, node):
         self.nodes.append(node)
         return len(self.nodes) - 1
 
     def update(self):
-        """Runs the bus up to the current time."""
+        """Runs the bus up to the current time. Afterwards `next_event` is the tick at which
+        the bus has something to do next as far as it knows (a frame in progress ends, a
+        queued frame becomes ready), or None: a scheduler that steps the CPUs to it delivers
+        each frame to its receivers at its end. Frames a CPU requests meanwhile are seen at
+        the next update, with the tick they were requested at."""
         now = self.clock.ticks
+        self.next_event = None
         while True:
             ready = [n.next_ready() for n in self.nodes]
             ready = [t for t in ready if t is not None]
@@ -91,6 +99,7 @@ class CanBus:
                 return
             start = max(self.idle_at, min(ready))
             if start > now:
+                self.next_event = start
                 return
             contenders = []
             for i, n in enumerate(self.nodes):
@@ -102,8 +111,10 @@ class CanBus:
                 continue
             can_id, sender, frame = min(contenders)
             node = self.nodes[sender]
-            if not node.joined(self.bit_ticks):
-                # Wrong bit rate or TX pin not on the bus: nobody acknowledges, an error frame
+            disturbed = any(a <= start < b for a, b in self.error_windows)
+            if disturbed or not node.joined(self.bit_ticks):
+                # Wrong bit rate, TX pin not on the bus, or a disturbance on the wires: the
+                # frame is not acknowledged (or its bits are destroyed) and an error frame
                 # (6 dominant + 8 delimiter bits) follows the first bits.
                 self.idle_at = start + 20 * self.bit_ticks
                 self.errors.append((start, sender, can_id))
@@ -112,6 +123,7 @@ class CanBus:
             data = frame[2]
             end = start + frame_bits(can_id, data) * self.bit_ticks
             if end > now:
+                self.next_event = end
                 return  # completes later; look again then
             self.idle_at = end
             self.log.append((start, end, sender, can_id, data))

@@ -78,6 +78,10 @@ class CortexM:
         self.uc.reg_write(UC_ARM_REG_PRIMASK, 0)
         self.uc.reg_write(UC_ARM_REG_PC, pc | 1)
 
+    def pin_reset(self):
+        """NRST pulled low and released: the same system reset as SYSRESETREQ."""
+        self._system_reset()
+
     def _system_reset(self):
         self.resets += 1
         self.scs.reset()

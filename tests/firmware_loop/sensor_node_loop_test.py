@@ -15,16 +15,14 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from mpu9250_model import ACCEL_LSB_PER_G, GYRO_LSB_PER_DPS, Motion  # noqa: E402
 from sensor_node_rig import SensorNodeRig  # noqa: E402
 from virtual_clock import TICK_HZ  # noqa: E402
+from wire_decode import DECODE, ERRF_IMU, STATE_FAULT, STATE_RUNNING, decode  # noqa: E402
 
 ELF = os.environ.get("FIRMWARE_F103_ELF", "")
-DECODE = os.environ.get("CAN_FRAME_DECODE", "")
 ENCODE_CONFIG = os.environ.get("CAN_CONFIG_ENCODE", "")
 RATE_HZ = 100
 SYNCS = 6
 SYNC_START_US = 170_000  # after the node's 144 ms MPU-9250 / AK8963 start-up
 G = 9.80665
-STATE_RUNNING, STATE_FAULT = 2, 3
-ERRF_IMU = 0x01
 
 
 def per_sample_cycles(rig, frames_per_sample):
@@ -48,12 +46,6 @@ def report_cycles(rig, mode, frames_per_sample):
           f"({100 * max(cycles) / period:.2f} %); boot to first STATUS "
           f"{min(t for t, _, _ in rig.board.can.tx_log) * 1000 // TICK_HZ} ms")
     assert max(cycles) < period, "a sample must fit its SYNC slot"
-
-
-def decode(frames):
-    text = "".join(f"{can_id:03X} {data.hex()}\n" for _, can_id, data in frames)
-    out = subprocess.run([DECODE], input=text, capture_output=True, text=True, check=True).stdout
-    return [line.split() for line in out.splitlines()]
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -10,26 +10,43 @@ import sys
 
 from can_bus import CanBus, HostPort
 from sensor_node_board import SensorNodeBoard
-from virtual_clock import TICK_HZ, ticks_from_us
+from virtual_clock import TICK_HZ, Clock, ticks_from_us
 
 BITRATE = 1_000_000
 SYNC_ID = 0x000
 
 
-class SensorNodeRig:
-    def __init__(self, elf_path, motion=None, who_am_i=0x71, rate_hz=100, hse_present=True):
+class SensorBusRig:
+    """N emulated sensor nodes on one 1 Mbit/s bus with a host port standing in for the sink.
+
+    Every CPU runs on its own virtual clock; a common scheduler steps them all to the same
+    instant, at most `STEP_US` of virtual time at a time and never past the bus's next event
+    (a frame's end, a queued frame's start), then runs the bus up to that instant (the bus's
+    clock is that instant: every node has reached it, to within one slice of instructions).
+    A frame therefore reaches its receivers at its end; a frame a node requests is seen by
+    the bus at the next step, with the tick it was requested at, so arbitration is decided as
+    on the wires."""
+
+    STEP_US = 50
+
+    def __init__(self, elf_paths, motions=None, who_am_i=0x71, rate_hz=100, hse_present=True):
         self.rate_hz = rate_hz
-        self.board = SensorNodeBoard(elf_path, motion=motion, who_am_i=who_am_i, hse_present=hse_present)
-        self.cpu = self.board.cpu
-        # One emulated MCU per bus for now: the bus runs on its clock.
-        self.bus = CanBus(self.cpu.clock, BITRATE)
-        self.board.connect(self.bus)
+        motions = motions or [None] * len(elf_paths)
+        self.boards = [SensorNodeBoard(elf, motion=m, who_am_i=who_am_i, hse_present=hse_present)
+                       for elf, m in zip(elf_paths, motions)]
+        self.clock = Clock()
+        self.bus = CanBus(self.clock, BITRATE)
+        for board in self.boards:
+            board.connect(self.bus)
         self.host = HostPort()
-        self.bus.attach(self.host)
+        self.host_index = self.bus.attach(self.host)
         self.syncs = []  # (tick, counter)
 
+    def fault(self):
+        return next((f"node {i}: {b.cpu.fault}" for i, b in enumerate(self.boards) if b.cpu.fault), None)
+
     def run(self, seconds, sync_start_us=200_000, sync_count=None):
-        """Runs `seconds` of virtual time, sending SYNC n at sync_start + n / rate."""
+        """Runs to `seconds` of virtual time, sending SYNC n at sync_start + n / rate."""
         period = TICK_HZ // self.rate_hz
         end = ticks_from_us(int(seconds * 1_000_000))
         start = ticks_from_us(sync_start_us)
@@ -41,15 +58,29 @@ class SensorNodeRig:
             self.host.send(tick, SYNC_ID, struct.pack("<I", n))
             self.syncs.append((tick, n))
             n += 1
-        step = ticks_from_us(500)  # the bus and the host port advance between slices
-        while self.cpu.clock.ticks < end and self.cpu.fault is None:
-            self.cpu.run_until(min(end, self.cpu.clock.ticks + step))
+        step = ticks_from_us(self.STEP_US)
+        while self.clock.ticks < end and self.fault() is None:
+            target = min(end, self.clock.ticks + step)
+            if self.bus.next_event is not None and self.clock.ticks < self.bus.next_event < target:
+                target = self.bus.next_event  # a frame ends there: its receivers get it on time
+            for board in self.boards:
+                board.cpu.run_until(target)
+            self.clock.ticks = target
             self.bus.update()
         return self
 
-    def node_frames(self):
-        """(end tick, id, data) of every frame the node put on the bus."""
-        return [(end, can_id, data) for (_, end, sender, can_id, data) in self.bus.log if sender == 0]
+    def node_frames(self, index=0):
+        """(end tick, id, data) of every frame node `index` put on the bus."""
+        return [(end, can_id, data) for (_, end, sender, can_id, data) in self.bus.log if sender == index]
+
+
+class SensorNodeRig(SensorBusRig):
+    """One node alone on the bus."""
+
+    def __init__(self, elf_path, motion=None, **kwargs):
+        super().__init__([elf_path], [motion], **kwargs)
+        self.board = self.boards[0]
+        self.cpu = self.board.cpu
 
 
 def main():
@@ -58,7 +89,7 @@ def main():
     rig = SensorNodeRig(elf).run(seconds)
     for end, can_id, data in rig.node_frames():
         print(f"{end / TICK_HZ * 1e3:10.3f} ms  id 0x{can_id:03X}  {data.hex()}")
-    print(f"fault: {rig.cpu.fault}; violations: {rig.board.all_violations()}; cycles {rig.cpu.clock.cycles}")
+    print(f"fault: {rig.fault()}; violations: {rig.board.all_violations()}; cycles {rig.cpu.clock.cycles}")
 
 
 if __name__ == "__main__":

@@ -87,6 +87,8 @@ static void send_status(sensor_node* node) {
     }
 }
 
+static void drop_waiting_syncs(sensor_node* node);
+
 static int init_imu(sensor_node* node) {
     const mpu9250_bus bus = {node->hal.user, node->hal.spi_transfer, node->hal.time_us};
     const int rc = mpu9250_init(&node->imu, &bus, node->config.accel_range, node->config.gyro_range,
@@ -124,6 +126,7 @@ int sensor_node_init(sensor_node* node, const sensor_node_hal* hal, uint8_t node
     (void)init_imu(node);
     node->event_flags = MW_ERRF_RESET;
     node->status_due = 1;
+    drop_waiting_syncs(node);
     return MW_OK;
 }
 
@@ -268,6 +271,22 @@ static void handle_frame(sensor_node* node, const mw_can_frame* frame) {
     /* Everything else is other nodes' traffic. */
 }
 
+/* Frames that arrived while the node was bringing its sensor up (about 144 ms at power-on)
+ * waited in the CAN controller's receive FIFO. A SYNC among them is not the present instant:
+ * a sample read now and tagged with its counter would be a wrong sample that looks right
+ * (found by the firmware-in-the-loop test of a node reset mid-stream). Such SYNCs are
+ * dropped and counted; a CONFIG among them still applies. */
+static void drop_waiting_syncs(sensor_node* node) {
+    mw_can_frame frame;
+    while (node->hal.can_receive(node->hal.user, &frame) == 1) {
+        if (mw_can_id_function(frame.id) == MW_FN_SYNC) {
+            ++node->counters.syncs_stale;
+        } else {
+            handle_frame(node, &frame);
+        }
+    }
+}
+
 void sensor_node_poll(sensor_node* node) {
     mw_can_frame frame;
     while (node->hal.can_receive(node->hal.user, &frame) == 1) {
@@ -281,6 +300,7 @@ void sensor_node_poll(sensor_node* node) {
         if (init_imu(node)) {
             node->status_due = 1;
         }
+        drop_waiting_syncs(node);
     }
     if (node->state == MW_NODE_RUNNING && node->config.rate_hz > 0u &&
         now - node->last_sync_us > (uint64_t)SENSOR_NODE_SYNC_TIMEOUT_PERIODS * US_PER_S / node->config.rate_hz) {

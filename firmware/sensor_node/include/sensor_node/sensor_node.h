@@ -61,6 +61,7 @@ typedef struct sensor_node_counters {
     uint32_t frames_sent;      /* frames accepted by the CAN controller */
     uint32_t tx_overflows;     /* frames dropped because the TX queue was full */
     uint32_t sync_missed;      /* SYNC counter gaps (counter jumped by more than one) */
+    uint32_t syncs_stale;      /* SYNCs that waited while the sensor was brought up: dropped */
     uint32_t configs_applied;  /* CONFIG frames accepted */
     uint32_t configs_rejected; /* CONFIG frames for this node that were invalid or unsupported */
     uint32_t malformed_frames; /* received frames the wire decoder rejected */
