@@ -38,9 +38,12 @@ def test_frames_carry_numpy_poses_of_the_subscribed_fields(walk):
     assert all(b > a for a, b in zip(syncs, syncs[1:])), "sync only grows"
     if drops == 0:
         assert syncs[-1] - syncs[0] == RATE_HZ - 1, "no frame lost unless announced"
-    # One SYNC step is one sample period on the sink's clock.
+    # One SYNC step is one sample period on the sink's clock. The simulated sink stamps its
+    # batches when it actually sends them, so on a loaded machine a second of SYNCs spans up
+    # to a few tenths more (seen: 1.047 s for 99 steps at load 8); a wrong unit or rate would
+    # be off by a factor.
     span_us = frames[-1].sample_us - frames[0].sample_us
-    assert span_us == pytest.approx((syncs[-1] - syncs[0]) * 1e6 / RATE_HZ, rel=0.05)
+    assert span_us == pytest.approx((syncs[-1] - syncs[0]) * 1e6 / RATE_HZ, rel=0.3)
     for f in frames:
         assert f.subject_id == 1
         assert f.q.shape == (SEGMENTS, 4) and f.p.shape == (SEGMENTS, 3) and f.q_raw.shape == (SEGMENTS, 4)
