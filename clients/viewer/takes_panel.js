@@ -60,7 +60,9 @@ export function initTakesPanel(view) {
     const r = await fetch(path, { method: 'POST', headers: { 'X-Mocap-Token': token } });
     const body = await r.json();
     if (r.status === 401) token = '';
-    say(body.ok ? `take ${body.take}: ${path.includes('/start') ? 'recording' : 'stopped'}` : `refused: ${body.error}`);
+    // A stop that lost samples stopped the take all the same: its reply names it and the loss.
+    if (body.ok) say(`take ${body.take}: ${path.includes('/start') ? 'recording' : 'stopped'}`);
+    else say(body.take ? `take ${body.take}: ${body.error}` : `refused: ${body.error}`);
     await refresh();
   }
 
