@@ -187,21 +187,38 @@ int run_takes(const TakeCommand& c) {
         target = base + "/stop";
     }
     http::response<http::string_body> res;
-    try {
-        conn.send(method, target, c);
-        http::response_parser<http::string_body> parser;
-        parser.body_limit(std::uint64_t{64} << 20);
-        http::read(conn.socket(), conn.buffer(), parser);
-        res = parser.release();
-    } catch (const std::exception& e) {
-        std::cerr << "mocap-client: " << e.what() << "\n";
-        return kExitConnection;
+    const auto exchange = [&](const std::string& t) {
+        try {
+            conn.send(method, t, c);
+            http::response_parser<http::string_body> parser;
+            parser.body_limit(std::uint64_t{64} << 20);
+            http::read(conn.socket(), conn.buffer(), parser);
+            res = parser.release();
+        } catch (const std::exception& e) {
+            std::cerr << "mocap-client: " << e.what() << "\n";
+            return kExitConnection;
+        }
+        if (res.result() != http::status::ok) {
+            std::cerr << "mocap-client: " << res.result_int() << " " << res.body();
+            return kExitFailed;
+        }
+        return 0;
+    };
+    if (c.action == "list") {
+        // The list comes in pages; `total` says how many takes there are in all.
+        auto all = nlohmann::json::array();
+        for (;;) {
+            if (const int status = exchange(base + "?offset=" + std::to_string(all.size())); status != 0) return status;
+            const auto page = nlohmann::json::parse(res.body(), nullptr, false);
+            if (!page.is_object() || !page.contains("takes") || !page["takes"].is_array()) break;
+            for (const auto& t : page["takes"])
+                all.push_back(t);
+            if (page["takes"].empty() || all.size() >= page.value("total", std::size_t{0})) break;
+        }
+        const std::size_t total = all.size();
+        return print_list(nlohmann::json{{"takes", std::move(all)}, {"total", total}}.dump() + "\n", c.json);
     }
-    if (res.result() != http::status::ok) {
-        std::cerr << "mocap-client: " << res.result_int() << " " << res.body();
-        return kExitFailed;
-    }
-    if (c.action == "list") return print_list(res.body(), c.json);
+    if (const int status = exchange(target); status != 0) return status;
     const auto j = nlohmann::json::parse(res.body(), nullptr, false);
     std::cout << "ok" << (j.is_object() && j.contains("take") ? " " + j["take"].get<std::string>() : "") << "\n";
     return 0;

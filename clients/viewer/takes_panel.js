@@ -29,8 +29,14 @@ export function initTakesPanel(view) {
   const guarded = (action) => (...args) => action(...args).catch((err) => say(String(err)));
 
   async function refresh() {
-    const r = await fetch('/api/takes');
-    const { takes } = await r.json();
+    // The list comes in pages (at most 500 takes each); `total` says how many there are.
+    const takes = [];
+    for (;;) {
+      const r = await fetch(`/api/takes?offset=${takes.length}`);
+      const page = await r.json();
+      takes.push(...page.takes);
+      if (page.takes.length === 0 || takes.length >= page.total) break;
+    }
     const list = $('takes-list');
     list.replaceChildren();
     for (const t of takes) {
@@ -54,7 +60,9 @@ export function initTakesPanel(view) {
     const r = await fetch(path, { method: 'POST', headers: { 'X-Mocap-Token': token } });
     const body = await r.json();
     if (r.status === 401) token = '';
-    say(body.ok ? `take ${body.take}: ${path.includes('/start') ? 'recording' : 'stopped'}` : `refused: ${body.error}`);
+    // A stop that lost samples stopped the take all the same: its reply names it and the loss.
+    if (body.ok) say(`take ${body.take}: ${path.includes('/start') ? 'recording' : 'stopped'}`);
+    else say(body.take ? `take ${body.take}: ${body.error}` : `refused: ${body.error}`);
     await refresh();
   }
 

@@ -381,6 +381,9 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
     if ((c.raw_ring_capacity & (c.raw_ring_capacity - 1)) != 0) {
         r.fail("raw_ring_capacity", r.take("raw_ring_capacity"), "must be a power of two");
     }
+    r.read("export_memory_mb", c.export_memory_mb, 1, 65536);
+    r.read("export_memory_per_address_mb", c.export_memory_per_address_mb, 1, 65536);
+    r.read("offline_export_max_mb", c.offline_export_max_mb, 1, 65536);
 }
 
 void read_http(TableReader& r, DaemonConfig& c) {

@@ -113,6 +113,9 @@ struct DaemonConfig {
     double raw_rotate_mb = 256.0;  ///< 0 = never by size
     double raw_rotate_s = 3600.0;  ///< 0 = never by time
     std::uint32_t raw_ring_capacity = 16384;
+    std::uint32_t export_memory_mb = 256;              ///< take exports held in memory, all peers
+    std::uint32_t export_memory_per_address_mb = 128;  ///< take exports held for one peer address
+    std::uint32_t offline_export_max_mb = 384;         ///< estimate above which an offline export is refused
     // [http] (docs/viewer.md): viewer page, pose WebSocket, /metrics, /healthz
     bool http_enabled = true;
     Endpoint http_listen{"0.0.0.0", 8080};

@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <fcntl.h>
+
 #include <cstdio>
 #include <limits>
 
@@ -159,11 +161,24 @@ private:
 /// Joint angles, one CSV row per frame (serve/angles_csv.hpp): replay's --angles-out.
 class AnglesCsvOutput final : public pipeline::Output {
 public:
-    AnglesCsvOutput(std::string path, std::vector<std::string> angle_names)
-        : path_(std::move(path)), angle_names_(std::move(angle_names)) {}
+    /// fd >= 0: write into that open file (through a dup), `path` only names it.
+    AnglesCsvOutput(std::string path, int fd, std::vector<std::string> angle_names)
+        : path_(fd >= 0 && path.empty() ? "the CSV export" : std::move(path)),
+          fd_(fd),
+          angle_names_(std::move(angle_names)) {}
     [[nodiscard]] std::string_view name() const override { return "angles_csv"; }
     bool start(std::string* error) override {
-        file_.reset(std::fopen(path_.c_str(), "wx"));
+        if (fd_ >= 0) {
+            const int own = ::fcntl(fd_, F_DUPFD_CLOEXEC, 0);
+            file_.reset(own < 0 ? nullptr : ::fdopen(own, "w"));
+            if (!file_) {
+                if (own >= 0) ::close(own);
+                *error = "cannot write " + path_;
+                return false;
+            }
+        } else {
+            file_.reset(std::fopen(path_.c_str(), "wx"));
+        }
         if (!file_) {
             *error = "cannot create " + path_ + " (it must not exist)";
             return false;
@@ -191,6 +206,7 @@ public:
 
 private:
     std::string path_;
+    int fd_ = -1;
     std::vector<std::string> angle_names_;
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_{nullptr, &std::fclose};
     std::string row_;
@@ -261,13 +277,15 @@ std::unique_ptr<pipeline::Output> make_bvh_recorder(const OutputContext& ctx) {
     rc.flush_interval_s = ctx.config.record_flush_interval_s;
     std::string start_path;
     if (ctx.replay) {
-        if (ctx.replay->bvh_out.empty()) return nullptr;
+        if (ctx.replay->bvh_out.empty() && ctx.replay->bvh_out_fd < 0) return nullptr;
         if (ctx.replay->bvh_subject != 0) rc.subject = ctx.replay->bvh_subject;
         rc.max_buffer_bytes = std::numeric_limits<std::size_t>::max();  // never drop: the file must be complete
         start_path = ctx.replay->bvh_out;
     }
+    const int start_fd = ctx.replay ? ctx.replay->bvh_out_fd : -1;
+    if (start_fd >= 0 && start_path.empty()) start_path = "the BVH export";
     return std::make_unique<BvhRecorderOutput>(rc, ctx.pipeline.model(), bvh_options_from_config(ctx.config),
-                                               std::move(start_path));
+                                               std::move(start_path), start_fd);
 }
 
 std::unique_ptr<pipeline::Output> make_raw_recorder(const OutputContext& ctx) {
@@ -292,8 +310,9 @@ std::unique_ptr<pipeline::Output> make_take_recorder(const OutputContext& ctx) {
 }
 
 std::unique_ptr<pipeline::Output> make_angles_csv(const OutputContext& ctx) {
-    if (!ctx.replay || ctx.replay->angles_out.empty()) return nullptr;
-    return std::make_unique<AnglesCsvOutput>(ctx.replay->angles_out, joint_angle_names(ctx.pipeline));
+    if (!ctx.replay || (ctx.replay->angles_out.empty() && ctx.replay->angles_out_fd < 0)) return nullptr;
+    return std::make_unique<AnglesCsvOutput>(ctx.replay->angles_out, ctx.replay->angles_out_fd,
+                                             joint_angle_names(ctx.pipeline));
 }
 
 std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
@@ -308,6 +327,8 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     hc.control_loopback_only = ctx.config.control_loopback_only;
     hc.allowed_origins = ctx.config.http_allowed_origins;
     hc.limits = peer_limits(ctx.config, ctx.config.http_per_address);
+    hc.export_memory_bytes = std::uint64_t{ctx.config.export_memory_mb} << 20;
+    hc.export_memory_per_address_bytes = std::uint64_t{ctx.config.export_memory_per_address_mb} << 20;
     hc.control_attempts = ctx.control_attempts;
     hc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };
     serve::HttpDescription hd;
@@ -369,10 +390,11 @@ constexpr OutputEntry kOutputs[] = {
 }  // namespace
 
 BvhRecorderOutput::BvhRecorderOutput(const serve::BvhRecorderConfig& config, const skeleton::BodyModel& model,
-                                     const serve::BvhOutputOptions& options, std::string start_path)
-    : encoder_(model, options), recorder_(config, encoder_), start_path_(std::move(start_path)) {}
+                                     const serve::BvhOutputOptions& options, std::string start_path, int start_fd)
+    : encoder_(model, options), recorder_(config, encoder_), start_path_(std::move(start_path)), start_fd_(start_fd) {}
 
 bool BvhRecorderOutput::start(std::string* error) {
+    if (start_fd_ >= 0) return recorder_.start_fd(start_fd_, start_path_, error);
     return start_path_.empty() || recorder_.start(start_path_, error);
 }
 

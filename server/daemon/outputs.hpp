@@ -62,9 +62,10 @@ void add_outputs(const OutputContext& context, pipeline::Pipeline& pipeline);
 /// requests; in replay, records the whole run to the --bvh-out file.
 class BvhRecorderOutput final : public pipeline::Output {
 public:
-    /// start_path: opened by start() (replay); "" = wait for start_recording().
+    /// start_path: opened by start() (replay); "" = wait for start_recording(). start_fd >= 0:
+    /// start() writes into that open file instead, named start_path in messages.
     BvhRecorderOutput(const serve::BvhRecorderConfig& config, const skeleton::BodyModel& model,
-                      const serve::BvhOutputOptions& options, std::string start_path);
+                      const serve::BvhOutputOptions& options, std::string start_path, int start_fd = -1);
     [[nodiscard]] std::string_view name() const override { return "bvh_record"; }
     bool start(std::string* error) override;
     /// Finishes an open recording (patches its frame count).
@@ -84,6 +85,7 @@ private:
     serve::BvhFrameEncoder encoder_;
     serve::BvhRecorder recorder_;
     std::string start_path_;
+    int start_fd_ = -1;
     std::uint64_t frames_written_ = 0;
 };
 

@@ -86,7 +86,12 @@ struct ReplayOptions {
     std::string bvh_out;            ///< "" = no BVH file; must not exist
     std::uint32_t bvh_subject = 0;  ///< 0 = [outputs].bvh_subject rule
     std::string angles_out;         ///< "" = no CSV
-    std::string calibration_dir;    ///< "" = neither load nor save calibrations
+    /// >= 0: write the BVH / the CSV into this open, empty file instead (a take export's
+    /// memfd, daemon/take_export.hpp); the replay writes through a dup and leaves `fd` open.
+    /// The path above, when also set, only names it in messages.
+    int bvh_out_fd = -1;
+    int angles_out_fd = -1;
+    std::string calibration_dir;  ///< "" = neither load nor save calibrations
     std::vector<ReplayCalibration> calibrate;
     /// Non-null: checked per sample; once true the replay stops and returns false (a take
     /// export the daemon abandons, daemon/take_export.hpp).

@@ -2,11 +2,15 @@
 // by `mocapd --replay`'s code (daemon/replay.hpp) with the daemon's config, the calibrations
 // the take carries, and optionally another filter (docs/client-protocol.md, "Takes").
 //
-// The export works in a hidden directory of the take store (<root>/.export-<n>): it copies
-// the take's calibration files there (so a re-solve never writes into the take), replays into
-// a file there, opens that file, then removes the directory, so the result is an unlinked
-// open file that disappears when the download closes it, and nothing is left behind but
-// after a crash mid-export (such a directory is removed when the next export starts).
+// The export is written into a memfd (memfd_create: memory, never record_dir's disk, which a
+// running take needs), returned open and positioned at its start; it is freed when the
+// download closes it. The take's calibration files are copied into a hidden directory of
+// the take store (<root>/.export-<n>, removed when the export ends, or at the next export
+// after a crash), so a re-solve never writes into the take.
+// Refused before anything runs: a BVH of a subject the take does not hold (kNotFound, as is
+// a BVH that ends up without a frame of the requested subject), and an offline re-solve whose
+// memory estimate (offline_export_estimate_bytes) exceeds [outputs] offline_export_max_mb
+// (kTooLarge). After every export malloc_trim(0) gives its freed buffers back to the system.
 // A requested filter replaces [filter] and every per-segment override, with that filter's
 // default parameters.
 //
@@ -16,12 +20,18 @@
 #pragma once
 
 #include <atomic>
+#include <cstdint>
 
 #include "daemon/config.hpp"
 #include "serve/take_export_queue.hpp"
 #include "serve/take_store.hpp"
 
 namespace mocap::daemon {
+
+/// What an offline re-solve of a take with `raw_bytes` of raw file holds at its peak, beyond
+/// what the daemon holds anyway (measured, docs/reliability.md "Export memory").
+inline constexpr std::uint64_t kOfflineBytesPerRawByte = 5;
+std::uint64_t offline_export_estimate_bytes(std::uint64_t raw_bytes);
 
 serve::TakeExportResult export_take(const DaemonConfig& config, const serve::TakeStore& store,
                                     const serve::TakeExportRequest& request, const std::atomic<bool>& cancel);

@@ -75,6 +75,26 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
         *error = "cannot create " + path + ": " + errno_text(errno);
         return false;
     }
+    return start_locked(fd, path, true, error, opened_path);
+}
+
+bool BvhRecorder::start_fd(int fd, const std::string& name, std::string* error) {
+    std::lock_guard control(control_mutex_);
+    if (recording()) {
+        *error = "a BVH recording is already running";
+        return false;
+    }
+    finish();
+    const int own = ::fcntl(fd, F_DUPFD_CLOEXEC, 0);
+    if (own < 0) {
+        *error = "cannot write " + name + ": " + errno_text(errno);
+        return false;
+    }
+    return start_locked(own, name, false, error, nullptr);
+}
+
+bool BvhRecorder::start_locked(int fd, const std::string& path, bool created, std::string* error,
+                               std::string* opened_path) {
     const std::string head = encoder_.hierarchy() + "MOTION\nFrames: ";
     const std::string header = head + count_digits(0) + "\n" + encoder_.frame_time_line(kUnmeasuredFrameTimeS);
     if (const int err = write_whole(file_writer_, fd, header.data(), header.size(), 0); err != 0) {
@@ -82,7 +102,7 @@ bool BvhRecorder::start(const std::string& requested, std::string* error, std::s
         write_errors_.add();
         *error = "cannot write " + path + ": " + errno_text(err);
         ::close(fd);
-        ::unlink(path.c_str());  // a file without its header is no recording
+        if (created) ::unlink(path.c_str());  // a file without its header is no recording
         return false;
     }
     fd_ = fd;

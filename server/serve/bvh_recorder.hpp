@@ -62,6 +62,10 @@ public:
     /// Fails if one is running or the file cannot be created (an existing file is not
     /// overwritten). On success *opened_path (if given) is the file.
     bool start(const std::string& requested, std::string* error, std::string* opened_path = nullptr);
+    /// Any thread. Starts a recording into an empty file the caller opened for writing (a
+    /// take export's memfd, daemon/take_export.hpp); the recorder writes into a dup of `fd`,
+    /// closes that dup when it stops, and names the file `name` in its messages.
+    bool start_fd(int fd, const std::string& name, std::string* error);
     /// Any thread. Writes the rest, patches the count, closes; *frames = whole frames in the
     /// file. False if none is running, or if the recording had stopped on a write failure
     /// (*error says why and how many frames the file holds; *frames is set as well).
@@ -90,6 +94,8 @@ private:
     bool write_pending(std::string& scratch);
     /// Stops the writer thread and closes the file (control_mutex_ held).
     void finish();
+    /// start()'s second half, on an open fd (control_mutex_ held); `created`: unlink on failure.
+    bool start_locked(int fd, const std::string& path, bool created, std::string* error, std::string* opened_path);
 
     BvhRecorderConfig config_;
     const BvhFrameEncoder& encoder_;

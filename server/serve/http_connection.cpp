@@ -42,6 +42,7 @@ void HttpServer::HttpSession::send(http::response<Body>&& response) {
 void HttpServer::HttpSession::close() {
     if (closed_) return;
     closed_ = true;
+    if (export_cancel_) export_cancel_->store(true);  // nobody will read it
     beast::error_code ignored;
     stream_.socket().shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
     stream_.close();

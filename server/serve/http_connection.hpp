@@ -51,7 +51,10 @@ private:
     void takes(const Request& request, std::string_view path, std::string_view query);
     void start_or_stop_take(const Request& request, std::string_view path, std::string_view query);
     void download(const Request& request, const std::string& name, std::string_view query);
-    void on_export(const ReplyTo& to, const std::string& file_name, const TakeExportResult& result);
+    void on_export(const ReplyTo& to, const std::string& file_name, const TakeExportResult& result,
+                   std::shared_ptr<TakeExportBudget::Charge> charge);
+    /// While an export is pending: a peer that closes its side cancels it (http_takes.cpp).
+    void watch_for_close();
     /// Streams an open file (taken over: closed when sent), one chunk per write, each with
     /// the idle timeout, so a stalled client is dropped and a slow one is not.
     void send_file(const ReplyTo& to, int fd, const char* content_type, const std::string& file_name);
@@ -73,6 +76,8 @@ private:
     std::shared_ptr<void> response_;  // the response being written
     bool keep_alive_ = false;
     bool closed_ = false;
+    std::shared_ptr<std::atomic<bool>> export_cancel_;         // the pending export's; set by close()
+    std::shared_ptr<TakeExportBudget::Charge> export_charge_;  // the export being sent
 };
 
 }  // namespace mocap::serve

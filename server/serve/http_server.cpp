@@ -30,6 +30,8 @@ HttpServerCounters::HttpServerCounters() {
     group.add("take_downloads", take_downloads);
     group.add("take_exports_busy", take_exports_busy);
     group.add("take_exports_failed", take_exports_failed);
+    group.add("take_exports_over_budget", take_exports_over_budget);
+    group.add("take_exports_abandoned", take_exports_abandoned);
     group.add("takes_deleted", takes_deleted);
     control.register_in(group);
 }
@@ -51,7 +53,8 @@ HttpServer::HttpServer(HttpServerConfig config, HttpDescription description, Htt
       ws_sessions_(serve_.lanes()),
       backlog_(serve_.ios(), config_.publish_backlog_frames,
                [this](std::size_t lane, const SubjectText& frame) { deliver(lane, frame); }),
-      exports_(config_.export_waiting) {
+      exports_(config_.export_waiting),
+      export_budget_(config_.export_memory_bytes, config_.export_memory_per_address_bytes) {
     register_metrics(own_metrics_);
     if (!config_.control_attempts) config_.control_attempts = std::make_shared<ControlAttemptLimiter>();
     if (!config_.wall_clock_us) {

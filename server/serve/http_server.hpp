@@ -70,6 +70,7 @@
 #include "serve/serve_counters.hpp"
 #include "serve/serve_thread.hpp"
 #include "serve/session_table.hpp"
+#include "serve/take_export_budget.hpp"
 #include "serve/take_export_queue.hpp"
 #include "serve/take_store.hpp"
 #include "skeleton/skeleton_pose.hpp"
@@ -99,6 +100,10 @@ struct HttpServerConfig {
     std::function<std::int64_t()> wall_clock_us;
     std::size_t threads = 1;         ///< serve threads ([http] threads); connections spread over them
     std::size_t export_waiting = 4;  ///< take exports that may wait behind the running one
+    /// Memory finished take exports may hold until read, all peers / one peer address
+    /// (take_export_budget.hpp; [outputs] export_memory_mb, export_memory_per_address_mb).
+    std::uint64_t export_memory_bytes = std::uint64_t{256} << 20;
+    std::uint64_t export_memory_per_address_bytes = std::uint64_t{128} << 20;
 };
 
 struct HttpSegment {
@@ -146,10 +151,12 @@ struct HttpServerCounters {
     Counter ws_backlog_dropped;  ///< the serve thread fell behind publish()
     Counter ws_client_messages;  ///< messages browsers sent (ignored)
     Counter write_errors;
-    Counter takes_listed;         ///< GET /api/takes and /api/takes/NAME answered
-    Counter take_downloads;       ///< downloads whose file started to go out
-    Counter take_exports_busy;    ///< bvh/csv downloads refused: the export queue was full
-    Counter take_exports_failed;  ///< bvh/csv exports that failed or were cancelled
+    Counter takes_listed;              ///< GET /api/takes and /api/takes/NAME answered
+    Counter take_downloads;            ///< downloads whose file started to go out
+    Counter take_exports_busy;         ///< bvh/csv downloads refused: the export queue was full
+    Counter take_exports_failed;       ///< bvh/csv exports that failed or were cancelled
+    Counter take_exports_over_budget;  ///< bvh/csv downloads refused with 507: export memory full
+    Counter take_exports_abandoned;    ///< bvh/csv exports cancelled: their connection closed
     Counter takes_deleted;
     ControlCounters control;  ///< http.control_* (control_access.hpp)
 
@@ -218,6 +225,7 @@ private:
     std::vector<WsTable> ws_sessions_;  // one per lane, used on that lane's thread
     PublishBacklog backlog_;
     TakeExportQueue exports_;  // posts its results to the lanes' io_contexts
+    TakeExportBudget export_budget_;
 
     mutable std::mutex subjects_mutex_;
     std::vector<std::pair<std::uint32_t, std::int64_t>> subject_last_us_;  // guarded

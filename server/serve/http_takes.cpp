@@ -4,9 +4,13 @@
 // A name from the URL is checked by valid_take_name before anything touches the disk, so
 // no request reaches outside the store's root. Reading needs no token (the pose stream
 // needs none either); every change goes through the control rules. A raw download opens
-// the file on the serve thread (one open()) and streams it; BVH and CSV wait for the export
-// queue, and the session reads no further request meanwhile.
+// the file on the serve thread (one open(), refused unless a regular file) and streams it;
+// BVH and CSV are charged to the export budget (take_export_budget.hpp), wait for the export
+// queue, and the session reads no further request meanwhile but watches for its peer to
+// leave, which cancels the export.
 #include <fcntl.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <nlohmann/json.hpp>
@@ -14,6 +18,7 @@
 #include "serve/http_connection.hpp"
 #include "serve/http_query.hpp"
 #include "serve/pose_json.hpp"
+#include "serve/record_file.hpp"
 
 namespace mocap::serve {
 
@@ -23,6 +28,8 @@ namespace http = beast::http;
 namespace {
 
 constexpr std::string_view kPrefix = "/api/takes";
+/// Most takes one GET /api/takes answers (and its default): ~1 KiB each.
+constexpr std::uint32_t kMaxListLimit = 500;
 
 nlohmann::ordered_json take_json(const TakeEntry& e) {
     auto j = nlohmann::ordered_json::parse(encode_take_json(e.meta));
@@ -53,11 +60,22 @@ void HttpServer::HttpSession::takes(const Request& request, std::string_view pat
     std::string_view rest = path.substr(kPrefix.size());
     if (rest.empty() || rest == "/") {
         if (method != http::verb::get) return send_text(request, http::status::method_not_allowed, "GET only\n");
+        const auto offset_text = query_value(query, "offset");
+        const auto limit_text = query_value(query, "limit");
+        const auto offset = offset_text ? parse_u32(*offset_text) : std::optional<std::uint32_t>(0);
+        const auto limit = limit_text ? parse_u32(*limit_text) : std::optional<std::uint32_t>(kMaxListLimit);
+        if (!offset || !limit || *limit == 0 || *limit > kMaxListLimit) {
+            return send_text(request, http::status::bad_request,
+                             "expected ?offset=N&limit=1.." + std::to_string(kMaxListLimit) + "\n");
+        }
+        const TakeStore::Page page = store->list_page(*offset, *limit);
         auto list = nlohmann::ordered_json::array();
-        for (const TakeEntry& e : store->list())
+        for (const TakeEntry& e : page.takes)
             list.push_back(take_json(e));
         server_.counters_.takes_listed.add();
-        return send_text(request, http::status::ok, dump({{"takes", std::move(list)}}), "application/json");
+        return send_text(request, http::status::ok,
+                         dump({{"takes", std::move(list)}, {"total", page.total}, {"offset", *offset}}),
+                         "application/json");
     }
     if (method == http::verb::post && (rest == "/start" || rest == "/stop")) {
         return start_or_stop_take(request, path, query);
@@ -132,7 +150,10 @@ void HttpServer::HttpSession::start_or_stop_take(const Request& request, std::st
         result = h.stop_take();
     }
     server_.counters_.control.count_result(result);
-    reply(result.ok ? http::status::ok : http::status::conflict, result);
+    // A stop that stopped a take answers 200 even when not ok: the take did stop, and the
+    // reply says what it lost.
+    const bool stopped = !start && !result.take.empty();
+    reply(result.ok || stopped ? http::status::ok : http::status::conflict, result);
 }
 
 void HttpServer::HttpSession::download(const Request& request, const std::string& name, std::string_view query) {
@@ -156,29 +177,77 @@ void HttpServer::HttpSession::download(const Request& request, const std::string
                              "take '" + name + "' holds " + std::to_string(entry->raw_files.size()) + " raw files\n");
         }
         // Opened now: a delete from here on unlinks a file this download keeps reading.
-        const int fd = ::open(entry->raw_files.front().c_str(), O_RDONLY | O_CLOEXEC);
+        const int fd = open_regular_file(entry->raw_files.front());
         if (fd < 0) return send_text(request, http::status::not_found, "no take '" + name + "'\n");
         return send_file(to, fd, "application/octet-stream", name + ".mocapraw");
     }
     const TakeExporter& exporter = server_.handlers_.export_take;
     if (!exporter) return send_text(request, http::status::not_implemented, "no exporter in this server\n");
+    const auto entry = server_.handlers_.takes->find(name);
+    if (!entry) return send_text(request, http::status::not_found, "no take '" + name + "'\n");
+    // Charged before it is queued, at half the raw file's size (a BVH or CSV export measured at
+    // a third of it or less, docs/reliability.md "Export memory"); the real size settles it.
+    beast::error_code peer_ec;
+    const auto peer = stream_.socket().remote_endpoint(peer_ec);
+    const std::string address = peer_ec ? std::string("?") : peer.address().to_string();
+    std::string why;
+    auto charge = server_.export_budget_.try_charge(address, entry->raw_bytes / 2, &why);
+    if (!charge) {
+        server_.counters_.take_exports_over_budget.add();
+        return send_text(request, http::status::insufficient_storage, why + "\n");
+    }
     TakeExportRequest job{name, format == "bvh" ? TakeFormat::kBvh : TakeFormat::kCsv, *filter, *subject,
                           offline == "1"};
     const std::string file_name = name + (format == "bvh" ? ".bvh" : ".csv");
     const auto executor = stream_.get_executor();
-    const bool queued = server_.exports_.submit([self = shared_from_this(), job = std::move(job), to, file_name,
-                                                 executor, &exporter](const std::atomic<bool>& cancel) {
-        auto result = std::make_shared<TakeExportResult>(exporter(job, cancel));
-        asio::post(executor, [self, to, file_name, result] { self->on_export(to, file_name, *result); });
-    });
+    auto cancel = std::make_shared<std::atomic<bool>>(false);
+    TakeExportBudget& budget = server_.export_budget_;
+    const bool queued = server_.exports_.submit(
+        [self = shared_from_this(), job = std::move(job), to, file_name, executor, &exporter, &budget,
+         charge](const std::atomic<bool>& cancelled) {
+            // Abandoned while it waited, or the server stops: answer without running it.
+            auto result = std::make_shared<TakeExportResult>(
+                cancelled.load() ? TakeExportResult{TakeExportResult::kCancelled, "export cancelled", -1}
+                                 : exporter(job, cancelled));
+            struct stat st {};
+            std::string over;
+            if (result->status == TakeExportResult::kOk &&
+                (::fstat(result->fd, &st) != 0 ||
+                 !budget.resize(*charge, static_cast<std::uint64_t>(st.st_size), &over))) {
+                ::close(result->fd);
+                *result =
+                    TakeExportResult{TakeExportResult::kTooLarge, over.empty() ? "cannot size the export" : over, -1};
+            }
+            asio::post(executor,
+                       [self, to, file_name, result, charge] { self->on_export(to, file_name, *result, charge); });
+        },
+        cancel);
     if (!queued) {
         server_.counters_.take_exports_busy.add();
         return send_text(request, http::status::service_unavailable, "busy: other exports are waiting, retry later\n");
     }
+    export_cancel_ = std::move(cancel);
+    watch_for_close();
 }
 
-void HttpServer::HttpSession::on_export(const ReplyTo& to, const std::string& file_name,
-                                        const TakeExportResult& result) {
+void HttpServer::HttpSession::watch_for_close() {
+    // The session reads no request while its export is pending, so nothing else would notice
+    // the peer leave: wait for the socket to become readable and look without consuming.
+    stream_.socket().async_wait(
+        asio::ip::tcp::socket::wait_read, [self = shared_from_this()](const beast::error_code& ec) {
+            if (ec || self->closed_ || !self->export_cancel_) return;  // closed, or the export answered
+            char byte = 0;
+            const ssize_t n = ::recv(self->stream_.socket().native_handle(), &byte, 1, MSG_PEEK | MSG_DONTWAIT);
+            if (n > 0) return;  // a pipelined request: read after the reply
+            if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return self->watch_for_close();
+            self->server_.counters_.take_exports_abandoned.add();
+            self->close();  // sets the export's cancel flag
+        });
+}
+
+void HttpServer::HttpSession::on_export(const ReplyTo& to, const std::string& file_name, const TakeExportResult& result,
+                                        std::shared_ptr<TakeExportBudget::Charge> charge) {
+    export_cancel_.reset();
     if (closed_) {
         if (result.fd >= 0) ::close(result.fd);
         return;
@@ -187,6 +256,7 @@ void HttpServer::HttpSession::on_export(const ReplyTo& to, const std::string& fi
     stream_.expires_after(std::chrono::seconds(server_.config_.idle_timeout_s));
     if (result.status == TakeExportResult::kOk) {
         const bool csv = file_name.ends_with(".csv");
+        export_charge_ = std::move(charge);  // held until the file is sent or the session ends
         return send_file(to, result.fd, csv ? "text/csv; charset=utf-8" : "text/plain; charset=utf-8", file_name);
     }
     server_.counters_.take_exports_failed.add();
@@ -194,6 +264,10 @@ void HttpServer::HttpSession::on_export(const ReplyTo& to, const std::string& fi
     if (result.status == TakeExportResult::kNotFound) status = http::status::not_found;
     if (result.status == TakeExportResult::kBadRequest) status = http::status::bad_request;
     if (result.status == TakeExportResult::kCancelled) status = http::status::service_unavailable;
+    if (result.status == TakeExportResult::kTooLarge) {
+        server_.counters_.take_exports_over_budget.add();
+        status = http::status::insufficient_storage;
+    }
     send_text(to, status, result.error + "\n");
 }
 
@@ -222,7 +296,10 @@ void HttpServer::HttpSession::write_file_some(const std::shared_ptr<FileResponse
     stream_.expires_after(std::chrono::seconds(server_.config_.idle_timeout_s));
     http::async_write_some(stream_, *sr,
                            [self = shared_from_this(), res, sr](const beast::error_code& ec, std::size_t) {
-                               if (ec || sr->is_done()) return self->on_write(ec);
+                               if (ec || sr->is_done()) {
+                                   self->export_charge_.reset();  // sent: its memory is given back
+                                   return self->on_write(ec);
+                               }
                                self->slot_->progress(ServeThread::now_us());
                                self->write_file_some(res, sr);
                            });

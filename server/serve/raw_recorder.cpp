@@ -185,6 +185,7 @@ bool RawRecorder::flush_buffer() {
 
 void RawRecorder::on_failure(int err, const std::string& what) {
     write_errors_.add();
+    if (first_failure_.empty()) first_failure_ = what + " failed: " + errno_text(err);
     const std::int64_t now = clock_.now_us();
     if (!paused_.load(std::memory_order_relaxed)) {
         // One line per episode, with the reason; the retries that follow are only counted.
@@ -272,9 +273,16 @@ void RawRecorder::writer_loop() {
 }
 
 bool RawRecordingReader::open(const std::string& path, std::string* error) {
-    file_.reset(std::fopen(path.c_str(), "rb"));
+    file_.reset();
+    const int fd = open_regular_file(path);
+    if (fd < 0) {
+        *error = path + ": " + (errno == EINVAL ? std::string("not a regular file") : errno_text(errno));
+        return false;
+    }
+    file_.reset(::fdopen(fd, "rb"));
     if (!file_) {
         *error = path + ": " + errno_text(errno);
+        ::close(fd);
         return false;
     }
     char magic[sizeof kRawMagic];

@@ -86,6 +86,9 @@ public:
     /// Path of the file being written ("" before start / after stop). Writer-thread value,
     /// read under a lock.
     [[nodiscard]] std::string current_path() const;
+    /// The first write failure of this recorder, as logged ("write FILE failed: No space
+    /// left on device"); "" if none. Read after stop() (the writer thread sets it).
+    [[nodiscard]] const std::string& first_failure() const { return first_failure_; }
     /// Component "raw_record": samples_recorded (written to a file), samples_dropped (ring
     /// full), samples_lost (the file could not take them and the buffer was full, or still
     /// unwritten at stop), bytes_written, files_opened, write_errors (failed writes and
@@ -119,6 +122,7 @@ private:
     int fd_ = -1;
     std::uint32_t file_index_ = 0;
     std::string series_stamp_;
+    std::string first_failure_;  // writer thread, then whoever called stop()
     std::uint64_t file_bytes_ = 0;
     std::int64_t file_opened_us_ = 0;
     std::string buffer_;  // whole encoded records not yet written

@@ -15,6 +15,8 @@
 #include <sys/types.h>
 
 #include <cstddef>
+#include <optional>
+#include <string>
 
 namespace mocap::serve {
 
@@ -35,6 +37,16 @@ FileWriter& system_file_writer();
 /// Writes all n bytes at `offset`. Returns 0, or the errno of the call that failed (a write
 /// that makes no progress counts as EIO); the file is then truncated back to `offset`.
 int write_whole(FileWriter& writer, int fd, const char* data, std::size_t n, off_t offset);
+
+// Reading the files of a take or a recording: what is not a regular file (a FIFO planted in
+// the store, a device) is refused without blocking the caller.
+
+/// The whole of `path` if it is a regular file of at most max_bytes; nullopt otherwise (a
+/// FIFO, a device, a directory are refused without blocking: opened O_NONBLOCK, fstat'ed).
+std::optional<std::string> read_regular_file(const std::string& path, std::size_t max_bytes);
+/// open(O_RDONLY) of a regular file, never blocking on a FIFO or a device (O_NONBLOCK,
+/// then fstat); -1 with errno otherwise (EINVAL: not a regular file). The caller closes it.
+int open_regular_file(const std::string& path);
 
 /// ENOSPC or EDQUOT: the disk (or the quota) is full, which freeing space can cure.
 bool is_disk_full(int err);

@@ -6,9 +6,13 @@
 // so ~40 s for an hour of one subject): far too long for a serve thread, whose other clients
 // would wait. The web endpoint hands it to this queue instead: ONE worker thread runs one
 // export at a time, at most `max_waiting` more wait, and a request beyond that is refused at
-// once (HTTP 503), so a client cannot pile up work or memory. stop() sets the cancel flag
-// every running and waiting job sees (an export checks it per sample), runs what waits (each
-// finds the flag set and returns at once) and joins the thread.
+// once (HTTP 503), so a client cannot pile up work or memory. Each job has its own cancel
+// flag (an export checks it per sample): its submitter sets it when the job is no longer
+// wanted (the HTTP connection that asked for it closed), and a waiting job whose flag is set
+// is dropped without running, so abandoned requests neither run nor hold a place. stop() sets
+// every running and waiting job's flag, runs what waits (each finds its flag set and returns
+// at once) and joins the thread. The thread runs at nice 19 (setpriority on that thread
+// alone): a re-solve takes a core only when the live path leaves it idle.
 //
 // Threads: submit() from any thread; jobs run on the queue's thread; stop() from the owner.
 #pragma once
@@ -19,6 +23,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -36,9 +41,10 @@ struct TakeExportRequest {
 };
 
 struct TakeExportResult {
-    enum Status { kOk, kNotFound, kBadRequest, kFailed, kCancelled } status = kFailed;
+    /// kTooLarge: refused before it ran, past a memory limit (HTTP 507, with the reason).
+    enum Status { kOk, kNotFound, kBadRequest, kFailed, kCancelled, kTooLarge } status = kFailed;
     std::string error;
-    int fd = -1;  ///< kOk: an open, already unlinked file holding the export; the receiver closes it
+    int fd = -1;  ///< kOk: an open file without a name (a memfd) holding the export; the receiver closes it
 };
 
 /// Runs one export on the queue's thread; must return soon after `cancel` becomes true.
@@ -53,9 +59,13 @@ public:
     TakeExportQueue(const TakeExportQueue&) = delete;
     TakeExportQueue& operator=(const TakeExportQueue&) = delete;
 
-    /// Queues `job` (the thread starts with the first one). False when max_waiting jobs wait
-    /// already, or after stop().
-    bool submit(Job job);
+    /// Queues `job` (the thread starts with the first one); it runs with `cancel` as its flag.
+    /// False when max_waiting jobs wait already (jobs whose flag is set are dropped first), or
+    /// after stop().
+    bool submit(Job job, std::shared_ptr<std::atomic<bool>> cancel);
+    bool submit(Job job) { return submit(std::move(job), std::make_shared<std::atomic<bool>>(false)); }
+    /// Jobs dropped because their flag was set while they waited.
+    [[nodiscard]] std::uint64_t dropped() const { return dropped_.load(std::memory_order_relaxed); }
     /// Cancels, runs what waits with the flag set, joins. Idempotent.
     void stop();
 
@@ -65,9 +75,14 @@ private:
     std::size_t max_waiting_;
     std::mutex mutex_;
     std::condition_variable wake_;
-    std::deque<Job> waiting_;  // mutex_
-    bool stopping_ = false;    // mutex_
-    std::atomic<bool> cancel_{false};
+    struct Waiting {
+        Job job;
+        std::shared_ptr<std::atomic<bool>> cancel;
+    };
+    std::deque<Waiting> waiting_;                 // mutex_
+    std::shared_ptr<std::atomic<bool>> running_;  // mutex_: the running job's flag
+    bool stopping_ = false;                       // mutex_
+    std::atomic<std::uint64_t> dropped_{0};
     std::thread thread_;  // started under mutex_
 };
 

@@ -121,6 +121,14 @@ ControlResult TakeRecorder::stop() {
     std::sort(meta_.subjects.begin(), meta_.subjects.end());
     meta_.samples = value("samples_recorded");
     meta_.samples_lost = value("samples_dropped") + value("samples_lost");
+    meta_.loss.clear();
+    if (value("samples_lost") > 0) {
+        meta_.loss = recorder->first_failure().empty() ? "the disk refused them" : recorder->first_failure();
+    }
+    if (value("samples_dropped") > 0) {
+        meta_.loss += std::string(meta_.loss.empty() ? "" : "; ") + std::to_string(value("samples_dropped")) +
+                      " dropped: the recorder's ring was full";
+    }
     recorded_.add(meta_.samples);
     lost_.add(meta_.samples_lost);
     stopped_.add();
@@ -132,7 +140,17 @@ ControlResult TakeRecorder::stop() {
         spdlog::error("take '{}': {}", meta_.name, error);
         result = ControlResult::failure("take stopped, but its metadata was not updated: " + error);
     }
-    spdlog::info("take '{}' stopped: {} samples, {} lost", meta_.name, meta_.samples, meta_.samples_lost);
+    if (meta_.samples_lost > 0) {
+        // Not a bare ok: whoever stops the take learns at once that it is incomplete.
+        spdlog::warn("take '{}' stopped: {} samples, {} lost ({})", meta_.name, meta_.samples, meta_.samples_lost,
+                     meta_.loss);
+        result = ControlResult::failure("take '" + meta_.name + "' stopped with " + std::to_string(meta_.samples_lost) +
+                                        " samples lost (" + meta_.loss + "); the take holds " +
+                                        std::to_string(meta_.samples) + " samples" +
+                                        (result.ok ? std::string() : "; " + result.error));
+    } else {
+        spdlog::info("take '{}' stopped: {} samples, {} lost", meta_.name, meta_.samples, meta_.samples_lost);
+    }
     result.take = meta_.name;
     return result;
 }

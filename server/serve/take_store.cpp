@@ -10,11 +10,10 @@
 #include <cerrno>
 #include <ctime>
 #include <filesystem>
-#include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "core/errno_text.hpp"
+#include "serve/record_file.hpp"
 
 namespace mocap::serve {
 
@@ -49,6 +48,21 @@ int fsync_path(const std::string& path, int flags) {
     return err;
 }
 
+void scan_raw_files(const std::string& d, TakeEntry& e) {
+    e.raw_files.clear();
+    e.raw_bytes = 0;
+    std::error_code ec;
+    for (const auto& f : fs::directory_iterator(d, ec)) {
+        // Only regular files: a FIFO or a device would block whoever opens it.
+        if (f.path().extension() != ".mocapraw" || !f.is_regular_file(ec)) continue;
+        e.raw_files.push_back(f.path().string());
+        const std::uintmax_t n = f.file_size(ec);
+        if (!ec) e.raw_bytes += n;
+    }
+    // raw-<UTC>-<index>: the names sort in recording order.
+    std::sort(e.raw_files.begin(), e.raw_files.end());
+}
+
 }  // namespace
 
 bool valid_take_name(std::string_view name) {
@@ -70,7 +84,8 @@ std::string encode_take_json(const TakeMeta& m) {
                                    {"filter", m.filter},
                                    {"notes", m.notes},
                                    {"samples", m.samples},
-                                   {"samples_lost", m.samples_lost}};
+                                   {"samples_lost", m.samples_lost},
+                                   {"loss", m.loss}};
     // Notes come from a client: invalid UTF-8 becomes U+FFFD rather than an exception.
     return j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
@@ -99,6 +114,7 @@ std::optional<TakeMeta> decode_take_json(std::string_view text, std::string* err
         m.notes = j.value("notes", std::string{});
         m.samples = j.value("samples", std::uint64_t{0});
         m.samples_lost = j.value("samples_lost", std::uint64_t{0});
+        m.loss = j.value("loss", std::string{});
     } catch (const nlohmann::json::exception& e) {
         *error = e.what();
         return std::nullopt;
@@ -155,6 +171,7 @@ bool TakeStore::create(const TakeMeta& meta, std::string* error) {
         *error = err == EEXIST ? "take '" + meta.name + "' exists" : "cannot create " + d + ": " + errno_text(err);
         return false;
     }
+    cache_valid_ = false;
     if (const int err = write_file_atomically(d + "/" + kSidecar, encode_take_json(meta)); err != 0) {
         fs::remove_all(d, ec);
         *error = "cannot write " + d + "/" + kSidecar + ": " + errno_text(err);
@@ -165,6 +182,7 @@ bool TakeStore::create(const TakeMeta& meta, std::string* error) {
 
 bool TakeStore::save(const TakeMeta& meta, std::string* error) {
     std::lock_guard lock(mutex_);
+    cache_valid_ = false;
     const std::string path = dir(meta.name) + "/" + kSidecar;
     if (const int err = write_file_atomically(path, encode_take_json(meta)); err != 0) {
         *error = "cannot write " + path + ": " + errno_text(err);
@@ -175,40 +193,64 @@ bool TakeStore::save(const TakeMeta& meta, std::string* error) {
 
 std::optional<TakeEntry> TakeStore::load(const std::string& name) const {
     const std::string d = dir(name);
-    std::ifstream in(d + "/" + kSidecar);
-    if (!in) return std::nullopt;
-    std::ostringstream text;
-    text << in.rdbuf();
+    const auto text = read_regular_file(d + "/" + kSidecar, kMaxSidecarBytes);
+    if (!text) return std::nullopt;
     std::string error;
-    auto meta = decode_take_json(text.str(), &error);
+    auto meta = decode_take_json(*text, &error);
     if (!meta || meta->name != name) return std::nullopt;
     TakeEntry e;
     e.meta = std::move(*meta);
     e.recording = name == recording_;
-    std::error_code ec;
-    for (const auto& f : fs::directory_iterator(d, ec)) {
-        if (f.path().extension() != ".mocapraw") continue;
-        e.raw_files.push_back(f.path().string());
-        e.raw_bytes += f.file_size(ec);
-    }
-    // raw-<UTC>-<index>: the names sort in recording order.
-    std::sort(e.raw_files.begin(), e.raw_files.end());
+    scan_raw_files(d, e);
     return e;
+}
+
+const std::vector<TakeEntry>& TakeStore::cached() const {
+    struct stat st {};
+    const std::int64_t mtime_ns =
+        ::stat(root_.c_str(), &st) == 0 ? std::int64_t{st.st_mtim.tv_sec} * 1'000'000'000 + st.st_mtim.tv_nsec : -1;
+    if (!cache_valid_ || mtime_ns != cache_root_mtime_ns_) {
+        cache_.clear();
+        std::error_code ec;
+        for (const auto& d : fs::directory_iterator(root_, ec)) {
+            const std::string name = d.path().filename().string();
+            if (!valid_take_name(name) || !d.is_directory(ec)) continue;
+            ++sidecars_read_;
+            if (auto e = load(name)) cache_.push_back(std::move(*e));
+        }
+        std::sort(cache_.begin(), cache_.end(), [](const TakeEntry& a, const TakeEntry& b) {
+            return a.meta.start_us != b.meta.start_us ? a.meta.start_us < b.meta.start_us : a.meta.name < b.meta.name;
+        });
+        cache_valid_ = true;
+        cache_root_mtime_ns_ = mtime_ns;
+    }
+    for (TakeEntry& e : cache_) {
+        e.recording = !recording_.empty() && e.meta.name == recording_;
+        if (!e.recording) continue;
+        scan_raw_files(dir(e.meta.name), e);  // it grows, and its file appears after its sidecar
+    }
+    return cache_;
 }
 
 std::vector<TakeEntry> TakeStore::list() const {
     std::lock_guard lock(mutex_);
-    std::vector<TakeEntry> out;
-    std::error_code ec;
-    for (const auto& d : fs::directory_iterator(root_, ec)) {
-        const std::string name = d.path().filename().string();
-        if (!valid_take_name(name) || !d.is_directory(ec)) continue;
-        if (auto e = load(name)) out.push_back(std::move(*e));
-    }
-    std::sort(out.begin(), out.end(), [](const TakeEntry& a, const TakeEntry& b) {
-        return a.meta.start_us != b.meta.start_us ? a.meta.start_us < b.meta.start_us : a.meta.name < b.meta.name;
-    });
-    return out;
+    return cached();
+}
+
+TakeStore::Page TakeStore::list_page(std::size_t offset, std::size_t limit) const {
+    std::lock_guard lock(mutex_);
+    const std::vector<TakeEntry>& all = cached();
+    Page page;
+    page.total = all.size();
+    const std::size_t begin = std::min(offset, all.size());
+    const std::size_t end = begin + std::min(limit, all.size() - begin);
+    page.takes.assign(all.begin() + static_cast<std::ptrdiff_t>(begin), all.begin() + static_cast<std::ptrdiff_t>(end));
+    return page;
+}
+
+std::uint64_t TakeStore::sidecars_read() const {
+    std::lock_guard lock(mutex_);
+    return sidecars_read_;
 }
 
 std::optional<TakeEntry> TakeStore::find(std::string_view name) const {
@@ -224,6 +266,7 @@ TakeStore::Removal TakeStore::remove(std::string_view name, std::string* error) 
         *error = "take '" + std::string(name) + "' is being recorded; stop it first";
         return Removal::kRecording;
     }
+    cache_valid_ = false;
     const std::string d = dir(name);
     const std::string hidden = root_ + "/.deleting-" + std::string(name) + "-" + std::to_string(++trash_);
     if (::rename(d.c_str(), hidden.c_str()) != 0) {

@@ -18,6 +18,11 @@
 // from every listing at once), then removes its files; a download that already opened a
 // file keeps reading it (the kernel frees it on close).
 //
+// Listing: list() keeps every take's entry in memory (~1 KiB each) and reads the sidecars
+// again only after this store created, saved or removed a take, or <root>'s mtime changed
+// (a take directory added or removed by hand). A sidecar edited by hand in place shows after
+// the next such change. The recording take's raw_bytes are read afresh on every call.
+//
 // Threads: every member may be called from any thread; list/find/remove/mark_recording
 // serialise on one mutex, file I/O included (a take directory holds a handful of files).
 #pragma once
@@ -48,6 +53,7 @@ struct TakeMeta {
     std::string notes;
     std::uint64_t samples = 0;       ///< samples written (known at stop)
     std::uint64_t samples_lost = 0;  ///< dropped or lost by the recorder (known at stop)
+    std::string loss;                ///< why samples were lost ("" = none was): the first write failure, or the ring
     bool operator==(const TakeMeta&) const = default;
 };
 
@@ -56,6 +62,9 @@ struct TakeMeta {
 std::string encode_take_json(const TakeMeta& meta);
 /// Parses a sidecar; nullopt + error on anything that is not one (a wrong type, a bad name).
 std::optional<TakeMeta> decode_take_json(std::string_view text, std::string* error);
+
+/// Largest sidecar read (notes are at most 4096 bytes; a sidecar is ~1 KiB).
+inline constexpr std::size_t kMaxSidecarBytes = std::size_t{64} * 1024;
 
 /// Writes `text` to `path` so that a crash leaves either the old file or the new one:
 /// <path>.tmp, fsync, rename over `path`, fsync of the directory. 0, or the errno of the
@@ -84,7 +93,17 @@ public:
     /// Replaces the sidecar of an existing take.
     bool save(const TakeMeta& meta, std::string* error);
     /// Every take, by start time then name. A directory without a readable sidecar is skipped.
+    /// Served from a cache of the sidecars (see below): a call reads no sidecar unless a
+    /// take was created, saved or removed since, through this store or in the directory.
     [[nodiscard]] std::vector<TakeEntry> list() const;
+    /// Takes [offset, offset + limit) of list(), and how many there are in all.
+    struct Page {
+        std::vector<TakeEntry> takes;
+        std::size_t total = 0;
+    };
+    [[nodiscard]] Page list_page(std::size_t offset, std::size_t limit) const;
+    /// Sidecars read by list()/list_page() since construction (a test's view of the cache).
+    [[nodiscard]] std::uint64_t sidecars_read() const;
     [[nodiscard]] std::optional<TakeEntry> find(std::string_view name) const;
 
     enum class Removal { kRemoved, kNotFound, kRecording, kFailed };
@@ -96,11 +115,19 @@ public:
 
 private:
     std::optional<TakeEntry> load(const std::string& name) const;  // mutex_ held
+    /// The cache, reloaded when invalid or when <root>'s mtime moved (a take directory
+    /// created or removed by another process); the recording take's raw size refreshed.
+    const std::vector<TakeEntry>& cached() const;  // mutex_ held
 
     std::string root_;
     mutable std::mutex mutex_;
     std::string recording_;    // guarded
     std::uint64_t trash_ = 0;  // guarded: suffix of hidden names
+    // The listing cache (guarded): every take, sorted; invalidated by create/save/remove.
+    mutable std::vector<TakeEntry> cache_;
+    mutable bool cache_valid_ = false;
+    mutable std::int64_t cache_root_mtime_ns_ = -1;
+    mutable std::uint64_t sidecars_read_ = 0;
 };
 
 }  // namespace mocap::serve

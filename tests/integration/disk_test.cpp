@@ -130,38 +130,6 @@ TEST_F(Disk, FifoInTheCalibrationDirectoryIsLoggedAndSkipped) {
     EXPECT_NE(log.find("ignoring " + fifo + ": a FIFO, not a regular file: skipped"), std::string::npos) << log;
 }
 
-/// A small tmpfs at `path` for the life of the object: unmounted (lazily, so a file still
-/// open cannot keep it) on every way out of the test.
-class TmpfsMount {
-public:
-    TmpfsMount(const std::string& path, const std::string& size) : path_(path) {
-        fs::create_directories(path);
-        const std::string options = "size=" + size + ",mode=0755";
-        if (::mount("tmpfs", path.c_str(), "tmpfs", 0, options.c_str()) != 0) {
-            error_ = std::string("mount tmpfs: ") + std::strerror(errno);
-        } else {
-            mounted_ = true;
-        }
-    }
-    ~TmpfsMount() {
-        if (mounted_) ::umount2(path_.c_str(), MNT_DETACH);
-    }
-    TmpfsMount(const TmpfsMount&) = delete;
-    TmpfsMount& operator=(const TmpfsMount&) = delete;
-    [[nodiscard]] bool mounted() const { return mounted_; }
-    [[nodiscard]] const std::string& error() const { return error_; }
-    /// Gives the file system a new size without touching what it holds.
-    bool resize(const std::string& size) {
-        const std::string options = "size=" + size;
-        return ::mount("tmpfs", path_.c_str(), "tmpfs", MS_REMOUNT, options.c_str()) == 0;
-    }
-
-private:
-    std::string path_;
-    std::string error_;
-    bool mounted_ = false;
-};
-
 int count_lines_with(const std::string& text, const std::string& a, const std::string& b) {
     int n = 0;
     std::istringstream in(text);

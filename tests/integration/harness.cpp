@@ -6,12 +6,14 @@
 #include <netinet/tcp.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/mount.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <array>
 #include <cerrno>
+#include <cstring>
 #include <fstream>
 #include <mutex>
 #include <random>
@@ -236,6 +238,34 @@ std::vector<std::uint64_t> csv_syncs(const std::string& text) {
         syncs.push_back(std::stoull(line.substr(a + 1, b - a - 1)));
     }
     return syncs;
+}
+
+std::uintmax_t take_raw_bytes(const std::filesystem::path& dir) {
+    std::uintmax_t n = 0;
+    std::error_code ec;
+    for (const auto& f : std::filesystem::directory_iterator(dir, ec)) {
+        if (f.path().extension() == ".mocapraw") n += f.file_size(ec);
+    }
+    return n;
+}
+
+TmpfsMount::TmpfsMount(const std::string& path, const std::string& size) : path_(path) {
+    std::filesystem::create_directories(path);
+    const std::string options = "size=" + size + ",mode=0755";
+    if (::mount("tmpfs", path.c_str(), "tmpfs", 0, options.c_str()) != 0) {
+        error_ = std::string("mount tmpfs: ") + std::strerror(errno);
+    } else {
+        mounted_ = true;
+    }
+}
+
+TmpfsMount::~TmpfsMount() {
+    if (mounted_) ::umount2(path_.c_str(), MNT_DETACH);
+}
+
+bool TmpfsMount::resize(const std::string& size) {
+    const std::string options = "size=" + size;
+    return ::mount("tmpfs", path_.c_str(), "tmpfs", MS_REMOUNT, options.c_str()) == 0;
 }
 
 }  // namespace mocap::itest

@@ -105,4 +105,26 @@ bool send_all(int fd, const std::vector<std::uint8_t>& b);
 /// whatever it sends, within `limit`.
 bool closed_by_peer(int fd, std::chrono::milliseconds limit);
 
+/// Bytes in the raw file(s) (*.mocapraw) of a take directory (0 while there is none).
+std::uintmax_t take_raw_bytes(const std::filesystem::path& dir);
+
+/// A small tmpfs at `path` for the life of the object (needs root: mounted() says whether it
+/// is): unmounted lazily, so a file still open cannot keep it, on every way out of the test.
+class TmpfsMount {
+public:
+    TmpfsMount(const std::string& path, const std::string& size);
+    ~TmpfsMount();
+    TmpfsMount(const TmpfsMount&) = delete;
+    TmpfsMount& operator=(const TmpfsMount&) = delete;
+    [[nodiscard]] bool mounted() const { return mounted_; }
+    [[nodiscard]] const std::string& error() const { return error_; }
+    /// Gives the file system a new size without touching what it holds.
+    bool resize(const std::string& size);
+
+private:
+    std::string path_;
+    std::string error_;
+    bool mounted_ = false;
+};
+
 }  // namespace mocap::itest

@@ -25,16 +25,6 @@ namespace fs = std::filesystem;
 constexpr const char* kToken = "takes-s3cret-0123456789";
 const std::map<std::string, std::string> kWithToken{{"X-Mocap-Token", kToken}};
 
-/// Bytes in the raw file(s) of a take directory (0 while there is none).
-std::uintmax_t raw_bytes(const fs::path& dir) {
-    std::uintmax_t n = 0;
-    std::error_code ec;
-    for (const auto& f : fs::directory_iterator(dir, ec)) {
-        if (f.path().extension() == ".mocapraw") n += f.file_size(ec);
-    }
-    return n;
-}
-
 std::string slurp(const fs::path& path) {
     return read_file(path.string());
 }
@@ -71,8 +61,8 @@ protected:
         ASSERT_EQ(started.status, 200u) << started.body;
         EXPECT_NE(started.body.find("\"take\":\"" + name + "\""), std::string::npos) << started.body;
         const fs::path dir = dir_.path() / "takes" / name;
-        ASSERT_TRUE(wait_until([&] { return raw_bytes(dir) >= bytes; }, 90s)) << raw_bytes(dir) << " bytes\n"
-                                                                              << daemon_->log();
+        ASSERT_TRUE(wait_until([&] { return take_raw_bytes(dir) >= bytes; }, 90s)) << take_raw_bytes(dir) << " bytes\n"
+                                                                                   << daemon_->log();
     }
     /// Runs mocap-client; its exit status, its stdout in *out.
     int client(const std::vector<std::string>& args, std::string* out = nullptr) {

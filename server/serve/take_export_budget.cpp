@@ -1,0 +1,72 @@
+// take_export_budget.cpp — two limits over one map.
+#include "serve/take_export_budget.hpp"
+
+namespace mocap::serve {
+
+namespace {
+
+std::string mib(std::uint64_t bytes) {
+    return std::to_string((bytes + (std::uint64_t{1} << 20) - 1) >> 20) + " MiB";
+}
+
+}  // namespace
+
+TakeExportBudget::Charge::~Charge() {
+    std::lock_guard lock(books_->mutex);
+    books_->total -= bytes_;
+    const auto it = books_->by_address.find(address_);
+    if (it == books_->by_address.end()) return;
+    it->second -= bytes_;
+    if (it->second == 0) books_->by_address.erase(it);
+}
+
+bool TakeExportBudget::fits(const std::string& address, std::uint64_t more, std::string* why) const {
+    if (books_->total + more > total_limit_) {
+        *why = "insufficient storage: take exports waiting for their readers hold " + mib(books_->total) + " of " +
+               mib(total_limit_) + " and this one needs " + mib(more) + " more; retry when downloads finish";
+        return false;
+    }
+    const auto it = books_->by_address.find(address);
+    const std::uint64_t mine = it == books_->by_address.end() ? 0 : it->second;
+    if (mine + more > address_limit_) {
+        *why = "insufficient storage: exports for " + address + " hold " + mib(mine) + " of " + mib(address_limit_) +
+               " per address and this one needs " + mib(more) + " more; finish those downloads first";
+        return false;
+    }
+    return true;
+}
+
+std::shared_ptr<TakeExportBudget::Charge> TakeExportBudget::try_charge(const std::string& address, std::uint64_t bytes,
+                                                                       std::string* why) {
+    auto charge = std::make_shared<Charge>(books_, address);
+    std::lock_guard lock(books_->mutex);
+    if (!fits(address, bytes, why)) return nullptr;
+    books_->total += bytes;
+    books_->by_address[address] += bytes;
+    charge->bytes_ = bytes;
+    return charge;
+}
+
+bool TakeExportBudget::resize(Charge& charge, std::uint64_t bytes, std::string* why) {
+    std::lock_guard lock(books_->mutex);
+    if (bytes > charge.bytes_ && !fits(charge.address_, bytes - charge.bytes_, why)) return false;
+    books_->total = books_->total - charge.bytes_ + bytes;
+    std::uint64_t& mine = books_->by_address[charge.address_];
+    mine = mine - charge.bytes_ + bytes;
+    if (mine == 0) books_->by_address.erase(charge.address_);
+    charge.bytes_ = bytes;
+    return true;
+}
+
+std::uint64_t TakeExportBudget::held() const {
+    std::lock_guard lock(books_->mutex);
+    return books_->total;
+}
+
+std::uint64_t TakeExportBudget::held_by(const std::string& address) const {
+    std::lock_guard lock(books_->mutex);
+    const auto it = books_->by_address.find(address);
+    return it == books_->by_address.end() ? 0 : it->second;
+}
+
+}  // namespace mocap::serve

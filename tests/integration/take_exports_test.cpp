@@ -1,0 +1,217 @@
+// Take exports on the real mocapd fed by the real mocap-sim, as a hostile client and an unlucky
+// operator would meet them (issue 24, items 1, 4, 5 and 13; docs/security.md "Takes and
+// exports"): exports held by slow readers leave the disk to a running take, a take that lost
+// samples says so when it stops, an offline export past its memory limit is refused, a BVH
+// of a subject the take does not hold is 404, and the export thread runs at nice 19.
+#include <gtest/gtest.h>
+#include <sys/statvfs.h>
+
+#include <cerrno>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "harness.hpp"
+#include "http_test_client.hpp"
+
+namespace mocap::itest {
+namespace {
+
+using namespace std::chrono_literals;
+using boost::beast::http::verb;
+using mocap::testing::http_request;
+namespace fs = std::filesystem;
+
+constexpr const char* kToken = "exports-s3cret-0123456789";
+const std::map<std::string, std::string> kWithToken{{"X-Mocap-Token", kToken}};
+
+/// Bytes in use on the file system holding `path`.
+std::uint64_t used_bytes(const std::string& path) {
+    struct statvfs st {};
+    if (::statvfs(path.c_str(), &st) != 0) return 0;
+    return static_cast<std::uint64_t>(st.f_blocks - st.f_bfree) * st.f_frsize;
+}
+
+class TakeExports : public ::testing::Test {
+protected:
+    void TearDown() override {
+        if (sim_) sim_->stop();
+        if (daemon_ && HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
+        if (daemon_ && daemon_->running()) {
+            EXPECT_EQ(daemon_->stop(30s), 0);
+        }
+    }
+    /// mocapd with its recordings in `record_dir`, [outputs] `extra` lines added.
+    void start(const std::string& record_dir, const std::string& extra = "") {
+        record_dir_ = record_dir;
+        std::ostringstream cfg;
+        cfg << "[log]\nstats_interval_s = 0\n"
+            << "[ingest]\nsink_listen = \"127.0.0.1:" << ports_.sink_port << "\"\n"
+            << "[pipeline]\nworkers = 2\nmax_subjects = 2\n"
+            << "[skeleton]\ncalibration_dir = \"" << dir_.path().string() << "\"\n"
+            << "[serve]\npose_listen = \"127.0.0.1:" << ports_.pose_port << "\"\n"
+            << "[control]\ntoken = \"" << kToken << "\"\n"
+            << "[outputs]\nbvh_live = false\nrecord_dir = \"" << record_dir << "\"\n"
+            << extra << "[http]\nlisten = \"127.0.0.1:" << ports_.http_port << "\"\n";
+        write_file(dir_.file("mocapd.toml"), cfg.str());
+        daemon_ = std::make_unique<Process>(std::vector<std::string>{MOCAPD_BIN, "--config", dir_.file("mocapd.toml")},
+                                            dir_.file("mocapd.log"), dir_.path().string());
+        ASSERT_TRUE(wait_for_port(ports_.http_port, 30s)) << daemon_->log();
+        ASSERT_TRUE(wait_for_port(ports_.sink_port, 30s)) << daemon_->log();
+        sim_ = std::make_unique<Process>(ports_.walk_sim(MOCAP_SIM_BIN, 300), dir_.file("sim.log"));
+    }
+    /// Starts take `name` and waits until its raw file holds `bytes` (~82 B a sample, 1500 a second).
+    void record(const std::string& name, std::uintmax_t bytes) {
+        const auto started = http_request(ports_.http_port, "/api/takes/start?name=" + name, verb::post, kWithToken);
+        ASSERT_EQ(started.status, 200u) << started.body;
+        grow(name, bytes);
+    }
+    void grow(const std::string& name, std::uintmax_t bytes) {
+        const fs::path dir = fs::path(record_dir_) / "takes" / name;
+        ASSERT_TRUE(wait_until([&] { return take_raw_bytes(dir) >= bytes; }, 120s))
+            << take_raw_bytes(dir) << " bytes of " << bytes << "\n"
+            << daemon_->log();
+    }
+    nlohmann::json stop_take() {
+        const auto stopped = http_request(ports_.http_port, "/api/takes/stop", verb::post, kWithToken);
+        EXPECT_EQ(stopped.status, 200u) << stopped.body;
+        return nlohmann::json::parse(stopped.body, nullptr, false);
+    }
+    nlohmann::json listed(const std::string& name) {
+        const auto reply = http_request(ports_.http_port, "/api/takes/" + name);
+        EXPECT_EQ(reply.status, 200u) << reply.body;
+        return nlohmann::json::parse(reply.body, nullptr, false);
+    }
+    std::uint64_t metric(const std::string& name) {
+        const std::string text = http_request(ports_.http_port, "/metrics").body;
+        const std::size_t at = text.find("\n" + name + " ");
+        return at == std::string::npos ? 0 : std::stoull(text.substr(at + name.size() + 2));
+    }
+
+    TempDir dir_;
+    WebDaemon ports_;
+    std::string record_dir_;
+    std::unique_ptr<Process> daemon_;
+    std::unique_ptr<Process> sim_;
+};
+
+// Item 13 (in part): subject=99 answered 200 with a BVH of no frame. Item 4: the export
+// thread runs below the live path's priority.
+TEST_F(TakeExports, ABvhOfASubjectTheTakeDoesNotHoldIs404AndExportsRunAtNice19) {
+    start(dir_.path().string());
+    record("walk", 150'000);
+    ASSERT_EQ(stop_take().value("ok", false), true);
+    const auto missing = http_request(ports_.http_port, "/api/takes/walk/download?format=bvh&subject=99");
+    EXPECT_EQ(missing.status, 404u) << missing.body.substr(0, 300);
+    EXPECT_NE(missing.body.find("has no subject 99"), std::string::npos) << missing.body.substr(0, 300);
+    const auto one = http_request(ports_.http_port, "/api/takes/walk/download?format=bvh&subject=1");
+    ASSERT_EQ(one.status, 200u) << one.body.substr(0, 300);
+    EXPECT_NE(one.body.find("MOTION\nFrames: "), std::string::npos);
+    // The export thread exists from the first export on: its nice value is the 19th field
+    // of its /proc stat line.
+    int nice = -100;
+    for (const auto& task : fs::directory_iterator("/proc/" + std::to_string(daemon_->pid()) + "/task")) {
+        if (read_file((task.path() / "comm").string()) != "mocap-export\n") continue;
+        std::string stat = read_file((task.path() / "stat").string());
+        std::istringstream fields(stat.substr(stat.rfind(')') + 2));
+        std::string field;
+        for (int i = 3; i <= 19 && fields >> field; ++i) {
+            if (i == 19) nice = std::stoi(field);
+        }
+    }
+    EXPECT_EQ(nice, 19) << "the export thread's nice value";
+}
+
+// Item 5: an offline re-solve holds the whole take in memory (218 MiB more for a 70 MiB take).
+// One whose estimate exceeds offline_export_max_mb is refused with 507 and the reason.
+TEST_F(TakeExports, AnOfflineExportPastItsMemoryLimitIsRefusedWith507) {
+    start(dir_.path().string(), "offline_export_max_mb = 1\n");
+    record("long", 300'000);  // estimate 5 x 300 kB: above 1 MiB
+    ASSERT_EQ(stop_take().value("ok", false), true);
+    const auto refused = http_request(ports_.http_port, "/api/takes/long/download?format=csv&offline=1");
+    EXPECT_EQ(refused.status, 507u) << refused.body.substr(0, 300);
+    EXPECT_NE(refused.body.find("offline_export_max_mb = 1"), std::string::npos) << refused.body;
+    EXPECT_EQ(metric("mocapd_http_take_exports_over_budget_total"), 1u);
+    EXPECT_EQ(http_request(ports_.http_port, "/api/takes/long/download?format=csv").status, 200u)
+        << "the causal export holds no take in memory";
+}
+
+// Item 1: thirty slow downloads held 29 MB of deleted export files on a 48 MiB disk and the
+// take being recorded lost 64 % of its samples. Exports now live in memory: downloads that
+// nobody reads leave the record disk to the running take.
+TEST_F(TakeExports, ExportsHeldBySlowReadersLeaveTheDiskToARunningTake) {
+    if (::geteuid() != 0) GTEST_SKIP() << "needs root to mount a tmpfs (CI runs as root)";
+    TmpfsMount disk(dir_.file("rec"), "5m");
+    if (!disk.mounted()) GTEST_SKIP() << disk.error() << " (no tmpfs in this container)";
+    start(dir_.file("rec"), "record_flush_interval_s = 0.2\n");
+    record("source", 1'200'000);
+    ASSERT_EQ(stop_take().value("ok", false), true);
+    record("live", 1);
+    const fs::path live = fs::path(dir_.file("rec")) / "takes" / "live";
+    const std::uint64_t used_before = used_bytes(dir_.file("rec"));
+    const std::uint64_t live_before = take_raw_bytes(live);
+    // Eight downloads of the source's BVH (~0.4 MB each, more than the socket buffers take),
+    // each read by nobody: one at a time, so that none waits for the queue.
+    std::vector<int> held;
+    for (int i = 0; i < 8; ++i) {
+        const int fd = tcp_connect(ports_.http_port, "127.0.0.1", 4096);
+        ASSERT_GE(fd, 0);
+        held.push_back(fd);
+        ASSERT_TRUE(send_all(fd, "GET /api/takes/source/download?format=bvh HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"));
+        ASSERT_TRUE(wait_until([&] { return metric("mocapd_http_take_downloads_total") == 1u + i; }, 60s));
+    }
+    // What the disk gained meanwhile, beyond the live take's samples: before, the exports'
+    // deleted files (~3.4 MB); now nothing but page rounding.
+    const std::uint64_t live_growth = take_raw_bytes(live) - live_before;
+    const std::uint64_t used_growth = used_bytes(dir_.file("rec")) - used_before;
+    EXPECT_LT(used_growth, live_growth + 100'000)
+        << "the disk gained " << used_growth << " bytes, the take " << live_growth;
+    // The live take records another 1.2 MB on the 5 MiB disk while they are held.
+    grow("live", take_raw_bytes(live) + 1'200'000);
+    const auto reply = stop_take();
+    EXPECT_EQ(reply.value("ok", false), true) << reply.dump();
+    const auto take = listed("live");
+    EXPECT_EQ(take.value("samples_lost", std::uint64_t{1}), 0u) << take.dump();
+    for (const int fd : held)
+        ::close(fd);
+}
+
+// Item 1: a take that lost samples to a full disk stopped with a bare ok. Now the stop reply
+// is not ok and says how many and why, and so do the sidecar and the listing.
+TEST_F(TakeExports, ATakeThatLostSamplesSaysSoInItsStopReplySidecarAndListing) {
+    if (::geteuid() != 0) GTEST_SKIP() << "needs root to mount a tmpfs (CI runs as root)";
+    TmpfsMount disk(dir_.file("rec"), "1m");
+    if (!disk.mounted()) GTEST_SKIP() << disk.error() << " (no tmpfs in this container)";
+    start(dir_.file("rec"), "record_flush_interval_s = 0.2\n");
+    record("cut", 50'000);
+    // Fill the disk but 8 KiB: the recorder's batches (~25 kB every 0.2 s) no longer fit,
+    // the new sidecar (~1 kB, one page) still does.
+    const std::string filler = dir_.file("rec") + "/filler";
+    {
+        std::ofstream out(filler, std::ios::binary);
+        const std::string block(4096, 'f');
+        while (out.write(block.data(), static_cast<std::streamsize>(block.size())) && out.flush()) {
+        }
+    }
+    fs::resize_file(filler, fs::file_size(filler) > 8192 ? fs::file_size(filler) - 8192 : 0);
+    ASSERT_TRUE(wait_until([&] { return daemon_->log().find("recording paused") != std::string::npos; }, 60s))
+        << daemon_->log();
+    const auto reply = stop_take();
+    EXPECT_EQ(reply.value("ok", true), false) << reply.dump();
+    EXPECT_EQ(reply.value("take", std::string()), "cut");
+    const std::string error = reply.value("error", std::string());
+    EXPECT_NE(error.find("samples lost"), std::string::npos) << error;
+    EXPECT_NE(error.find("No space left on device"), std::string::npos) << error;
+    const auto take = listed("cut");
+    EXPECT_GT(take.value("samples_lost", std::uint64_t{0}), 0u) << take.dump();
+    EXPECT_NE(take.value("loss", std::string()).find("No space left on device"), std::string::npos) << take.dump();
+    const auto sidecar = nlohmann::json::parse(read_file(dir_.file("rec") + "/takes/cut/take.json"), nullptr, false);
+    EXPECT_EQ(sidecar.value("samples_lost", std::uint64_t{0}), take.value("samples_lost", std::uint64_t{0}));
+    EXPECT_EQ(sidecar.value("loss", std::string()), take.value("loss", std::string()));
+}
+
+}  // namespace
+}  // namespace mocap::itest
