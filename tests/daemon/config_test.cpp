@@ -369,6 +369,15 @@ TEST_F(ConfigCheck, IllTypedFilterParameterIsRefused) {
     EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { beta = true }\n", "filter.params.beta:");
 }
 
+// `beta = 1e308` passed the check and made every output NaN: each number has a range.
+TEST_F(ConfigCheck, FilterParameterOutsideItsRangeIsRefused) {
+    EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { beta = 1e308 }\n",
+                   "filter.params.beta: parameter \"beta\" of filter \"madgwick\": ");
+    EXPECT_REFUSED("[filter]\nname = \"pf\"\nparams = { particles = 1000000 }\n", "filter.params.particles:");
+    EXPECT_REFUSED("[filter]\nparams = { tau_acc_s = -3.0 }\n", "filter.params.tau_acc_s:");
+    EXPECT_EQ(refusal("[filter]\nname = \"madgwick\"\nparams = { beta = 0.5 }\n"), "");
+}
+
 TEST_F(ConfigCheck, ParameterThatASegmentsFilterDoesNotKnowIsRefused) {
     // [filter.params] apply to every segment's filter: a segment overriding the filter must
     // know them too (start-up built it and failed).
