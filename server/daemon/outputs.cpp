@@ -2,6 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <unistd.h>
+
+#include <array>
 #include <cstdio>
 #include <limits>
 
@@ -220,6 +223,8 @@ std::unique_ptr<pipeline::Output> make_pose_service(const OutputContext& ctx) {
     sc.max_client_message_bytes = c.max_message_bytes;
     sc.max_client_messages_per_s = c.max_client_messages_per_s;
     sc.client_message_burst = c.client_message_burst;
+    sc.max_address_messages_per_s = c.max_address_messages_per_s;
+    sc.address_message_burst = c.address_message_burst;
     sc.max_subscribe_subjects = c.max_subscribe_subjects;
     sc.control_token = c.control_token;
     sc.control_loopback_only = c.control_loopback_only;
@@ -296,6 +301,19 @@ std::unique_ptr<pipeline::Output> make_angles_csv(const OutputContext& ctx) {
     return std::make_unique<AnglesCsvOutput>(ctx.replay->angles_out, joint_angle_names(ctx.pipeline));
 }
 
+// The names a browser may have used to reach this machine besides IP literals: localhost,
+// this host's name (and its mDNS form) and the operator's list.
+std::vector<std::string> http_allowed_hosts(const DaemonConfig& config) {
+    std::vector<std::string> names{"localhost"};
+    std::array<char, 256> host{};
+    if (::gethostname(host.data(), host.size() - 1) == 0 && host[0] != '\0') {
+        names.emplace_back(host.data());
+        names.push_back(std::string(host.data()) + ".local");
+    }
+    names.insert(names.end(), config.http_allowed_hosts.begin(), config.http_allowed_hosts.end());
+    return names;
+}
+
 std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     if (ctx.replay || !ctx.config.http_enabled) return nullptr;
     serve::HttpServerConfig hc;
@@ -307,6 +325,7 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     hc.control_token = ctx.config.control_token;
     hc.control_loopback_only = ctx.config.control_loopback_only;
     hc.allowed_origins = ctx.config.http_allowed_origins;
+    hc.allowed_hosts = http_allowed_hosts(ctx.config);
     hc.limits = peer_limits(ctx.config, ctx.config.http_per_address);
     hc.control_attempts = ctx.control_attempts;
     hc.wall_clock_us = [&clock = ctx.clock] { return clock.now_us(); };

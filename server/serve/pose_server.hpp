@@ -101,6 +101,11 @@ private:
     SharedBytes hello_;
     SharedBytes goodbye_full_;
     SharedBytes goodbye_per_address_;
+    SharedBytes goodbye_address_budget_;
+    /// Requests per peer address across connections (address_budget.hpp); before the
+    /// session context, which points at it.
+    AddressBudget address_budget_{
+        {static_cast<double>(config_.address_message_burst), config_.max_address_messages_per_s}};
 
     // Lanes (io_contexts) are declared before the broadcaster and the session context,
     // which refer to them, and destroyed after them.
