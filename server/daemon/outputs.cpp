@@ -52,6 +52,7 @@ public:
         server_.set_description(description);
     }
     [[nodiscard]] std::string_view name() const override { return "pose"; }
+    [[nodiscard]] std::vector<Heartbeat> heartbeats() const override { return server_.heartbeats(); }
 };
 
 /// Holds the BVH encoder in a base class, so it is built before the server that refers to it

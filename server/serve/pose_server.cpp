@@ -106,6 +106,7 @@ bool PoseServer::start(std::string& error) {
     do_accept();
     for (std::size_t i = 0; i < lanes_.size(); ++i) {
         Lane& lane = *lanes_[i];
+        beat(lane);
         lane.thread = std::thread([&lane, i] {
             const std::string name = "mocap-serve-" + std::to_string(i);
             pthread_setname_np(pthread_self(), name.c_str());
@@ -143,6 +144,21 @@ void PoseServer::stop() {
         if (lane->thread.joinable()) lane->thread.join();
     }
     spdlog::info("serve: stopped");
+}
+
+void PoseServer::beat(Lane& lane) {
+    lane.beats.fetch_add(1, std::memory_order_relaxed);
+    lane.beat_timer.expires_after(std::chrono::milliseconds(250));
+    lane.beat_timer.async_wait([this, &lane](const boost::system::error_code& ec) {
+        if (!ec && running_.load()) beat(lane);
+    });
+}
+
+std::vector<Heartbeat> PoseServer::heartbeats() const {
+    std::vector<Heartbeat> out;
+    for (std::size_t i = 0; i < lanes_.size(); ++i)
+        out.push_back({"pose serve thread " + std::to_string(i), &lanes_[i]->beats});
+    return out;
 }
 
 void PoseServer::do_accept() {
