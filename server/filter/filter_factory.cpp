@@ -88,6 +88,14 @@ std::string cannot_parse_message(std::string_view filter, const std::string& key
     return "parameter \"" + key + "\" of filter \"" + std::string(filter) + "\": cannot parse \"" + value + "\"";
 }
 
+std::string out_of_range_message(std::string_view filter, const std::string& key, const std::string& value, double min,
+                                 double max) {
+    std::string out = "parameter \"";
+    out.append(key).append("\" of filter \"").append(filter).append("\": ").append(value);
+    out.append(" is outside ").append(format_value(min)).append("..").append(format_value(max));
+    return out;
+}
+
 // Everything the factory needs to know about one filter type.
 template <class P, class F>
 struct Entry {
@@ -119,10 +127,7 @@ struct Entry {
                 [&](auto member) { return in_range(p.*member, field->min, field->max, field->nan_means_unset); },
                 field->member);
             if (!in) {
-                if (error) {
-                    *error = "parameter \"" + key + "\" of filter \"" + std::string(name) + "\": " + value +
-                             " is outside " + format_value(field->min) + ".." + format_value(field->max);
-                }
+                if (error) *error = out_of_range_message(name, key, value, field->min, field->max);
                 return nullptr;
             }
         }
