@@ -81,7 +81,11 @@ void WorkerPool::start() {
     const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
     for (std::size_t i = 0; i < workers_.size(); ++i) {
         Worker& w = *workers_[i];
-        w.thread = std::thread([this, &w] { run_worker(w); });
+        w.thread = std::thread([this, &w, i] {
+            const std::string name = "mocap-worker-" + std::to_string(i);
+            pthread_setname_np(pthread_self(), name.substr(0, 15).c_str());
+            run_worker(w);
+        });
         if (config_.pin_cpus) {
             cpu_set_t set;
             CPU_ZERO(&set);
@@ -159,6 +163,7 @@ void WorkerPool::process_one(Worker& w, const WorkItem& item) {
 
 void WorkerPool::run_worker(Worker& w) {
     for (;;) {
+        w.beats.fetch_add(1, std::memory_order_relaxed);
         std::size_t done = 0;
         while (done < config_.batch) {
             const WorkItem* item = w.input.front();
@@ -183,7 +188,7 @@ void WorkerPool::run_worker(Worker& w) {
             continue;
         }
         w.sleeps.add();
-        w.wake.wait(key);
+        w.wake.wait_for(key, config_.idle_beat_us);
     }
 }
 

@@ -32,8 +32,10 @@
 //   poses_dropped_full; the assembler then flags the segment stale for that instant.
 //
 // Idle workers spin `spin_iterations` polls (with a CPU pause) and then sleep on a futex
-// (EventCount); submit() wakes a sleeping worker. Wake-up costs the scheduler's latency
-// (measured in docs/performance.md); spinning longer trades CPU for lower p99.
+// (EventCount) for at most idle_beat_us; submit() wakes a sleeping worker. Every turn of a
+// worker's loop, busy or idle, adds one to its heartbeat (worker_beats(i)): a count that
+// stops moving means a worker stuck or frozen (the daemon's /healthz and watchdog). Wake-up costs the scheduler's
+// latency (measured in docs/performance.md); spinning longer trades CPU for lower p99.
 //
 // Cost per sample: submit ~ ring copy (~200 B) + one uncontended atomic RMW; the worker adds two
 // Clock::now_us() calls and two histogram records when a clock is given. Nothing on the
@@ -65,6 +67,9 @@ struct WorkerPoolConfig {
     std::size_t batch = 64;               ///< samples a worker processes before waking the assembler
     std::uint32_t spin_iterations = 200;  ///< idle polls (each with a CPU pause) before sleeping
     bool pin_cpus = false;                ///< pin worker i to CPU i mod cores (failures counted)
+    /// An idle worker wakes at least this often to beat its heartbeat (worker_beats()), so
+    /// a worker that sleeps is told from one that is stuck.
+    std::int64_t idle_beat_us = 100'000;
 };
 
 namespace detail {
@@ -114,6 +119,10 @@ public:
 
     /// Ingest thread only. Wakes every sleeping worker (cheap for awake ones).
     void wake_workers() noexcept;
+
+    /// Any thread: worker `i`'s heartbeat, one per turn of its loop (at least one per
+    /// idle_beat_us while it runs); i < worker_count().
+    [[nodiscard]] const std::atomic<std::uint64_t>& worker_beats(std::size_t i) const { return workers_.at(i)->beats; }
 
     /// Assembler thread only. Pops every ready pose (at most max_per_worker per worker) and
     /// calls on_pose(const PoseUpdate&) for each; returns how many. Per segment, poses come
@@ -184,6 +193,7 @@ private:
         SingleWriterCounter rejected;
         SingleWriterCounter output_dropped;
         SingleWriterCounter sleeps;
+        std::atomic<std::uint64_t> beats{0};  ///< one per loop turn (heartbeat), any thread reads
         SingleWriterLatencyHistogram queue_wait;
         SingleWriterLatencyHistogram filter;
         // Written by the ingest thread only (own cache line).

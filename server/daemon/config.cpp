@@ -307,6 +307,8 @@ void read_serve(TableReader& r, DaemonConfig& c) {
     r.read("max_message_bytes", c.max_message_bytes, 64, 16 << 20);
     r.read("max_client_messages_per_s", c.max_client_messages_per_s, 0.1, 100000.0);
     r.read("client_message_burst", c.client_message_burst, 1, 100000);
+    r.read("max_address_messages_per_s", c.max_address_messages_per_s, 0.1, 1e6);
+    r.read("address_message_burst", c.address_message_burst, 1, 10000000);
     r.read("max_subscribe_subjects", c.max_subscribe_subjects, 1, 65536);
 }
 
@@ -401,6 +403,17 @@ void read_http(TableReader& r, DaemonConfig& c) {
             if (!origin || origin->empty())
                 r.fail("allowed_origins", &item, "expected origin strings like \"https://host:port\"");
             c.http_allowed_origins.push_back(*origin);
+        }
+    }
+    if (const auto* arr = r.array("allowed_hosts")) {
+        for (const auto& item : *arr) {
+            const auto name = item.value<std::string>();
+            const bool valid = name && !name->empty() && name->size() <= 253 &&
+                               std::all_of(name->begin(), name->end(), [](unsigned char ch) {
+                                   return std::isalnum(ch) != 0 || ch == '-' || ch == '.' || ch == '_';
+                               });
+            if (!valid) r.fail("allowed_hosts", &item, "expected host names like \"mocap.lab\" (no scheme, no port)");
+            c.http_allowed_hosts.push_back(*name);
         }
     }
 }

@@ -94,6 +94,8 @@ struct DaemonConfig {
     std::uint32_t max_message_bytes = 65536;
     double max_client_messages_per_s = 20.0;    ///< sustained requests per client
     std::uint32_t client_message_burst = 40;    ///< requests at once before the rate applies
+    double max_address_messages_per_s = 500.0;  ///< the same per peer address, over its connections
+    std::uint32_t address_message_burst = 1000;
     std::uint32_t max_subscribe_subjects = 64;  ///< subject ids one Subscribe may name
     // [control]
     std::string control_token;  ///< "" = control off; else at least kMinControlTokenLength characters
@@ -123,6 +125,9 @@ struct DaemonConfig {
     std::uint32_t http_threads = 1;                 ///< serve threads; connections spread over them
     std::uint32_t http_ws_queue_frames = 16;        ///< per-WebSocket frame queue (oldest dropped)
     std::vector<std::string> http_allowed_origins;  ///< origins besides the served host that may open /ws
+    /// Host names besides localhost and this machine's own that a request's Host may carry
+    /// (DNS rebinding: origin_check.hpp); IP literals always may.
+    std::vector<std::string> http_allowed_hosts;
     // [limits] (docs/security.md, "Connection slots"): connections one peer address may
     // hold per port (0 = no limit), whether that applies to loopback peers, and how long a
     // connection may go without progress before a new one may take its slot.

@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <pthread.h>
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
 
@@ -139,20 +140,39 @@ bool Daemon::start(std::string* error) {
     for (auto& r : can_readers_) {
         if (!r->start(error)) return false;
     }
+    // The threads that must make progress, for /healthz and the watchdog.
+    heartbeats_.add({"ingest thread", &ingest_beats_});
+    for (std::size_t i = 0; i < pipeline_->pool().worker_count(); ++i)
+        heartbeats_.add({"worker " + std::to_string(i), &pipeline_->pool().worker_beats(i)});
+    for (const auto& o : pipeline_->outputs()) {
+        for (Heartbeat& h : o->heartbeats())
+            heartbeats_.add(std::move(h));
+    }
+    beat_ingest();
     ingest_thread_ = std::thread([this] {
+        pthread_setname_np(pthread_self(), "mocap-ingest");
         auto guard = asio::make_work_guard(ingest_io_);
         ingest_io_.run();
     });
     if (sd_watchdog_enabled(0, &watchdog_usec_) <= 0) watchdog_usec_ = 0;
     assembler_thread_ = std::thread([this] {
         auto last_ping = std::chrono::steady_clock::now();
-        pipeline_->run_assembler([this, &last_ping] {
+        bool withheld = false;
+        pipeline_->run_assembler([this, &last_ping, &withheld] {
             if (watchdog_usec_ == 0) return;
             const auto t = std::chrono::steady_clock::now();
-            if (t - last_ping > std::chrono::microseconds(watchdog_usec_ / 4)) {
-                sd_notify(0, "WATCHDOG=1");
-                last_ping = t;
+            if (t - last_ping <= std::chrono::microseconds(watchdog_usec_ / 4)) return;
+            // A thread that stopped withholds the ping: systemd restarts a daemon that is
+            // alive in part only (WatchdogSec), as it would one that hangs.
+            if (const std::string stale = heartbeats_.stale(steady_us(), kHeartbeatWindowUs); !stale.empty()) {
+                if (!withheld) spdlog::error("watchdog: not pinging systemd: {} made no progress", stale);
+                withheld = true;
+                return;
             }
+            if (withheld) spdlog::info("watchdog: every thread makes progress again");
+            withheld = false;
+            sd_notify(0, "WATCHDOG=1");
+            last_ping = t;
         });
     });
 
@@ -184,6 +204,20 @@ std::uint16_t Daemon::output_port(std::string_view name) const {
         if (o->name() == name) return o->port();
     }
     return 0;
+}
+
+std::int64_t Daemon::steady_us() {
+    return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+}
+
+// Every 250 ms on the ingest thread, whether sinks send or not: the thread's heartbeat.
+void Daemon::beat_ingest() {
+    ingest_beats_.fetch_add(1, std::memory_order_relaxed);
+    ingest_beat_timer_.expires_after(std::chrono::milliseconds(250));
+    ingest_beat_timer_.async_wait([this](const boost::system::error_code& ec) {
+        if (!ec) beat_ingest();
+    });
 }
 
 void Daemon::arm_stats_timer() {
@@ -263,6 +297,7 @@ void Daemon::shutdown() {
             if (sink_listener_) sink_listener_->stop();
             for (auto& r : can_readers_)
                 r->stop();
+            ingest_beat_timer_.cancel();
             ingest_io_.stop();
         });
         ingest_thread_.join();

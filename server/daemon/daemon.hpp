@@ -8,7 +8,8 @@
 //             take player) -> Pipeline::route -> worker pool (the pool's single producer)
 //   workers   WorkerPool: one FilterProcessor per (subject, segment), pinned to a worker
 //   assembler Pipeline::run_assembler: drains the pool, joins segments per SYNC instant,
-//             solves the skeleton and publishes to the outputs; pings the watchdog
+//             solves the skeleton and publishes to the outputs; pings the watchdog unless
+//             a thread's heartbeat stopped (heartbeat_monitor.hpp)
 //   serve     the network outputs' own threads (client sessions)
 // Subjects: subject id = ingest.subject_id_base + sink id (1..pipeline.max_subjects) or the id configured for a
 // SocketCAN interface. Every subject has the same body model; filters for all subjects are
@@ -23,6 +24,7 @@
 
 #include "core/asio.hpp"
 #include "daemon/config.hpp"
+#include "daemon/heartbeat_monitor.hpp"
 #include "daemon/outputs.hpp"
 #include "daemon/pipeline_config.hpp"
 #include "daemon/take_player.hpp"
@@ -72,6 +74,12 @@ private:
     void reload();
     void log_stats();
     void arm_stats_timer();
+    /// A thread whose heartbeat did not move for this long is stale (/healthz, watchdog):
+    /// eight beats of the slowest (250 ms).
+    static constexpr std::int64_t kHeartbeatWindowUs = 2'000'000;
+    void beat_ingest();
+    /// Steady-clock µs: the heartbeats' time base.
+    static std::int64_t steady_us();
     void shutdown();
 
     DaemonConfig config_;
@@ -86,6 +94,10 @@ private:
     MetricsRegistry metrics_;
 
     asio::io_context ingest_io_;
+    asio::steady_timer ingest_beat_timer_{ingest_io_};  // ingest thread
+    std::atomic<std::uint64_t> ingest_beats_{0};        // heartbeat of the ingest thread
+    /// Every thread that must make progress (heartbeat_monitor.hpp): filled in start().
+    mutable HeartbeatMonitor heartbeats_;
     std::unique_ptr<ingest::SinkListener> sink_listener_;
     std::vector<std::unique_ptr<ingest::SocketCanReader>> can_readers_;
     PlayOptions play_;

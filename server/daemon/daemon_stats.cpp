@@ -8,13 +8,16 @@
 namespace mocap::daemon {
 
 // Alive: the assembler loop turns (it wakes at least every 50 ms), the ingest thread's
-// io_context runs, and samples that arrive turn into frames within 2 s.
+// io_context runs, every thread that must make progress beats (heartbeat_monitor.hpp), and
+// samples that arrive turn into frames within 2 s.
 serve::HealthStatus Daemon::health() const {
     constexpr std::int64_t kWindowUs = 2'000'000;
     const std::int64_t now = clock_.now_us();
     if (stopping_.load()) return {false, "stopping"};
     if (now - pipeline_->assembler_alive_us() > kWindowUs) return {false, "assembler thread stalled"};
     if (ingest_io_.stopped()) return {false, "ingest thread stopped"};
+    if (const std::string stale = heartbeats_.stale(steady_us(), kHeartbeatWindowUs); !stale.empty())
+        return {false, stale + " made no progress for 2 s"};
     const std::int64_t last_sample = pipeline_->last_sample_us();
     if (last_sample == 0) return {true, "no sink data yet"};
     std::int64_t last_frame = pipeline_->first_sample_us();

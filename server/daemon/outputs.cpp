@@ -3,7 +3,9 @@
 #include <spdlog/spdlog.h>
 
 #include <fcntl.h>
+#include <unistd.h>
 
+#include <array>
 #include <cstdio>
 #include <limits>
 
@@ -51,6 +53,7 @@ public:
         server_.set_description(description);
     }
     [[nodiscard]] std::string_view name() const override { return "pose"; }
+    [[nodiscard]] std::vector<Heartbeat> heartbeats() const override { return server_.heartbeats(); }
 };
 
 /// Holds the BVH encoder in a base class, so it is built before the server that refers to it
@@ -236,6 +239,8 @@ std::unique_ptr<pipeline::Output> make_pose_service(const OutputContext& ctx) {
     sc.max_client_message_bytes = c.max_message_bytes;
     sc.max_client_messages_per_s = c.max_client_messages_per_s;
     sc.client_message_burst = c.client_message_burst;
+    sc.max_address_messages_per_s = c.max_address_messages_per_s;
+    sc.address_message_burst = c.address_message_burst;
     sc.max_subscribe_subjects = c.max_subscribe_subjects;
     sc.control_token = c.control_token;
     sc.control_loopback_only = c.control_loopback_only;
@@ -315,6 +320,19 @@ std::unique_ptr<pipeline::Output> make_angles_csv(const OutputContext& ctx) {
                                              joint_angle_names(ctx.pipeline));
 }
 
+// The names a browser may have used to reach this machine besides IP literals: localhost,
+// this host's name (and its mDNS form) and the operator's list.
+std::vector<std::string> http_allowed_hosts(const DaemonConfig& config) {
+    std::vector<std::string> names{"localhost"};
+    std::array<char, 256> host{};
+    if (::gethostname(host.data(), host.size() - 1) == 0 && host[0] != '\0') {
+        names.emplace_back(host.data());
+        names.push_back(std::string(host.data()) + ".local");
+    }
+    names.insert(names.end(), config.http_allowed_hosts.begin(), config.http_allowed_hosts.end());
+    return names;
+}
+
 std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     if (ctx.replay || !ctx.config.http_enabled) return nullptr;
     serve::HttpServerConfig hc;
@@ -326,6 +344,7 @@ std::unique_ptr<pipeline::Output> make_http(const OutputContext& ctx) {
     hc.control_token = ctx.config.control_token;
     hc.control_loopback_only = ctx.config.control_loopback_only;
     hc.allowed_origins = ctx.config.http_allowed_origins;
+    hc.allowed_hosts = http_allowed_hosts(ctx.config);
     hc.limits = peer_limits(ctx.config, ctx.config.http_per_address);
     hc.export_memory_bytes = std::uint64_t{ctx.config.export_memory_mb} << 20;
     hc.export_memory_per_address_bytes = std::uint64_t{ctx.config.export_memory_per_address_mb} << 20;

@@ -3,8 +3,9 @@
 //
 // Names: filter_names(). Keys: the `key "..."` named in each filter's Params header, listed
 // with their defaults by filter_keys(). Values: numbers as written by C++ (from_chars, no
-// trailing characters), booleans as true/false/1/0/yes/no/on/off. Keys not given keep their
-// defaults. Untrusted input: a bad name, key or value never throws, it returns nullptr and
+// trailing characters), booleans as true/false/1/0/yes/no/on/off; every number has a range
+// (FilterKey::min..max), so `--check-config` and the start refuse `beta = 1e308`. Keys not
+// given keep their defaults. Untrusted input: a bad name, key or value never throws, it returns nullptr and
 // a message naming the offending item.
 //
 // Thread-safety: all functions are pure (the tables are constant). Cost: allocation, call
@@ -12,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -38,6 +40,10 @@ std::vector<std::string_view> filter_names();
 struct FilterKey {
     std::string_view key;
     std::string default_value;  ///< the default, written so that make_filter accepts it
+    /// The values make_filter accepts, inclusive (a filter's own check may narrow them, e.g.
+    /// "> 0"); infinite for booleans and the particle filter's seed.
+    double min = -std::numeric_limits<double>::infinity();
+    double max = std::numeric_limits<double>::infinity();
 };
 
 /// The parameters of filter `name` (empty for an unknown name).

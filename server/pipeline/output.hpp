@@ -17,8 +17,10 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/frame.hpp"
+#include "core/heartbeat.hpp"
 #include "core/imu_sample.hpp"
 #include "core/metrics_registry.hpp"
 #include "skeleton/skeleton_pose.hpp"
@@ -59,6 +61,9 @@ public:
     /// Wall clock µs of the last frame it delivered to a client (0 = none or not tracked):
     /// the health check's "samples arrive but no frame goes out".
     [[nodiscard]] virtual std::int64_t last_frame_us() const { return 0; }
+    /// Set-up thread, after start(): the heartbeats of the threads this output runs that
+    /// must make progress (core/heartbeat.hpp); /healthz and the watchdog watch them.
+    [[nodiscard]] virtual std::vector<Heartbeat> heartbeats() const { return {}; }
 };
 
 }  // namespace mocap::pipeline

@@ -119,12 +119,21 @@ bool ClientSession::parse_next() {
         protocol_error(CloseReason::kMalformed, LogLimiter::kMalformed, "unparseable message");
         return false;
     }
-    if (!take_request_token()) {
-        ctx_.counters.rate_limited.add();
-        const std::string why = fmt::format(
-            "too many requests: more than client_message_burst ({}) at once or max_client_messages_per_s ({}) "
-            "sustained",
-            ctx_.config.client_message_burst, ctx_.config.max_client_messages_per_s);
+    // The connection's budget, then its address's, which a reconnect does not refill.
+    const bool connection_ok = take_request_token();
+    const bool address_ok = !connection_ok || ctx_.address_budget == nullptr || !peer_ ||
+                            ctx_.address_budget->take(*peer_, ServeThread::now_us());
+    if (!address_ok || !connection_ok) {
+        (connection_ok ? ctx_.counters.address_rate_limited : ctx_.counters.rate_limited).add();
+        const std::string why =
+            connection_ok ? fmt::format(
+                                "too many requests from your address: more than address_message_burst ({}) at once "
+                                "or max_address_messages_per_s ({}) sustained, over all its connections",
+                                ctx_.config.address_message_burst, ctx_.config.max_address_messages_per_s)
+                          : fmt::format(
+                                "too many requests: more than client_message_burst ({}) at once or "
+                                "max_client_messages_per_s ({}) sustained",
+                                ctx_.config.client_message_burst, ctx_.config.max_client_messages_per_s);
         protocol_error(CloseReason::kRateLimited, LogLimiter::kRateLimited, why);
         return false;
     }

@@ -14,7 +14,9 @@
 // at most client_message_burst replies, the same number the request rate limit lets a
 // client send at once, so a client that pipelines its whole burst gets every answer, and
 // one that keeps asking without reading is closed with Goodbye(RATE_LIMITED) saying so.
-// Garbage, an oversized length, a flood of requests or silence before subscribing:
+// Requests also draw on their peer address's budget (address_budget.hpp), which a
+// reconnect does not refill. Garbage, an oversized length, a flood of requests or silence
+// before subscribing:
 // counted, logged (rate-limited), Goodbye written, FIN sent, further input discarded
 // until the client closes or close_grace_ms passes, then closed.
 //
@@ -36,6 +38,7 @@
 
 #include "core/asio.hpp"
 #include "core/connection_slots.hpp"
+#include "serve/address_budget.hpp"
 #include "serve/client_send_queue.hpp"
 #include "serve/framing.hpp"
 #include "serve/pose_broadcaster.hpp"
@@ -69,6 +72,8 @@ struct SessionContext {
     std::function<void(std::size_t lane, std::uint64_t id)> on_closed;
     /// One per lane (index = lane): how many requests a lane handles per turn.
     std::vector<RequestBudget*> request_budgets;
+    /// Requests per peer address over all its connections; null = none (fuzzing).
+    AddressBudget* address_budget = nullptr;
 };
 
 class ClientSession : public std::enable_shared_from_this<ClientSession> {

@@ -83,8 +83,13 @@ public:
     [[nodiscard]] std::size_t tracked_addresses() const;
     [[nodiscard]] const ControlAttemptLimits& limits() const { return limits_; }
 
-private:
+    /// One peer's key in the table: an IPv4 address (also mapped into IPv6) as ::ffff:a.b.c.d,
+    /// an IPv6 address by its /64 (the block one host usually holds). Shared with the
+    /// pose service's per-address request budget (address_budget.hpp).
     using Key = std::array<std::uint8_t, 16>;
+    static Key key_of(const asio::ip::address& peer);
+
+private:
     /// A token bucket kept as one time (the generic cell rate algorithm, in integer µs, so
     /// nothing drifts): every failure moves `full_at_us` one interval later; a failure is
     /// in hand while full_at_us lies less than (burst - 1) intervals after now.
@@ -97,7 +102,6 @@ private:
     };
     static Rate rate(double burst, double per_s);
     static bool in_hand(const Bucket& bucket, const Rate& rate, std::int64_t now_us);
-    static Key key_of(const asio::ip::address& peer);
     Bucket* lookup(const Key& key);
     Bucket& insert(const Key& key, std::int64_t now_us);
 

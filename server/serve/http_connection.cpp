@@ -68,8 +68,26 @@ void HttpServer::HttpSession::on_read(const beast::error_code& ec) {
     const std::size_t q = target.find('?');
     const std::string_view path = target.substr(0, q);
     const std::string_view query = q == std::string_view::npos ? "" : target.substr(q + 1);
+    if (!host_allowed(request)) return;
     if (path == "/ws") return upgrade(std::move(request), query);
     respond(request, path, query);
+}
+
+// Every path: a page whose name was rebound to this address must read nothing, not even
+// /healthz (docs/security.md, "DNS rebinding").
+bool HttpServer::HttpSession::host_allowed(const Request& request) {
+    const auto it = request.find(http::field::host);
+    const std::string_view host =
+        it == request.end() ? std::string_view() : std::string_view(it->value().data(), it->value().size());
+    if (http_host_allowed(host, server_.config_.allowed_hosts)) return true;
+    server_.counters_.host_refused.add();
+    std::uint64_t suppressed = 0;
+    if (server_.log_.allow(LogLimiter::kHostRefused, suppressed)) {
+        spdlog::warn("http: request for host '{}' refused: not in allowed_hosts ({} suppressed)", host, suppressed);
+    }
+    send_text(request, http::status::forbidden,
+              fmt::format("host '{}' not allowed: add it to [http] allowed_hosts to serve it\n", host));
+    return false;
 }
 
 void HttpServer::HttpSession::upgrade(Request request, std::string_view query) {

@@ -38,6 +38,9 @@ private:
 
     void do_read();
     void on_read(const boost::beast::error_code& ec);
+    /// The Host header against the allowed names (origin_check.hpp); false = refused, and
+    /// the refusal was sent.
+    bool host_allowed(const Request& request);
     void upgrade(Request request, std::string_view query);
     void respond(const Request& request, std::string_view path, std::string_view query);
     void control(const Request& request, std::string_view path, std::string_view query);

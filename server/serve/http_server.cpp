@@ -20,6 +20,7 @@ HttpServerCounters::HttpServerCounters() {
     group.add("health_checks", health_checks);
     group.add("ws_connections", ws_connections);
     group.add("ws_origin_refused", ws_origin_refused);
+    group.add("host_refused", host_refused);
     group.add("ws_frames_encoded", ws_frames_encoded);
     group.add("ws_frames_sent", ws_frames_sent);
     group.add("ws_frames_dropped", ws_frames_dropped);

@@ -89,6 +89,9 @@ struct HttpServerConfig {
     /// Origins besides the served host that may open /ws (origin_check.hpp), e.g.
     /// "https://viewer.lab:8443".
     std::vector<std::string> allowed_origins;
+    /// Host names a request's Host header may carry (origin_check.hpp: IP literals always
+    /// may); the daemon puts localhost, this machine's names and `[http] allowed_hosts` here.
+    std::vector<std::string> allowed_hosts{"localhost"};
     PeerLimits limits{};  ///< [limits] http_per_address, loopback, stall_evict_s
     /// SO_SNDBUF per connection: bounded, so a stalled browser's frames are dropped from its
     /// queue (counted) instead of piling up in the kernel (0 = kernel default).
@@ -145,6 +148,7 @@ struct HttpServerCounters {
     Counter health_checks;
     Counter ws_connections;
     Counter ws_origin_refused;  ///< /ws upgrades refused with 403: a foreign Origin
+    Counter host_refused;       ///< requests refused with 403: a Host not allowed (DNS rebinding)
     Counter ws_frames_encoded;
     Counter ws_frames_sent;
     Counter ws_frames_dropped;   ///< oldest frames dropped from lagging browsers

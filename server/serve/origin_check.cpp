@@ -1,5 +1,8 @@
-// origin_check.cpp — Origin against Host and the allow-list (origin_check.hpp).
+// origin_check.cpp — Host against the allowed names, Origin against Host and the allow-list
+// (origin_check.hpp).
 #include "serve/origin_check.hpp"
+
+#include <arpa/inet.h>
 
 #include <algorithm>
 #include <cctype>
@@ -50,7 +53,36 @@ std::optional<std::string> host_port(std::string_view text, std::string_view def
     return lower(host) + ":" + std::string(port);
 }
 
+// The host of a Host header without its port and a trailing dot, lower case; nullopt when
+// the text is not "host[:port]".
+std::optional<std::string> host_name(std::string_view text) {
+    const auto hp = host_port(text, "0");
+    if (!hp) return std::nullopt;
+    std::string name = hp->substr(0, hp->rfind(':'));
+    if (name.size() > 1 && name.back() == '.') name.pop_back();
+    return name;
+}
+
+bool is_ip_literal(const std::string& name) {
+    if (name.front() == '[') return true;  // host_port() admits brackets only around the whole host
+    in_addr a{};
+    return ::inet_pton(AF_INET, name.c_str(), &a) == 1;
+}
+
 }  // namespace
+
+bool http_host_allowed(std::string_view host, const std::vector<std::string>& names) {
+    host = trim(host);
+    if (host.empty()) return true;
+    const auto name = host_name(host);
+    if (!name) return false;
+    if (is_ip_literal(*name)) return true;
+    return std::any_of(names.begin(), names.end(), [&](const std::string& allowed) {
+        std::string a = lower(allowed);
+        if (a.size() > 1 && a.back() == '.') a.pop_back();
+        return a == *name;
+    });
+}
 
 bool websocket_origin_allowed(std::string_view origin, std::string_view host, const std::vector<std::string>& allowed) {
     origin = trim(origin);

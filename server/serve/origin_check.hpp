@@ -1,5 +1,14 @@
-// origin_check.hpp — may a WebSocket upgrade on /ws be answered, given its Origin and Host
-// headers (docs/security.md, "Origin of WebSocket requests")?
+// origin_check.hpp — may a request of the web endpoint be answered, given the names it
+// carries: its Host header (every path) and, for a WebSocket upgrade on /ws, its Origin
+// (docs/security.md, "Origin of WebSocket requests" and "DNS rebinding").
+//
+// Host (DNS rebinding): a page on evil.example whose name the attacker's DNS later points
+// at 127.0.0.1 talks to this server as "same origin"; the browser still sends
+// `Host: evil.example[:port]`. So a Host that names a host must be one of `names` (the
+// daemon passes localhost, this machine's names and `[http] allowed_hosts`), compared
+// case-insensitively without the port and a trailing dot. An IP literal (127.0.0.1,
+// 10.1.2.3, [::1]) is allowed: a rebinding page always has a name. No Host header (HTTP/1.0
+// scripts; a browser always sends one) is allowed.
 //
 // Why: a browser lets any page open a WebSocket to any address and sends its own origin in
 // the Origin header; it is the server's job to refuse foreign ones. Without the check, a
@@ -19,6 +28,9 @@
 #include <vector>
 
 namespace mocap::serve {
+
+/// True when a request whose Host header is `host` ("" when absent) may be answered.
+[[nodiscard]] bool http_host_allowed(std::string_view host, const std::vector<std::string>& names);
 
 /// True when a WebSocket request with these headers may be upgraded; `origin` and `host`
 /// are the header values ("" when absent).

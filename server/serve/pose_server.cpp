@@ -41,9 +41,12 @@ PoseServer::PoseServer(ServeConfig config, ControlHandlers handlers)
                                                      config_.wall_clock_us, counters_);
     session_context_ = std::make_unique<SessionContext>(SessionContext{
         config_, handlers_, counters_, log_, *broadcaster_, [this] { return hello(); }, config_.wall_clock_us,
-        [this](std::size_t lane, std::uint64_t id) { on_session_closed(lane, id); }, std::move(budgets)});
+        [this](std::size_t lane, std::uint64_t id) { on_session_closed(lane, id); }, std::move(budgets),
+        &address_budget_});
     goodbye_full_ = encode_goodbye(CloseReason::kServerFull, "client limit reached");
     goodbye_per_address_ = encode_goodbye(CloseReason::kServerFull, "connection limit of your address reached");
+    goodbye_address_budget_ = encode_goodbye(
+        CloseReason::kRateLimited, "too many requests from your address (address_message_burst): try again later");
     set_description({});
 }
 
@@ -103,6 +106,7 @@ bool PoseServer::start(std::string& error) {
     do_accept();
     for (std::size_t i = 0; i < lanes_.size(); ++i) {
         Lane& lane = *lanes_[i];
+        beat(lane);
         lane.thread = std::thread([&lane, i] {
             const std::string name = "mocap-serve-" + std::to_string(i);
             pthread_setname_np(pthread_self(), name.c_str());
@@ -142,6 +146,21 @@ void PoseServer::stop() {
     spdlog::info("serve: stopped");
 }
 
+void PoseServer::beat(Lane& lane) {
+    lane.beats.fetch_add(1, std::memory_order_relaxed);
+    lane.beat_timer.expires_after(std::chrono::milliseconds(250));
+    lane.beat_timer.async_wait([this, &lane](const boost::system::error_code& ec) {
+        if (!ec && running_.load()) beat(lane);
+    });
+}
+
+std::vector<Heartbeat> PoseServer::heartbeats() const {
+    std::vector<Heartbeat> out;
+    for (std::size_t i = 0; i < lanes_.size(); ++i)
+        out.push_back({"pose serve thread " + std::to_string(i), &lanes_[i]->beats});
+    return out;
+}
+
 void PoseServer::do_accept() {
     asio::io_context& target = lanes_[next_lane_]->io;
     acceptor_->async_accept(target, [this](const boost::system::error_code& ec, asio::ip::tcp::socket socket) {
@@ -155,6 +174,20 @@ void PoseServer::on_accept(const boost::system::error_code& ec, asio::ip::tcp::s
     const std::size_t lane = next_lane_;
     next_lane_ = (next_lane_ + 1) % lanes_.size();
     const PeerAddress peer = peer_address(socket);
+    // An address that has used up its requests reconnects for nothing: refused before it
+    // costs a session, so a reconnect storm cannot queue work ahead of other clients.
+    boost::system::error_code peer_ec;
+    const auto endpoint = socket.remote_endpoint(peer_ec);
+    if (!peer_ec && !address_budget_.in_hand(endpoint.address(), ServeThread::now_us())) {
+        counters_.address_rate_limited.add();
+        std::uint64_t suppressed = 0;
+        if (log_.allow(LogLimiter::kRateLimited, suppressed)) {
+            spdlog::warn("serve: connection from {} refused: its address used up address_message_burst ({} suppressed)",
+                         peer.ip, suppressed);
+        }
+        reject(socket, *goodbye_address_budget_);
+        return do_accept();
+    }
     ConnectionSlots::Admission a = slots_.admit(peer.ip, peer.loopback, ServeThread::now_us());
     std::uint64_t suppressed = 0;
     switch (a.verdict) {

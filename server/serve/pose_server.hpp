@@ -33,6 +33,7 @@
 
 #include "core/asio.hpp"
 #include "core/frame.hpp"
+#include "core/heartbeat.hpp"
 #include "core/metrics_registry.hpp"
 #include "serve/client_session.hpp"
 #include "serve/pose_broadcaster.hpp"
@@ -74,6 +75,9 @@ public:
     /// Set-up: counter group "serve" and gauge "pose_clients" (logged as "clients").
     void register_metrics(MetricsRegistry& registry) const;
     [[nodiscard]] const ServeConfig& config() const { return config_; }
+    /// Set-up: one heartbeat per serve thread ("pose serve thread N"), beating at least
+    /// every 250 ms while the thread runs its io_context (core/heartbeat.hpp).
+    [[nodiscard]] std::vector<Heartbeat> heartbeats() const;
 
 private:
     struct Lane {
@@ -81,8 +85,11 @@ private:
         RequestBudget requests;  ///< lane thread; declared after io, destroyed before it
         std::unordered_map<std::uint64_t, std::shared_ptr<ClientSession>> sessions;  // lane thread
         std::thread thread;
+        asio::steady_timer beat_timer{io};    ///< lane thread: beats while no client does
+        std::atomic<std::uint64_t> beats{0};  ///< heartbeat (core/heartbeat.hpp)
         explicit Lane(std::size_t requests_per_turn) : requests(io, requests_per_turn) {}
     };
+    void beat(Lane& lane);
 
     void do_accept();
     void on_accept(const boost::system::error_code& ec, asio::ip::tcp::socket socket);
@@ -101,6 +108,11 @@ private:
     SharedBytes hello_;
     SharedBytes goodbye_full_;
     SharedBytes goodbye_per_address_;
+    SharedBytes goodbye_address_budget_;
+    /// Requests per peer address across connections (address_budget.hpp); before the
+    /// session context, which points at it.
+    AddressBudget address_budget_{
+        {static_cast<double>(config_.address_message_burst), config_.max_address_messages_per_s}};
 
     // Lanes (io_contexts) are declared before the broadcaster and the session context,
     // which refer to them, and destroyed after them.

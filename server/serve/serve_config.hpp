@@ -34,6 +34,10 @@ struct ServeConfig {
     std::uint32_t max_client_message_bytes = 4096;  ///< longer ClientMessages close the link
     double max_client_messages_per_s = 20.0;        ///< sustained request rate per client
     std::uint32_t client_message_burst = 40;        ///< requests allowed at once before the rate applies
+    /// The same per peer address, over all its connections, so that reconnecting gains
+    /// nothing (address_budget.hpp).
+    double max_address_messages_per_s = 500.0;
+    std::uint32_t address_message_burst = 1000;
     /// Subject ids one Subscribe may name (an empty list means every subject, so a client
     /// never needs more ids than there are subjects); more: Goodbye(MALFORMED), counted in
     /// serve.subscribe_too_many_subjects. Bounds what one request costs the serve thread.

@@ -18,6 +18,7 @@ ServeCounters::ServeCounters() {
     group.add("unknown_messages", unknown_messages);
     group.add("idle_timeouts", idle_timeouts);
     group.add("rate_limited", rate_limited);
+    group.add("address_rate_limited", address_rate_limited);
     group.add("write_errors", write_errors);
     group.add("stats_requests", stats_requests);
     group.add("subscribe_too_many_subjects", subscribe_too_many_subjects);

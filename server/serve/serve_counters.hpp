@@ -30,6 +30,9 @@ struct ServeCounters {
     Counter unknown_messages;    ///< parseable but no known body (newer client): ignored
     Counter idle_timeouts;       ///< no Subscribe/valid message within subscribe_timeout_ms
     Counter rate_limited;        ///< clients closed for sending too many messages
+    /// Requests and connections refused because their address had no request in hand
+    /// (address_budget.hpp): the connection closed with Goodbye(RATE_LIMITED).
+    Counter address_rate_limited;
     Counter write_errors;
     Counter stats_requests;
     Counter subscribe_too_many_subjects;  ///< Subscribes naming more than max_subscribe_subjects
@@ -56,6 +59,7 @@ public:
         kClientFull,
         kIoError,
         kOriginRefused,
+        kHostRefused,
         kKinds
     };
     explicit LogLimiter(std::chrono::milliseconds interval = std::chrono::seconds(10))

@@ -161,17 +161,24 @@ void VmcSender::resolve_pending() {
             // Connected, so that an ICMP "port unreachable" comes back as ECONNREFUSED on a
             // later send and is counted.
             if (fd < 0 || ::connect(fd, reinterpret_cast<const sockaddr*>(&address->address), address->length) != 0) {
-                error = "cannot open a UDP socket to it: " + errno_text(errno);
+                const int err = errno;
+                error = "cannot open a UDP socket to it: " + errno_text(err);
+                if (err == EACCES) error += " (a broadcast address? VMC goes to one receiver per destination)";
                 if (fd >= 0) ::close(fd);
                 fd = -1;
             }
         }
         if (fd < 0) {
             resolve_errors_.add();
-            spdlog::warn("vmc: destination {}: {}; retrying every {} s", t.destination.str(), error,
-                         config_.resolve_retry_s);
+            // Once: a retry every few seconds must not fill the journal with the same line.
+            if (t.failures++ == 0) {
+                spdlog::warn("vmc: destination {}: {}; retrying every {} s, failures counted in vmc.resolve_errors",
+                             t.destination.str(), error, config_.resolve_retry_s);
+            }
             continue;
         }
+        if (t.failures > 0) spdlog::info("vmc: destination {} open after {} failures", t.destination.str(), t.failures);
+        t.failures = 0;
         t.fd = fd;
         ++open;
     }

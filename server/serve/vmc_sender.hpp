@@ -10,10 +10,11 @@
 //   the sender thread ("mocap-vmc", started by start())  resolves the destinations (getaddrinfo
 //       may block: it runs here, never on the pipeline), converts and encodes each frame once
 //       and send()s the same bytes on one connected non-blocking UDP socket per destination.
-//       A destination that does not resolve is counted (resolve_errors), logged and retried
-//       every resolve_retry_s. A send that fails (ECONNREFUSED after an ICMP port unreachable,
-//       no route) is counted (send_errors) and logged at most once per 10 s; a full socket
-//       buffer (EAGAIN) drops that bundle for that destination (sends_would_block).
+//       A destination that does not resolve or cannot be opened (a broadcast address) is
+//       retried every resolve_retry_s and counted each time (resolve_errors); it is logged on
+//       its first failure only, and once more when it opens. A send that fails (ECONNREFUSED after an ICMP port
+//       unreachable, no route) is counted (send_errors) and logged at most once per 10 s; a full socket buffer (EAGAIN)
+//       drops that bundle for that destination (sends_would_block).
 //   set-up thread  construction, start(), stop(), register_metrics(); any thread reads counters.
 // Cost on the producer: one copy of the pose (~2.7 kB) and an EventCount notify (~0.2 µs).
 // Memory: queue_frames ring slots of ~2.7 kB, allocated at construction.
@@ -99,6 +100,7 @@ private:
     struct Target {
         VmcDestination destination;
         int fd = -1;
+        std::uint64_t failures = 0;  ///< failed opens since the last success (logged: the first)
     };
 
     void run();

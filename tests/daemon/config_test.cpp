@@ -65,6 +65,18 @@ TEST(Config, WrongTypeAndRangeNameKeyAndLine) {
     EXPECT_EQ(err, "test.toml:2: log.level: must be one of trace, debug, info, warn, error, off");
 }
 
+TEST(Config, HttpAllowedHostsAreHostNames) {
+    std::string err;
+    const auto c = parse("[http]\nallowed_hosts = [\"mocap.lab\", \"studio-1\"]\n", &err);
+    ASSERT_TRUE(c) << err;
+    EXPECT_EQ(c->http_allowed_hosts, (std::vector<std::string>{"mocap.lab", "studio-1"}));
+    EXPECT_FALSE(parse("[http]\nallowed_hosts = [\"http://mocap.lab\"]\n", &err));
+    EXPECT_EQ(err, "test.toml:2: http.allowed_hosts: expected host names like \"mocap.lab\" (no scheme, no port)");
+    EXPECT_FALSE(parse("[http]\nallowed_hosts = [\"mocap.lab:8080\"]\n", &err));
+    EXPECT_FALSE(parse("[http]\nallowed_hosts = [\"\"]\n", &err));
+    EXPECT_FALSE(parse("[http]\nallowed_hosts = [3]\n", &err));
+}
+
 // An integer too large for a double to hold exactly used to escape parse_config as
 // std::bad_optional_access (found by fuzz_config); it must be an ordinary range error.
 TEST(Config, HugeIntegerForAFloatKeyIsARangeError) {
@@ -221,6 +233,13 @@ TEST(ConfigServe, RateLimitKeysDefaultsMatchTheServeLayerAndRangesAreChecked) {
     EXPECT_DOUBLE_EQ(d->max_client_messages_per_s, s.max_client_messages_per_s);
     EXPECT_EQ(d->client_message_burst, s.client_message_burst);
     EXPECT_EQ(d->max_subscribe_subjects, s.max_subscribe_subjects);
+    EXPECT_DOUBLE_EQ(d->max_address_messages_per_s, s.max_address_messages_per_s);
+    EXPECT_EQ(d->address_message_burst, s.address_message_burst);
+    const auto a = parse("[serve]\nmax_address_messages_per_s = 50.0\naddress_message_burst = 100\n", &err);
+    ASSERT_TRUE(a) << err;
+    EXPECT_DOUBLE_EQ(a->max_address_messages_per_s, 50.0);
+    EXPECT_EQ(a->address_message_burst, 100u);
+    EXPECT_FALSE(parse("[serve]\naddress_message_burst = 0\n", &err));
 
     const auto c = parse("[serve]\nmax_client_messages_per_s = 2.5\nclient_message_burst = 3\n", &err);
     ASSERT_TRUE(c) << err;
@@ -367,6 +386,15 @@ TEST_F(ConfigCheck, IllTypedFilterParameterIsRefused) {
     EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { beta = \"abc\" }\n",
                    "filter.params.beta: parameter \"beta\" of filter \"madgwick\": cannot parse \"abc\"");
     EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { beta = true }\n", "filter.params.beta:");
+}
+
+// `beta = 1e308` passed the check and made every output NaN: each number has a range.
+TEST_F(ConfigCheck, FilterParameterOutsideItsRangeIsRefused) {
+    EXPECT_REFUSED("[filter]\nname = \"madgwick\"\nparams = { beta = 1e308 }\n",
+                   "filter.params.beta: parameter \"beta\" of filter \"madgwick\": ");
+    EXPECT_REFUSED("[filter]\nname = \"pf\"\nparams = { particles = 1000000 }\n", "filter.params.particles:");
+    EXPECT_REFUSED("[filter]\nparams = { tau_acc_s = -3.0 }\n", "filter.params.tau_acc_s:");
+    EXPECT_EQ(refusal("[filter]\nname = \"madgwick\"\nparams = { beta = 0.5 }\n"), "");
 }
 
 TEST_F(ConfigCheck, ParameterThatASegmentsFilterDoesNotKnowIsRefused) {

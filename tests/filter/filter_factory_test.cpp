@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <regex>
 #include <set>
@@ -143,6 +144,50 @@ TEST(FilterFactory, CostWeightSetsTheParticleFilterApart) {
         EXPECT_EQ(filter_cost_weight(name), 1u) << name;
     }
     EXPECT_EQ(filter_cost_weight("nope"), 1u) << "an unknown name weighs as a plain filter";
+}
+
+// Every number a filter takes has a finite range (the seed and booleans excepted); a value
+// beyond it is refused naming the key, and so is every non-finite one. Before, only lower
+// bounds were checked: `beta = 1e308` built a filter whose every output was NaN.
+TEST(FilterParamRanges, EveryNumberHasAFiniteRangeHoldingItsDefault) {
+    for (const std::string_view name : filter_names()) {
+        for (const FilterKey& k : filter_keys(name)) {
+            const bool boolean = k.default_value == "true" || k.default_value == "false";
+            if (boolean || k.key == "seed") continue;
+            EXPECT_TRUE(std::isfinite(k.min) && std::isfinite(k.max)) << name << " " << k.key;
+            EXPECT_LT(k.min, k.max) << name << " " << k.key;
+            if (k.default_value != "nan") {
+                const double d = std::stod(k.default_value);
+                EXPECT_TRUE(d >= k.min && d <= k.max) << name << " " << k.key << "=" << k.default_value;
+            }
+        }
+    }
+}
+
+TEST(FilterParamRanges, ValuesBeyondTheRangeAreRefusedNamingTheKey) {
+    for (const std::string_view name : filter_names()) {
+        for (const FilterKey& k : filter_keys(name)) {
+            const bool boolean = k.default_value == "true" || k.default_value == "false";
+            if (boolean || k.key == "seed") continue;
+            for (const std::string value : {"1e308", "-1e308", "inf", "-inf"}) {
+                std::string error;
+                EXPECT_EQ(make_filter(name, {{std::string(k.key), value}}, &error), nullptr)
+                    << name << " " << k.key << "=" << value;
+                EXPECT_NE(error.find(std::string(1, '"').append(k.key).append(1, '"')), std::string::npos) << error;
+            }
+            std::string error;
+            const bool nan_ok = k.default_value == "nan";
+            EXPECT_EQ(make_filter(name, {{std::string(k.key), "nan"}}, &error) != nullptr, nan_ok)
+                << name << " " << k.key << ": " << error;
+        }
+    }
+    std::string error;
+    EXPECT_EQ(make_filter("madgwick", {{"beta", "1e308"}}, &error), nullptr);
+    EXPECT_EQ(error, "parameter \"beta\" of filter \"madgwick\": 1e308 is outside 0..10");
+    EXPECT_NE(make_filter("madgwick", {{"beta", "10"}}, &error), nullptr) << "the bounds are inclusive: " << error;
+    EXPECT_EQ(make_filter("pf", {{"particles", "65537"}}, &error), nullptr);
+    EXPECT_EQ(make_filter("csmo", {{"dip_deg", "90.5"}}, &error), nullptr);
+    EXPECT_NE(make_filter("csmo", {{"dip_deg", "60"}}, &error), nullptr) << error;
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 
 #include <array>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <mutex>
@@ -214,6 +215,18 @@ bool send_all(int fd, const std::vector<std::uint8_t>& b) {
 }
 bool send_all(int fd, const std::string& s) {
     return send_all(fd, s.data(), s.size());
+}
+
+unsigned http_status(int fd) {
+    std::string head;
+    std::array<char, 512> buf{};
+    for (int i = 0; i < 50 && head.find("\r\n") == std::string::npos; ++i) {
+        const ssize_t r = ::recv(fd, buf.data(), buf.size(), 0);
+        if (r == 0) break;
+        if (r > 0) head.append(buf.data(), static_cast<std::size_t>(r));
+    }
+    const auto sp = head.find(' ');
+    return sp == std::string::npos ? 0u : static_cast<unsigned>(std::atoi(head.c_str() + sp + 1));
 }
 
 bool closed_by_peer(int fd, std::chrono::milliseconds limit) {

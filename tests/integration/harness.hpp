@@ -101,6 +101,9 @@ int tcp_connect(std::uint16_t port, const std::string& host = "127.0.0.1", int r
 bool send_all(int fd, const void* data, std::size_t n);
 bool send_all(int fd, const std::string& s);
 bool send_all(int fd, const std::vector<std::uint8_t>& b);
+/// The status code of the HTTP reply read from `fd` (a request was sent on it; 0 = none
+/// came). Reads only up to the status line, so a WebSocket can be used after a 101.
+unsigned http_status(int fd);
 /// True once the peer has closed the connection (EOF or reset), reading and discarding
 /// whatever it sends, within `limit`.
 bool closed_by_peer(int fd, std::chrono::milliseconds limit);

@@ -37,19 +37,6 @@ std::string ws_upgrade(std::uint16_t port, const std::string& origin = "") {
     return r + "\r\n";
 }
 
-/// The HTTP status of the reply to a WebSocket upgrade sent on `fd` (0 = none).
-unsigned upgrade_status(int fd) {
-    std::string head;
-    std::array<char, 512> buf{};
-    for (int i = 0; i < 50 && head.find("\r\n") == std::string::npos; ++i) {
-        const ssize_t r = ::recv(fd, buf.data(), buf.size(), 0);
-        if (r == 0) break;
-        if (r > 0) head.append(buf.data(), static_cast<std::size_t>(r));
-    }
-    const auto sp = head.find(' ');
-    return sp == std::string::npos ? 0u : static_cast<unsigned>(std::atoi(head.c_str() + sp + 1));
-}
-
 /// Bytes queued for sending on the daemon's side of the connection from local port
 /// `server_port` to peer port `client_port` (the tx_queue column of /proc/net/tcp).
 std::uint64_t server_send_queue(std::uint16_t server_port, std::uint16_t client_port) {
@@ -249,7 +236,7 @@ TEST_F(Limits, WebSocketsThatNeverReadLeaveTheViewerAndMetricsWorking) {
     for (int i = 0; i < kSlots; ++i) {
         const int fd = hold(tcp_connect(http_port_, "127.0.0.1", 4096));
         ASSERT_TRUE(send_all(fd, ws_upgrade(http_port_)));
-        ASSERT_EQ(upgrade_status(fd), 101u);
+        ASSERT_EQ(http_status(fd), 101u);
     }
     // They stall: their queues drop the oldest frames.
     EXPECT_TRUE(wait_until([&] { return counter("http.ws_frames_dropped") >= 10; }, 20s));
@@ -362,7 +349,7 @@ TEST_F(Limits, WebSocketFromAForeignOriginIsRefused) {
     auto status = [&](const std::string& origin) {
         const int fd = tcp_connect(http_port_);
         send_all(fd, ws_upgrade(http_port_, origin));
-        const unsigned st = upgrade_status(fd);
+        const unsigned st = http_status(fd);
         ::close(fd);
         return st;
     };
@@ -386,7 +373,7 @@ TEST_F(Limits, NonReadingBvhAndWebSocketClientsDropAndStayBounded) {
     const int bvh = hold(tcp_connect(bvh_port_, "127.0.0.1", 4096));
     const int ws = hold(tcp_connect(http_port_, "127.0.0.1", 4096));
     ASSERT_TRUE(send_all(ws, ws_upgrade(http_port_)));
-    ASSERT_EQ(upgrade_status(ws), 101u);
+    ASSERT_EQ(http_status(ws), 101u);
     EXPECT_TRUE(wait_until([&] { return counter("bvh_live.frames_dropped") >= 50; }, 30s));
     EXPECT_TRUE(wait_until([&] { return counter("http.ws_frames_dropped") >= 50; }, 30s));
     const std::uint64_t bvh_queued = server_send_queue(bvh_port_, local_port(bvh));

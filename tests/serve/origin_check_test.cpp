@@ -1,4 +1,5 @@
-// websocket_origin_allowed: Origin against Host and [http] allowed_origins.
+// websocket_origin_allowed: Origin against Host and [http] allowed_origins; http_host_allowed:
+// Host against the allowed names (DNS rebinding).
 #include "serve/origin_check.hpp"
 
 #include <gtest/gtest.h>
@@ -33,6 +34,33 @@ TEST(OriginCheck, TheAllowListAdmitsExactOrigins) {
     EXPECT_TRUE(websocket_origin_allowed("HTTPS://DASH.EXAMPLE:8443", "10.0.0.5:8080", allowed));
     EXPECT_TRUE(websocket_origin_allowed("null", "10.0.0.5:8080", allowed));
     EXPECT_FALSE(websocket_origin_allowed("https://dash.example", "10.0.0.5:8080", allowed)) << "other port";
+}
+
+// A page on evil.example rebound to 127.0.0.1 sends its own name as Host: refused, on any port.
+TEST(HostCheck, NamesOutsideTheListAreRefused) {
+    const std::vector<std::string> names{"localhost", "capture-host", "Mocap.Lab"};
+    EXPECT_FALSE(http_host_allowed("evil.example", names));
+    EXPECT_FALSE(http_host_allowed("evil.example:8080", names));
+    EXPECT_FALSE(http_host_allowed("localhost.evil.example:8080", names));
+    EXPECT_FALSE(http_host_allowed("mocap.lab.evil", names));
+    EXPECT_FALSE(http_host_allowed("127.0.0.1.evil.example", names)) << "a name that starts like an address";
+    EXPECT_FALSE(http_host_allowed("evil.example@127.0.0.1", names)) << "not host[:port]";
+    EXPECT_FALSE(http_host_allowed("[::1", names)) << "unclosed bracket";
+    EXPECT_FALSE(http_host_allowed("localhost:80:80", names));
+}
+
+TEST(HostCheck, ListedNamesIpLiteralsAndNoHostAreAllowed) {
+    const std::vector<std::string> names{"localhost", "capture-host", "Mocap.Lab"};
+    EXPECT_TRUE(http_host_allowed("localhost", names));
+    EXPECT_TRUE(http_host_allowed("LOCALHOST:8080", names)) << "case and port do not matter";
+    EXPECT_TRUE(http_host_allowed("mocap.lab:8080", names));
+    EXPECT_TRUE(http_host_allowed("mocap.lab.", names)) << "a trailing dot is the same name";
+    EXPECT_TRUE(http_host_allowed("capture-host", names));
+    EXPECT_TRUE(http_host_allowed("127.0.0.1:8080", names));
+    EXPECT_TRUE(http_host_allowed("10.20.0.5", names));
+    EXPECT_TRUE(http_host_allowed("[::1]:8080", names));
+    EXPECT_TRUE(http_host_allowed("", names)) << "no Host: not a browser";
+    EXPECT_FALSE(http_host_allowed("localhost", {})) << "nothing is implied by the function";
 }
 
 }  // namespace

@@ -1,12 +1,17 @@
 // Tests of serve/vmc_sender.hpp on loopback: the chosen subject's frames arrive as one
 // bundle each, in order; a destination nobody listens on and one that does not resolve are
-// counted and do not stop the others; a full ring drops and counts.
+// counted and do not stop the others, and logged once however often they are retried; a
+// full ring drops and counts.
 #include "serve/vmc_sender.hpp"
 
 #include <gtest/gtest.h>
 #include <netinet/in.h>
+#include <spdlog/sinks/ringbuffer_sink.h>
+#include <spdlog/spdlog.h>
 #include <sys/socket.h>
 #include <unistd.h>
+
+#include <atomic>
 
 #include "skeleton/body_model.hpp"
 #include "vmc_receiver.hpp"
@@ -118,6 +123,40 @@ TEST(VmcSender, CountsUnreachableAndUnresolvableDestinationsAndServesTheRest) {
     }));
     sender.stop();
     EXPECT_EQ(counter(sender, "resolve_errors"), 1u);
+}
+
+// Every call is a second later, so each wake-up of the sender may retry.
+struct SecondPerCallClock final : Clock {
+    [[nodiscard]] std::int64_t now_us() const noexcept override { return t_us += 1'000'000; }
+    mutable std::atomic<std::int64_t> t_us{0};
+};
+
+// A broadcast address cannot be opened (connect() without SO_BROADCAST: EACCES); it used to
+// log its warning on every retry, every 5 s for the daemon's lifetime.
+TEST(VmcSender, ADestinationThatCannotBeOpenedIsLoggedOnceAndCounted) {
+    const auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(1000);
+    const auto old_logger = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink));
+    const SecondPerCallClock clock;
+    VmcSenderConfig config;
+    config.destinations = {{"255.255.255.255", 39539}};
+    config.resolve_retry_s = 2.0;
+    VmcSender sender(config, default_rig(), clock);
+    sender.start();
+    const auto pose = pose_of();
+    std::int64_t t_us = 0;
+    // Each frame wakes the sender, and the clock moves on a second per look.
+    const bool retried = wait_until([&] {
+        sender.publish(frame_of(1, t_us += 10'000), pose);
+        return counter(sender, "resolve_errors") >= 5;
+    });
+    sender.stop();
+    spdlog::set_default_logger(old_logger);
+    ASSERT_TRUE(retried) << "resolve_errors " << counter(sender, "resolve_errors");
+    int lines = 0;
+    for (const auto& line : sink->last_formatted())
+        lines += line.find("vmc: destination 255.255.255.255:39539") != std::string::npos ? 1 : 0;
+    EXPECT_EQ(lines, 1) << "logged once, then only counted";
 }
 
 TEST(VmcSender, AFullRingDropsAndCounts) {
