@@ -8,9 +8,11 @@
 //
 // Times: a sample is due when the pacer says (daemon/play_pacer.hpp): at its recorded sample
 // instant where the SYNC counter bears it out, else by the SYNC counter and the take's own
-// SYNC period, never more than max_gap_s after the previous sample of its
-// subject, so a receive-time jump of an hour, a clock step backwards or a span that overflows
-// int64 in a hostile file costs at most max_gap_s and never a spin. The sample instant (t_us)
+// SYNC period, never more than max_gap_s after the previous sample of its subject, so a
+// receive-time jump of an hour, a clock step backwards or a span that overflows int64 in a
+// hostile file costs at most max_gap_s and never a spin. No wait is longer than max_gap_s or
+// a pass: a longer one means the host's own clock stepped back, and the take goes on from
+// now instead of freezing. The sample instant (t_us)
 // becomes the time it is due, the sink's send time keeps its distance before the receive time
 // (at most max_gap_s), and each subject's SYNC counter is shifted by its own span per pass, so
 // each segment's times and SYNCs keep increasing; received_us is the real time the player
@@ -72,8 +74,9 @@ public:
     /// Any thread: samples handed on so far, passes begun.
     [[nodiscard]] std::uint64_t samples() const { return samples_.value(); }
     [[nodiscard]] std::uint64_t passes() const { return passes_.value(); }
-    /// Any thread: receive-time steps longer than max_gap_s (played as max_gap_s, or as the
-    /// SYNC says) and steps backwards (played as the SYNC says, or as no wait).
+    /// Any thread: recorded steps longer than the SYNC allows or than max_gap_s (played as
+    /// the SYNC says, at most max_gap_s) and steps backwards (played as the SYNC says, or as
+    /// no wait where there is no SYNC).
     [[nodiscard]] std::uint64_t gaps_clamped() const { return gaps_clamped_.value(); }
     [[nodiscard]] std::uint64_t steps_back() const { return steps_back_.value(); }
 
