@@ -79,6 +79,7 @@ bool Daemon::start(std::string* error) {
     // Takes live under the record directory (docs/outputs.md, "Takes"); a download re-solves
     // one with this config (daemon/take_export.hpp), on the web endpoint's export thread.
     auto takes = std::make_shared<serve::TakeStore>(config_.record_dir + "/takes");
+    takes->remove_unfinished_deletes();
     serve::TakeExporter exporter = [config = config_, takes](const serve::TakeExportRequest& request,
                                                              const std::atomic<bool>& cancel) {
         return export_take(config, *takes, request, cancel);

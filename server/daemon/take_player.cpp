@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <utility>
 
 #include "core/metrics_registry.hpp"
@@ -14,13 +15,32 @@ namespace {
 /// Samples handed on per timer run at most: a take recorded in bursts cannot hold the ingest
 /// thread for long (the rest are due already and follow at once).
 constexpr int kBurst = 4096;
+
+std::int64_t add_saturated(std::int64_t a, std::int64_t b) {
+    std::int64_t r = 0;
+    if (__builtin_add_overflow(a, b, &r))
+        return b < 0 ? std::numeric_limits<std::int64_t>::min() : std::numeric_limits<std::int64_t>::max();
+    return r;
+}
+
+std::int64_t max_gap_us(double max_gap_s) {
+    // A setting, so also bounded here: between 1 ms and a day.
+    return static_cast<std::int64_t>(std::clamp(max_gap_s, 1e-3, 86'400.0) * 1e6);
+}
 }  // namespace
 
 TakePlayer::TakePlayer(asio::io_context& io, PlayOptions options, const Clock& clock, Route route)
-    : io_(io), options_(std::move(options)), clock_(clock), route_(std::move(route)), timer_(io) {
+    : io_(io),
+      options_(std::move(options)),
+      clock_(clock),
+      route_(std::move(route)),
+      timer_(io),
+      pacer_(max_gap_us(options_.max_gap_s)) {
     group_.add("samples", samples_);
     group_.add("passes", passes_);
     group_.add("errors", errors_);
+    group_.add("gaps_clamped", gaps_clamped_);
+    group_.add("steps_back", steps_back_);
 }
 
 void TakePlayer::register_metrics(MetricsRegistry& registry) const {
@@ -52,23 +72,22 @@ bool TakePlayer::begin_pass(std::string* error) {
     file_ = 0;
     if (!reader_.open(options_.files[file_], error)) return false;
     passes_.add();
-    if (!read_next()) return true;  // an empty take: have_next_ stays false
     if (!have_first_) {
         have_first_ = true;
-        first_received_us_ = last_received_us_ = next_.times.received_us;
-        time_shift_us_ = clock_.now_us() - first_received_us_;
+        pass_start_us_ = clock_.now_us();
     } else {
-        // One SYNC period (of the subject with the most SYNCs) after the last sample of the
-        // previous pass; each subject's SYNCs move on by its own count.
-        std::uint64_t most = 1;
+        // One SYNC period after the last sample of the previous pass, and never sooner than
+        // kMinPassUs after its start; each subject's SYNCs move on by its own count.
+        const std::int64_t length = std::max(add_saturated(pacer_.end_us(), pacer_.period_us()), kMinPassUs);
+        pass_start_us_ = add_saturated(pass_start_us_, length);
         for (const auto& [subject, e] : syncs_) {
-            most = std::max(most, e.last - e.first + 1);
-            sync_shift_[subject] += e.last - e.first + 1;
+            auto& shift = sync_shift_[subject];
+            const std::uint64_t span = e.last - e.first + 1;
+            shift = shift > std::numeric_limits<std::uint64_t>::max() - span ? shift : shift + span;
         }
-        const std::int64_t span = last_received_us_ - first_received_us_;
-        const std::int64_t period = most > 1 ? span / static_cast<std::int64_t>(most - 1) : 10'000;
-        time_shift_us_ += span + std::max<std::int64_t>(period, 1);
     }
+    pacer_.restart();
+    (void)read_next();  // an empty take: have_next_ stays false
     return true;
 }
 
@@ -78,6 +97,9 @@ bool TakePlayer::read_next() {
         const int r = reader_.next(next_, &error);
         if (r == 1) {
             have_next_ = true;
+            const PlayPacer::Due due = pacer_.next(next_);
+            report(due);
+            next_due_us_ = add_saturated(pass_start_us_, due.offset_us);
             return true;
         }
         if (r < 0) {
@@ -100,8 +122,24 @@ bool TakePlayer::read_next() {
     }
 }
 
-std::int64_t TakePlayer::due_us(const SegmentSample& s) const {
-    return s.times.received_us + time_shift_us_;
+void TakePlayer::report(const PlayPacer::Due& due) {
+    const double step_s = static_cast<double>(due.step_us) / 1e6;
+    const double max_s = static_cast<double>(pacer_.max_gap_us()) / 1e6;
+    if (due.clamp == PlayPacer::Clamp::kGap) {
+        gaps_clamped_.add();
+        if (!std::exchange(logged_gap_, true))
+            spdlog::warn(
+                "play: {}: the recorded time jumps {:.3f} s ahead at sample {}; a gap is played as the SYNC "
+                "counter says and never longer than {:.3f} s (counted in play.gaps_clamped, logged once)",
+                options_.files[file_], step_s, reader_.samples_read(), max_s);
+    } else if (due.clamp == PlayPacer::Clamp::kBackward) {
+        steps_back_.add();
+        if (!std::exchange(logged_back_, true))
+            spdlog::warn(
+                "play: {}: the recorded time steps {:.3f} s back at sample {}; played as the SYNC counter says "
+                "(or with no wait where there is none) (counted in play.steps_back, logged once)",
+                options_.files[file_], -step_s, reader_.samples_read());
+    }
 }
 
 void TakePlayer::schedule() {
@@ -119,7 +157,14 @@ void TakePlayer::schedule() {
             return;
         }
     }
-    const std::int64_t wait = due_us(next_) - clock_.now_us();
+    std::int64_t wait = next_due_us_ - clock_.now_us();
+    // No wait is longer than a gap or a pass: a longer one means the host's clock stepped
+    // back, and the take goes on from now instead of freezing for that long.
+    if (const std::int64_t longest = std::max(pacer_.max_gap_us(), kMinPassUs); wait > longest) {
+        pass_start_us_ -= wait - longest;
+        next_due_us_ -= wait - longest;
+        wait = longest;
+    }
     if (wait <= 0) {
         asio::post(io_, [this] { play_due(); });
         return;
@@ -132,18 +177,23 @@ void TakePlayer::schedule() {
 
 void TakePlayer::play_due() {
     const std::int64_t now = clock_.now_us();
-    for (int n = 0; have_next_ && n < kBurst && due_us(next_) <= now; ++n) {
+    for (int n = 0; have_next_ && n < kBurst && next_due_us_ <= now; ++n) {
         SegmentSample s = next_;
         if (passes_.value() == 1) {
-            last_received_us_ = std::max(last_received_us_, s.times.received_us);
             const auto [e, fresh] = syncs_.try_emplace(s.subject_id, SyncExtent{s.sync, s.sync});
             if (!fresh) {
                 e->second.first = std::min(e->second.first, s.sync);
                 e->second.last = std::max(e->second.last, s.sync);
             }
         }
-        s.imu.t_us += time_shift_us_;
-        if (s.times.sink_send_us != 0) s.times.sink_send_us += time_shift_us_;
+        // The sample instant is when it is due; the sink sent it as long before it was
+        // received as it did when recorded (within max_gap), so ingest latency reads true.
+        if (s.times.sink_send_us != 0) {
+            std::int64_t before = 0;
+            if (__builtin_sub_overflow(s.times.received_us, s.times.sink_send_us, &before)) before = 0;
+            s.times.sink_send_us = next_due_us_ - std::clamp<std::int64_t>(before, 0, pacer_.max_gap_us());
+        }
+        s.imu.t_us = next_due_us_;
         s.times.received_us = clock_.now_us();
         if (const auto shift = sync_shift_.find(s.subject_id); shift != sync_shift_.end()) s.sync += shift->second;
         route_(s);

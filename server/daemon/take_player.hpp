@@ -6,18 +6,29 @@
 // service, live BVH, the viewer and VMC serve it exactly as they serve sinks. The cluster is
 // off while a take is played (daemon.cpp): the take is not the venue's. A client developer can work without a suit on.
 //
-// Times: every sample keeps its spacing but is moved to now. The sample instant (t_us) and the
-// sink's send time are shifted by one offset per pass, and each subject's SYNC counter by its
-// own span, so each segment's times and SYNCs keep increasing; received_us is the real time the player handed the
-// sample on, as an ingest source stamps it. With `loop`, the take starts again after its last sample (one SYNC period
-// later), shifted by the length of the take, forever.
+// Times: a sample is due when the pacer says (daemon/play_pacer.hpp): at its recorded sample
+// instant where the SYNC counter bears it out, else by the SYNC counter and the take's own
+// SYNC period, never more than max_gap_s after the previous sample of its subject, so a
+// receive-time jump of an hour, a clock step backwards or a span that overflows int64 in a
+// hostile file costs at most max_gap_s and never a spin. No wait is longer than max_gap_s or
+// a pass: a longer one means the host's own clock stepped back, and the take goes on from
+// now instead of freezing. The sample instant (t_us)
+// becomes the time it is due, the sink's send time keeps its distance before the receive time
+// (at most max_gap_s), and each subject's SYNC counter is shifted by its own span per pass, so
+// each segment's times and SYNCs keep increasing; received_us is the real time the player
+// handed the sample on, as an ingest source stamps it. With `loop`, the take starts again one
+// SYNC period after its last sample, and a pass lasts at least kMinPassUs (a take whose
+// samples all sit at one instant is served 10 times a second, not as fast as the CPU goes).
+// What was not played as recorded is logged once per kind (a gap clamped, a step backwards)
+// and counted (play.gaps_clamped, play.steps_back).
 //
 // Errors: a file that cannot be opened is refused at start; a corrupt record later ends the
 // pass with a logged error and a counted `errors` (a loop then starts again from the first
 // file); a truncated final record ends that file, as in a replay.
 //
 // Threads: runs on the ingest io_context (a steady timer); route() is called on that thread,
-// as the ingest sources call it. Counters, component "play": samples, passes, errors.
+// as the ingest sources call it. Counters, component "play": samples, passes, errors,
+// gaps_clamped, steps_back.
 #pragma once
 
 #include <cstdint>
@@ -31,6 +42,7 @@
 #include "core/clock.hpp"
 #include "core/counters.hpp"
 #include "core/frame.hpp"
+#include "daemon/play_pacer.hpp"
 #include "serve/raw_recorder.hpp"
 
 namespace mocap {
@@ -42,7 +54,11 @@ namespace mocap::daemon {
 struct PlayOptions {
     std::vector<std::string> files;  ///< raw recordings, played in this order as one take
     bool loop = false;               ///< start again after the last sample, forever
+    double max_gap_s = 1.0;          ///< a longer wait between two samples of a subject is played as this
 };
+
+/// The shortest pass of a loop, µs.
+inline constexpr std::int64_t kMinPassUs = 100'000;
 
 class TakePlayer {
 public:
@@ -58,6 +74,11 @@ public:
     /// Any thread: samples handed on so far, passes begun.
     [[nodiscard]] std::uint64_t samples() const { return samples_.value(); }
     [[nodiscard]] std::uint64_t passes() const { return passes_.value(); }
+    /// Any thread: recorded steps longer than the SYNC allows or than max_gap_s (played as
+    /// the SYNC says, at most max_gap_s) and steps backwards (played as the SYNC says, or as
+    /// no wait where there is no SYNC).
+    [[nodiscard]] std::uint64_t gaps_clamped() const { return gaps_clamped_.value(); }
+    [[nodiscard]] std::uint64_t steps_back() const { return steps_back_.value(); }
 
 private:
     /// Reads the next sample of the take into next_; false at the end of a pass.
@@ -66,7 +87,8 @@ private:
     bool begin_pass(std::string* error);
     void schedule();
     void play_due();
-    [[nodiscard]] std::int64_t due_us(const SegmentSample& s) const;
+    /// Counts (and logs, once per kind) what the pacer did not play as recorded.
+    void report(const PlayPacer::Due& due);
 
     asio::io_context& io_;
     PlayOptions options_;
@@ -87,15 +109,17 @@ private:
         std::uint64_t last = 0;
     };
     bool have_first_ = false;
-    std::int64_t first_received_us_ = 0;
-    std::int64_t last_received_us_ = 0;
     std::unordered_map<std::uint32_t, SyncExtent> syncs_;
 
-    // This pass: the shifts it applies (a sample is due at its received_us + time_shift_us_).
-    std::int64_t time_shift_us_ = 0;
+    // This pass: when it started on the clock, and when next_ is due.
+    PlayPacer pacer_;
+    std::int64_t pass_start_us_ = 0;
+    std::int64_t next_due_us_ = 0;
     std::unordered_map<std::uint32_t, std::uint64_t> sync_shift_;
+    bool logged_gap_ = false;
+    bool logged_back_ = false;
 
-    Counter samples_, passes_, errors_;
+    Counter samples_, passes_, errors_, gaps_clamped_, steps_back_;
     CounterGroup group_{"play"};
 };
 

@@ -157,6 +157,28 @@ std::string TakeStore::dir(std::string_view name) const {
     return root_ + "/" + std::string(name);
 }
 
+std::size_t TakeStore::remove_unfinished_deletes() {
+    std::lock_guard lock(mutex_);
+    std::error_code ec;
+    std::vector<fs::path> left;
+    for (fs::directory_iterator it(root_, ec), end; !ec && it != end; it.increment(ec)) {
+        // symlink_status: a link of that name is not a directory of ours, whatever it points at.
+        if (it->path().filename().string().rfind(".deleting-", 0) == 0 && fs::is_directory(it->symlink_status()))
+            left.push_back(it->path());
+    }
+    std::size_t removed = 0;
+    for (const fs::path& p : left) {
+        fs::remove_all(p, ec);  // removes links inside, never what they point at
+        if (ec) {
+            spdlog::warn("takes: cannot remove {}, left by a delete that did not finish: {}", p.string(), ec.message());
+        } else {
+            ++removed;
+        }
+    }
+    if (removed > 0) spdlog::info("takes: removed {} folder(s) left by deletes that did not finish", removed);
+    return removed;
+}
+
 bool TakeStore::create(const TakeMeta& meta, std::string* error) {
     if (!valid_take_name(meta.name)) {
         *error = "invalid take name '" + meta.name + "': expected [A-Za-z0-9][A-Za-z0-9._-]{0,63}";

@@ -16,7 +16,8 @@
 // whole record (at most the last flush interval lost): it lists with "stopped": false.
 // Deleting renames the directory to a hidden name first (one atomic step: the take is gone
 // from every listing at once), then removes its files; a download that already opened a
-// file keeps reading it (the kernel frees it on close).
+// file keeps reading it (the kernel frees it on close). A hidden folder left by a daemon
+// that died in between is removed at the next start (remove_unfinished_deletes).
 //
 // Listing: list() keeps every take's entry in memory (~1 KiB each) and reads the sidecars
 // again only after this store created, saved or removed a take, or <root>'s mtime changed
@@ -112,6 +113,12 @@ public:
 
     /// The take being recorded ("" = none): remove() refuses it, list() marks it.
     void mark_recording(std::string name);
+
+    /// At start: removes the `.deleting-*` directories a delete left when the daemon died
+    /// between its rename and the removal. Only those, only directly in the root, never
+    /// through a symbolic link (one of that name is left alone, as its target is). Logs
+    /// what it removed; returns how many.
+    std::size_t remove_unfinished_deletes();
 
 private:
     std::optional<TakeEntry> load(const std::string& name) const;  // mutex_ held
