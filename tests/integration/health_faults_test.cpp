@@ -158,6 +158,7 @@ TEST_F(HealthFaults, AThreadFrozenAloneMakesHealthzNameItAndWithholdsTheWatchdog
         SCOPED_TRACE(part);
         const pid_t tid = thread_named(daemon_->pid(), thread);
         ASSERT_GT(tid, 0) << "no thread named " << thread;
+        const std::size_t withheld_before = count_lines(daemon_->log(), "watchdog: not pinging systemd");
         const auto t0 = std::chrono::steady_clock::now();
         FrozenThread frozen(tid);
         if (frozen.error().find("PTRACE_SEIZE") == 0) GTEST_SKIP() << "cannot ptrace here: " << frozen.error();
@@ -173,7 +174,12 @@ TEST_F(HealthFaults, AThreadFrozenAloneMakesHealthzNameItAndWithholdsTheWatchdog
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         std::cout << "[ metrics  ] " << part << " frozen: /healthz 503 after " << seconds << " s: " << reply.body;
         EXPECT_NE(reply.body.find(part), std::string::npos) << reply.body;
-        // The monitor has called the thread stale, so no ping follows the ones queued now.
+        // The watchdog hook decides on its own thread: once it has said that it withholds the
+        // ping, every ping it decided before is queued (one it decided just before the monitor
+        // called the thread stale may arrive late on a loaded machine), and none follows.
+        ASSERT_TRUE(wait_until(
+            [&] { return count_lines(daemon_->log(), "watchdog: not pinging systemd") > withheld_before; }, 30s))
+            << daemon_->log();
         new_pings();
         EXPECT_EQ(healthz().status, 503u);
         EXPECT_EQ(new_pings(), 0) << "the watchdog must not be pinged while " << part << " is frozen";
