@@ -5,7 +5,7 @@
 
 namespace mocap::serve {
 
-AddressBudget::AddressBudget(AddressBudgetLimits limits) : limits_(limits) {
+AddressBudget::AddressBudget(const AddressBudgetLimits& limits) : limits_(limits) {
     limits_.burst = std::max(limits_.burst, 1.0);
     limits_.max_addresses = std::max<std::size_t>(limits_.max_addresses, 1);
 }

@@ -39,7 +39,7 @@ struct AddressBudgetLimits {
 
 class AddressBudget {
 public:
-    explicit AddressBudget(AddressBudgetLimits limits);
+    explicit AddressBudget(const AddressBudgetLimits& limits);
 
     /// Takes one request from `peer`'s bucket at `now_us` (any monotonic µs); false = none
     /// in hand: the request must be refused.
