@@ -69,6 +69,8 @@ std::optional<ChainRunOutput> run_chain(const ChainRecording& chain, const Chain
             x.mag_heading_rad = h.mag_heading_rad;
             x.mag_trusted = h.mag_trusted;
             x.field_norm_ut = h.field_norm_ut;
+            x.field_heading_rad = h.field_heading_rad;
+            x.field_usable = h.field_usable;
             x.field_dip_rad = h.field_dip_rad;
         }
         estimator.update(chain.segments.front().recording.rows[k].sample.t_us, in, est);

@@ -73,6 +73,8 @@ struct SegmentPose {
                                         ///< (its attitude restarted after a gap), modulo 256
     float mag_heading_rad = 0.0f;       ///< the filter's heading correction about the vertical
     float field_norm_ut = 0.0f;         ///< the field the filter sees (0: unknown)
+    float field_heading_rad = 0.0f;     ///< the field's own heading in the 6D frame (HeadingSplit)
+    bool field_usable = false;          ///< the field keeps its norm and dip (HeadingSplit)
     float field_dip_rad = 0.0f;         ///< its dip, positive down
     std::array<float, 3> rate_rad_s{};  ///< bias-corrected rate, sensor frame
     std::array<float, 3> accel_m_s2{};  ///< specific force, sensor frame (for the joint centres' constraint)

@@ -296,6 +296,7 @@ void MocapFilter::restart_attitude() {
     // The field in the 6D frame, and the heading's statistics against it, start again.
     s.mag_lp = {};
     s.mag_dis_lp_rad = s.mag_dis_drift_rad = 0.0;
+    s.field_dir_lp.setZero();
     s.mag_heading_disturbed = false;
     s.mag_settled = true;
     s.k_mag_init = 1.0;
@@ -700,6 +701,12 @@ void MocapFilter::update_mag(const math::Vec3& mag_raw, const math::Vec3& rate, 
     if (p.mag_guard) update_mag_guard(mag_e);
 
     const math::Vec3 h(mag_e.x(), mag_e.y(), 0.0);
+    // The field's own heading in the 6D frame (heading_split().field_heading_rad), whether or
+    // not the heading correction uses it: its direction, low-passed over mag_heading_tau_s.
+    if (const double hn = h.norm(); hn > 0.0) {
+        const double k = s.field_dir_lp.squaredNorm() == 0.0 ? 1.0 : k_dis_;
+        s.field_dir_lp += k * (h / hn - s.field_dir_lp);
+    }
     s.last_mag_disagreement_rad = heading_disagreement(h, s.delta_rad, s.mag_horizontal_lp.norm());
     if (p.mag_guard) update_heading_guard();
     double k = k_mag_;
@@ -764,6 +771,12 @@ HeadingSplit MocapFilter::heading_split() const {
     h.has_mag_heading = state_.samples > state_.no_mag_samples;
     h.mag_trusted = h.has_mag_heading && !(params_.mag_guard && mag_rejected()) && state_.mag_settled;
     h.field_norm_ut = state_.mag_norm;
+    h.field_heading_rad = state_.field_dir_lp.squaredNorm() > 0.0
+                              ? std::atan2(state_.field_dir_lp.x(), state_.field_dir_lp.y())
+                              : state_.delta_rad;
+    h.field_usable =
+        h.has_mag_heading &&
+        !(params_.mag_guard && (state_.mag_disturbed || state_.mag_guard_blind || state_.mag_ref_norm == 0.0));
     h.field_dip_rad = state_.mag_dip_rad;
     h.frame_epoch = state_.attitude_restarts;
     return h;

@@ -298,22 +298,24 @@ struct MocapFilterState {
     bool rest_detected = false;
 
     // Magnetic disturbance guard
-    LowPassState<3> mag_lp;              ///< field in the 6D earth frame
-    double mag_noise_var = 0.0;          ///< per-axis variance of the raw field around mag_lp
-    double mag_dis_lp_rad = 0.0;         ///< low-passed heading disagreement
-    double mag_dis_drift_rad = 0.0;      ///< that disagreement as the gyro's drift alone could have moved
-                                         ///< it (follows it at most at the drift rate, held while flagged)
-    double mag_dis_var = 0.0;            ///< variance of the raw disagreement around it, rad²
-    std::uint64_t mag_stat_count = 0;    ///< samples in the noise statistics (fast start)
-    bool mag_heading_disturbed = false;  ///< flagged by the heading disagreement
-    bool mag_guard_blind = false;        ///< field noise too large to detect a disturbance of
-                                         ///< the configured size: guard not applied
-    double mag_norm = 0.0;               ///< filtered field norm
-    double mag_dip_rad = 0.0;            ///< filtered dip angle (positive: field points down)
-    double mag_dev_norm_ut = 0.0;        ///< accepted field's departure from the reference norm, low-passed, µT
-    double mag_dev_dip_ut = 0.0;         ///< the same for the dip (times the norm), µT
-    double mag_var_ut2 = 0.0;            ///< variance of that departure, per axis, µT²
-    double mag_ref_norm = 0.0;           ///< reference norm (0: none yet)
+    LowPassState<3> mag_lp;                        ///< field in the 6D earth frame
+    double mag_noise_var = 0.0;                    ///< per-axis variance of the raw field around mag_lp
+    double mag_dis_lp_rad = 0.0;                   ///< low-passed heading disagreement
+    math::Vec3 field_dir_lp = math::Vec3::Zero();  ///< the horizontal field's direction in the 6D frame,
+                                                   ///< low-passed over mag_heading_tau_s (0: none yet)
+    double mag_dis_drift_rad = 0.0;                ///< that disagreement as the gyro's drift alone could have moved
+                                                   ///< it (follows it at most at the drift rate, held while flagged)
+    double mag_dis_var = 0.0;                      ///< variance of the raw disagreement around it, rad²
+    std::uint64_t mag_stat_count = 0;              ///< samples in the noise statistics (fast start)
+    bool mag_heading_disturbed = false;            ///< flagged by the heading disagreement
+    bool mag_guard_blind = false;                  ///< field noise too large to detect a disturbance of
+                                                   ///< the configured size: guard not applied
+    double mag_norm = 0.0;                         ///< filtered field norm
+    double mag_dip_rad = 0.0;                      ///< filtered dip angle (positive: field points down)
+    double mag_dev_norm_ut = 0.0;  ///< accepted field's departure from the reference norm, low-passed, µT
+    double mag_dev_dip_ut = 0.0;   ///< the same for the dip (times the norm), µT
+    double mag_var_ut2 = 0.0;      ///< variance of that departure, per axis, µT²
+    double mag_ref_norm = 0.0;     ///< reference norm (0: none yet)
     double mag_ref_dip_rad = 0.0;
     double mag_candidate_norm = -1.0;  ///< candidate new field (-1: none)
     double mag_candidate_dip_rad = 0.0;

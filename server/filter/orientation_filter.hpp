@@ -37,6 +37,11 @@ struct HeadingSplit {
     bool mag_trusted = false;                ///< ... uses the field now (not rejected) and, after a
                                              ///< rejection, its heading is back on the field
     double field_norm_ut = 0.0;              ///< the field it sees, filtered (0: unknown)
+    double field_heading_rad = 0.0;          ///< the field's own heading in q6's frame, low-passed
+                                             ///< briefly: where mag_heading_rad converges to, without
+                                             ///< the lag of the filter's heading correction
+    bool field_usable = false;               ///< the field keeps its norm and dip (not disturbed), even
+                                             ///< where the filter holds its heading on the gyro
     double field_dip_rad = 0.0;              ///< its dip, positive down
     std::uint32_t frame_epoch = 0;           ///< changes when q6's heading frame starts again (the
                                              ///< filter restarted its attitude after a gap)

@@ -146,14 +146,20 @@ void ChainEstimator::forget_delta(Joint& j) {
 }
 
 void ChainEstimator::restart_delta(Joint& j, const SegmentInput& p, const SegmentInput& c) {
-    const bool known = j.filter.initialised();
-    forget_delta(j);
     ++j.stats.restarts;
-    if (!known) return;
-    // Rz(δ) ≈ q6_p · (q_p⁻¹ q_c)_last · q6_c⁻¹; its twist about the vertical is δ.
+    if (!j.filter.initialised()) {
+        forget_delta(j);
+        return;
+    }
+    // Rz(δ) ≈ q6_p · (q_p⁻¹ q_c)_last · q6_c⁻¹; its twist about the vertical is δ. The rate at
+    // which the two frames drift apart is the difference of the gyros' unlearned biases, which
+    // the filters keep across their restart: it stays.
     const auto pi = static_cast<std::size_t>(j.def.parent), ci = static_cast<std::size_t>(j.def.child);
     const Quat m = p.q6 * last_out_[pi].conjugate() * last_out_[ci] * c.q6.conjugate();
-    j.filter.init(math::wrap_pi(2.0 * std::atan2(m.z(), m.w())), params_.restart_sigma_deg * kDeg);
+    const HeadingFilter kept = j.filter;
+    forget_delta(j);
+    j.filter = kept;
+    j.filter.restart(math::wrap_pi(2.0 * std::atan2(m.z(), m.w())), params_.restart_sigma_deg * kDeg);
 }
 
 void ChainEstimator::reset() {
@@ -379,7 +385,7 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
     learn_axes(j, t_us, p, c);
     const bool fields_alike =
         params_.mode == HeadingMode::kAuto && p.mag_available && c.mag_available && fields_agree(p, c);
-    const bool fields_ok = fields_alike && p.mag_trusted && c.mag_trusted;
+    const bool fields_ok = fields_alike && p.field_usable && c.field_usable;
     // A 2-DoF joint's axes from the body model are only as good as the calibration pose held
     // them (a T-pose with the upper arm turned 30° about its length turns the elbow's flexion
     // axis by as much, and biases δ by about that): auto takes agreeing fields over them and
@@ -399,7 +405,7 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
         ++j.stats.joint_updates;
     }
     if (!fields_ok) return;
-    const double z = math::wrap_pi(c.mag_heading_rad - p.mag_heading_rad);
+    const double z = math::wrap_pi(c.field_heading_rad - p.field_heading_rad);
     if (!f.initialised()) {
         f.init(z, 20.0 * kDeg);
         j.last_mag_us = t_us;

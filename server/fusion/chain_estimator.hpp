@@ -17,11 +17,14 @@
 //   magnetometer  every segment keeps its own filter's heading (q9; the chain is bypassed);
 //   joints        relative headings from the joints only; the magnetometer is used for the
 //                 root's absolute heading alone (and nowhere with --no-mag: d = 0);
-//   auto          joints, plus each joint's magnetometer difference d_c − d_p where both
-//                 filters trust their fields, the fields agree with each other (norm and
-//                 dip), and the difference agrees with what the joint says. Where a joint
-//                 cannot see δ (vertical hinge axis, a ball joint), agreeing fields alone
-//                 carry it.
+//   auto          joints, plus each joint's magnetometer difference where both fields keep
+//                 their norm and dip, agree with each other, and the difference agrees with
+//                 what the joint says. The difference is of the fields' own headings
+//                 (SegmentInput::field_heading_rad), not of the filters' corrections d, which
+//                 lag a drifting 6D frame by its rate × the correction's time constant (a
+//                 pelvis whose vertical gyro bias is 1 °/s off leaves its d 10° behind its
+//                 field). Where a joint cannot see δ (vertical hinge axis, a ball joint),
+//                 agreeing fields alone carry it.
 // Each segment reports where its heading came from (HeadingSource): the magnetometer, the
 // joints, or the gyroscope alone (nothing observed it for hold_s).
 //
@@ -128,6 +131,10 @@ struct SegmentInput {
     double mag_heading_rad = 0.0;    ///< d: the filter's own output is Rz(d) ⊗ q6
     bool mag_trusted = false;        ///< the filter uses the field now (not rejected)
     double field_norm_ut = 0.0;      ///< the field the filter sees (0: unknown)
+    double field_heading_rad = 0.0;  ///< the field's own heading in q6's frame: d without the lag of
+                                     ///< the filter's correction (which a drifting q6 leaves behind)
+    bool field_usable = false;       ///< the field keeps its norm and dip, whether or not the filter
+                                     ///< uses it for its own heading now
     double field_dip_rad = 0.0;
     std::uint8_t frame_epoch = 0;  ///< changes when q6's heading frame starts again (the filter
                                    ///< restarted after a gap): the joints' δ to it start again

@@ -27,6 +27,16 @@ void HeadingFilter::init(double delta_rad, double sigma_rad) {
     p11_ = rs * rs;
 }
 
+void HeadingFilter::restart(double delta_rad, double sigma_rad) {
+    if (!initialised_) {
+        init(delta_rad, sigma_rad);
+        return;
+    }
+    delta_ = math::wrap_pi(delta_rad);
+    p00_ = sigma_rad * sigma_rad;
+    p01_ = 0.0;
+}
+
 double HeadingFilter::sigma_rad() const {
     return initialised_ ? std::sqrt(std::max(p00_, 0.0)) : std::numbers::pi;
 }

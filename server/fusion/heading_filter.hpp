@@ -41,6 +41,10 @@ public:
     void reset();
     /// Starts from δ = delta_rad with standard deviation sigma_rad, rate 0.
     void init(double delta_rad, double sigma_rad);
+    /// Starts δ again at delta_rad with standard deviation sigma_rad, keeping the drift rate
+    /// and its uncertainty: one of the two 6D frames started again, but the gyro biases that
+    /// make them drift apart did not. Before init, as init().
+    void restart(double delta_rad, double sigma_rad);
     /// Moves the state dt_s forward (no-op before init or for dt_s <= 0).
     void predict(double dt_s);
     /// One measurement of δ with variance var_rad2 (> 0). Refused (returns false, counted in

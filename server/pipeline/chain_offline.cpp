@@ -74,6 +74,9 @@ std::vector<fusion::SegmentInput> offline_segment_inputs(const filter::OfflineSm
         if (with_mag) {
             x.mag_heading_rad = heading_of(r9.orientation[k] * r6.orientation[k].conjugate());
             x.mag_trusted = r9.mag_used[k] != 0;
+            // The re-solve's heading has no correction lag to take out: it is the field's.
+            x.field_heading_rad = x.mag_heading_rad;
+            x.field_usable = x.mag_trusted;
             x.field_norm_ut = norm_ut[k];
             x.field_dip_rad = dip_rad[k];
         }

@@ -35,6 +35,8 @@ bool FilterProcessor::process(const SegmentSample& in, SegmentPose& out) {
         out.mag = h.mag_trusted ? SegmentMag::kTrusted : SegmentMag::kRejected;
         out.mag_heading_rad = static_cast<float>(h.mag_heading_rad);
         out.field_norm_ut = static_cast<float>(h.field_norm_ut);
+        out.field_heading_rad = static_cast<float>(h.field_heading_rad);
+        out.field_usable = h.field_usable;
         out.field_dip_rad = static_cast<float>(h.field_dip_rad);
     }
     out.frame_epoch = static_cast<std::uint8_t>(h.frame_epoch);

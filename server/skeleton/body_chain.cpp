@@ -128,6 +128,8 @@ void BodyChain::apply(const SubjectFrame& frame, std::span<Quat> q_earth_sensor,
         x.mag_heading_rad = s.mag_heading_rad;
         x.frame_epoch = s.frame_epoch;
         x.field_norm_ut = s.field_norm_ut;
+        x.field_heading_rad = s.field_heading_rad;
+        x.field_usable = s.field_usable;
         x.field_dip_rad = s.field_dip_rad;
         x.gyro_rad_s = Vec3(s.rate_rad_s[0], s.rate_rad_s[1], s.rate_rad_s[2]);
         x.accel_m_s2 = Vec3(s.accel_m_s2[0], s.accel_m_s2[1], s.accel_m_s2[2]);

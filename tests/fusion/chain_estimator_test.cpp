@@ -240,13 +240,15 @@ TEST(ChainEstimatorTwoDof, ConvergesFromAMagnetometerStart) {
     const auto mag = [&](double t, SegmentInput& a, SegmentInput& b) {
         for (SegmentInput* x : {&a, &b}) {
             x->mag_available = true;
-            x->mag_trusted = t < 1.0;  // one look at the field, then it is rejected
+            x->mag_trusted = x->field_usable = t < 1.0;  // one look at the field, then it is rejected
             x->field_norm_ut = 50.0;
             x->field_dip_rad = 1.0;
         }
         // d is the filter's heading correction: the field's heading error is 25° for the child.
         a.mag_heading_rad = -m.h_parent(t);
         b.mag_heading_rad = -m.h_child(t) + 25.0 * kDeg;
+        a.field_heading_rad = a.mag_heading_rad;
+        b.field_heading_rad = b.mag_heading_rad;
     };
     const RunResult r = run(m, def, p, 120.0, mag);
     EXPECT_LT(max_error_deg(r, 60.0), 1.0);
@@ -266,12 +268,12 @@ TEST(ChainEstimatorTwoDof, AgreeingFieldsHoldAJointWhoseModelAxisIsOff) {
     const auto mag = [&](double t, SegmentInput& a, SegmentInput& b) {
         for (SegmentInput* x : {&a, &b}) {
             x->mag_available = true;
-            x->mag_trusted = t >= 3.0;
+            x->mag_trusted = x->field_usable = t >= 3.0;
             x->field_norm_ut = 50.0;
             x->field_dip_rad = 1.0;
         }
-        a.mag_heading_rad = -m.h_parent(t);
-        b.mag_heading_rad = -m.h_child(t);
+        a.mag_heading_rad = a.field_heading_rad = -m.h_parent(t);
+        b.mag_heading_rad = b.field_heading_rad = -m.h_child(t);
     };
     ChainParams p;
     p.mode = HeadingMode::kAuto;
@@ -305,12 +307,12 @@ TEST(ChainEstimatorAuto, TakesAgreeingFieldsAndRefusesADisturbedOne) {
     const auto mag = [&](double t, SegmentInput& a, SegmentInput& b) {
         for (SegmentInput* x : {&a, &b}) {
             x->mag_available = true;
-            x->mag_trusted = true;
+            x->mag_trusted = x->field_usable = true;
             x->field_norm_ut = 50.0;
             x->field_dip_rad = 1.0;
         }
-        a.mag_heading_rad = -m.h_parent(t);
-        b.mag_heading_rad = -m.h_child(t) + ((t > 30.0 && t < 60.0) ? 40.0 * kDeg : 0.0);
+        a.mag_heading_rad = a.field_heading_rad = -m.h_parent(t);
+        b.mag_heading_rad = b.field_heading_rad = -m.h_child(t) + ((t > 30.0 && t < 60.0) ? 40.0 * kDeg : 0.0);
     };
     const RunResult r = run(m, def, p, 90.0, mag);
     EXPECT_LT(max_error_deg(r, 5.0), 1.0);
@@ -359,6 +361,40 @@ TEST(ChainEstimatorBall, AStillJointShowsItsHeadingAndAMovingOneIsNotTakenForSti
     EXPECT_EQ(r.source.back(), HeadingSource::kGyro);
 }
 
+// A child whose gyro keeps an unlearned vertical bias of 1 °/s: its 6D frame drifts, and its
+// filter's heading correction d follows the field only at 1 / tau (10 s here), 10° behind it
+// for good; the field's own heading does not lag. The parent's filter refuses its field for its
+// own heading for a while (its heading guard), though the field keeps its norm and dip. A ball
+// joint (no constraint of its own) in auto: δ from the fields' own headings, with the drift
+// rate learned, stays within a degree where the corrections would leave it 10° off.
+TEST(ChainEstimatorAuto, TakesTheFieldsOwnHeadingsNotTheFiltersLaggingCorrections) {
+    TwoSegmentMotion m;
+    m.q_parent = swaying_parent;
+    const Quat mount = axis_angle(Vec3(0.2, 0.4, 1.0), 1.9);
+    m.q_child = [mount](double t, const Quat& qp) { return qp * axis_angle(Vec3(0, 1, 0), std::sin(2.0 * t)) * mount; };
+    m.h_parent = [](double) { return 0.4; };
+    m.h_child = [](double t) { return -1.6 + 1.0 * kDeg * t; };
+    ChainParams p;
+    p.mode = HeadingMode::kAuto;
+    const auto mag = [&](double t, SegmentInput& a, SegmentInput& b) {
+        for (SegmentInput* x : {&a, &b}) {
+            x->mag_available = true;
+            x->field_usable = true;
+            x->field_norm_ut = 50.0;
+            x->field_dip_rad = 1.0;
+        }
+        a.mag_trusted = t < 30.0 || t > 60.0;
+        b.mag_trusted = true;
+        a.mag_heading_rad = a.field_heading_rad = -m.h_parent(t);
+        b.field_heading_rad = -m.h_child(t);
+        b.mag_heading_rad = b.field_heading_rad - 10.0 * kDeg;  // the correction's lag
+    };
+    const RunResult r = run(m, ball_def(), p, 90.0, mag);
+    EXPECT_LT(max_error_deg(r, 40.0), 1.0);  // the rate learned (one difference per 30 s counts)
+    EXPECT_GT(r.status.mag_updates, 5000u);
+    EXPECT_NEAR(r.status.rate_rad_s / kDeg, -1.0, 0.05);
+}
+
 // After a gap the child's filter starts its attitude again (SegmentInput::frame_epoch changes):
 // its 6D frame is turned by whatever it turned unseen (here 70°), so the δ learned in the old
 // frame is wrong by as much. A moving ball joint has no constraint to relearn it; δ starts again
@@ -381,6 +417,37 @@ TEST(ChainEstimatorBall, ASegmentWhoseFrameStartsAgainKeepsTheJointsRelativeHead
         run(m, def, p, 60.0, [](double t, SegmentInput&, SegmentInput& c) { c.frame_epoch = t < 40.0 ? 3 : 4; });
     EXPECT_LT(max_error_deg(r, 5.0, 39.99), 1.5);
     EXPECT_LT(max_error_deg(r, 40.0), 2.0);
+    EXPECT_EQ(r.status.restarts, 1u);
+}
+
+// The same restart while the two frames drift apart at 1 °/s (the child's gyro keeps an
+// unlearned vertical bias, learned by δ's rate from agreeing fields until t = 50 s, when the
+// child's filter restarts and the fields are lost): the filters keep their biases across a
+// restart, so the frames go on drifting apart at that rate, and δ's rate is kept with it.
+// Forgetting the rate would leave δ 1° further off for every second after the restart.
+TEST(ChainEstimatorBall, AFrameRestartKeepsTheRateTheFramesDriftApartAt) {
+    TwoSegmentMotion m;
+    m.q_parent = swaying_parent;
+    const Quat mount = axis_angle(Vec3(0.2, 0.4, 1.0), 1.9);
+    m.q_child = [mount](double t, const Quat& qp) { return qp * axis_angle(Vec3(0, 1, 0), std::sin(2.0 * t)) * mount; };
+    m.h_parent = [](double) { return 0.4; };
+    m.h_child = [](double t) { return -1.6 + 1.0 * kDeg * t + (t < 50.0 ? 0.0 : 70.0 * kDeg); };
+    ChainParams p;
+    p.mode = HeadingMode::kAuto;
+    const auto mag = [&](double t, SegmentInput& a, SegmentInput& b) {
+        for (SegmentInput* x : {&a, &b}) {
+            x->mag_available = true;
+            x->mag_trusted = x->field_usable = t < 50.0;
+            x->field_norm_ut = 50.0;
+            x->field_dip_rad = 1.0;
+        }
+        a.mag_heading_rad = a.field_heading_rad = -m.h_parent(t);
+        b.mag_heading_rad = b.field_heading_rad = -m.h_child(t);
+        b.frame_epoch = t < 50.0 ? 3 : 4;
+    };
+    const RunResult r = run(m, ball_def(), p, 80.0, mag);
+    EXPECT_LT(max_error_deg(r, 40.0, 49.99), 1.0);
+    EXPECT_LT(max_error_deg(r, 50.0), 3.0);  // 30 s on: forgetting the rate left it 25° off
     EXPECT_EQ(r.status.restarts, 1u);
 }
 
