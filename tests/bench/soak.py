@@ -560,7 +560,8 @@ def main():
     ap.add_argument("--rotate-s", type=float, default=60.0, help="raw recording rotation (10 s at least)")
     ap.add_argument("--hostile-scale", type=int, default=2, help="multiplies the hostile connections")
     ap.add_argument("--export-hold-s", type=float, default=30.0, help="how long a slow reader holds a download")
-    ap.add_argument("--source-take-mb", type=float, default=4.0, help="size of the take the exports download")
+    ap.add_argument("--source-take-mb", type=float, default=1.5,
+                    help="size of the take the exports download (below export_memory_per_address_mb = 2)")
     ap.add_argument("--max-p99-ms", type=float, default=50.0, help="honest clients' p99 latency bound (real run)")
     ap.add_argument("--nats-server", default="", help="path of nats-server (default: from PATH, /usr/sbin)")
     ap.add_argument("--no-cluster", action="store_true", help="no nats-server: no calibration attacks")
@@ -571,7 +572,7 @@ def main():
     a = ap.parse_args()
     if a.smoke:
         a.duration_s, a.clients, a.sample_s, a.rotate_s, a.hostile_scale = 30.0, 10, 5.0, 10.0, 1
-        a.export_hold_s, a.source_take_mb = 10.0, 1.5
+        a.export_hold_s = 10.0
     given = {"mocapd": a.mocapd, "mocap-sim": a.sim, "mocap-client": a.client}
     bins = {n: given[n] or load_run.find_binary(a.bin, n) for n in given}
     load_run.raise_nofile()
