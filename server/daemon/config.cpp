@@ -386,6 +386,7 @@ void read_outputs(TableReader& r, DaemonConfig& c) {
     r.read("export_memory_mb", c.export_memory_mb, 1, 65536);
     r.read("export_memory_per_address_mb", c.export_memory_per_address_mb, 1, 65536);
     r.read("offline_export_max_mb", c.offline_export_max_mb, 1, 65536);
+    r.read_zero_or("take_start_min_free_mb", c.take_start_min_free_mb, 0.01, 1e6);
 }
 
 void read_http(TableReader& r, DaemonConfig& c) {

@@ -118,6 +118,7 @@ struct DaemonConfig {
     std::uint32_t export_memory_mb = 256;              ///< take exports held in memory, all peers
     std::uint32_t export_memory_per_address_mb = 128;  ///< take exports held for one peer address
     std::uint32_t offline_export_max_mb = 384;         ///< estimate above which an offline export is refused
+    double take_start_min_free_mb = 64.0;              ///< free space a take start needs on record_dir; 0 = no check
     // [http] (docs/viewer.md): viewer page, pose WebSocket, /metrics, /healthz
     bool http_enabled = true;
     Endpoint http_listen{"0.0.0.0", 8080};

@@ -311,6 +311,7 @@ std::unique_ptr<pipeline::Output> make_take_recorder(const OutputContext& ctx) {
     tc.raw.ring_capacity = ctx.config.raw_ring_capacity;
     tc.filter = ctx.config.filter_name;
     tc.calibration_dir = ctx.config.calibration_dir;
+    tc.min_free_bytes = static_cast<std::uint64_t>(ctx.config.take_start_min_free_mb * 1024.0 * 1024.0);
     return std::make_unique<TakeRecorderOutput>(*ctx.takes, tc, ctx.clock);
 }
 

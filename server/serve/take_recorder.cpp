@@ -2,6 +2,7 @@
 #include "serve/take_recorder.hpp"
 
 #include <spdlog/spdlog.h>
+#include <sys/statvfs.h>
 
 #include <algorithm>
 #include <ctime>
@@ -16,6 +17,7 @@ TakeRecorder::TakeRecorder(TakeStore& store, TakeRecorderConfig config, const Cl
     group_.add("takes_started", started_);
     group_.add("takes_stopped", stopped_);
     group_.add("takes_refused", refused_);
+    group_.add("takes_refused_disk_full", refused_disk_full_);
     group_.add("samples_recorded", recorded_);
     group_.add("samples_lost", lost_);
 }
@@ -34,6 +36,26 @@ std::string TakeRecorder::default_name(std::int64_t now_us) const {
     for (int n = 2; store_.find(name) && n < 1000; ++n)
         name = std::string(buf) + "-" + std::to_string(n);
     return name;
+}
+
+std::string TakeRecorder::short_of_space() const {
+    if (config_.min_free_bytes == 0) return {};
+    // The store's root is created on first use: before that its parent's file system holds it.
+    fs::path at = store_.root();
+    std::error_code ec;
+    while (!at.empty() && !fs::exists(at, ec) && at.has_parent_path() && at.parent_path() != at)
+        at = at.parent_path();
+    struct statvfs st {};
+    if (::statvfs(at.c_str(), &st) != 0) return {};  // the create below says what is wrong
+    const std::uint64_t avail = static_cast<std::uint64_t>(st.f_bavail) * st.f_frsize;
+    if (avail >= config_.min_free_bytes) return {};
+    const auto mib = [](std::uint64_t b) {
+        return std::to_string(b >> 20) + "." + std::to_string(((b & 0xFFFFF) * 10) >> 20);
+    };
+    return "not enough free space for a take: " + mib(avail) + " MiB free on " + at.string() + ", " +
+           mib(config_.min_free_bytes) +
+           " MiB kept in reserve ([outputs] take_start_min_free_mb); free some space (delete takes or raw files) "
+           "and start again";
 }
 
 std::vector<std::string> TakeRecorder::copy_calibrations(const std::string& dir) const {
@@ -61,6 +83,11 @@ ControlResult TakeRecorder::start(const std::string& name, const std::string& no
     };
     if (active_.load()) return refuse("take '" + meta_.name + "' is running; stop it first");
     if (notes.size() > kMaxTakeNotesBytes) return refuse("notes longer than 4096 bytes");
+    if (std::string why = short_of_space(); !why.empty()) {
+        refused_disk_full_.add();
+        spdlog::warn("take start refused: {}", why);
+        return refuse(std::move(why));
+    }
     const std::int64_t now = clock_.now_us();
     TakeMeta meta;
     meta.name = name.empty() ? default_name(now) : name;

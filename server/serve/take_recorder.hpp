@@ -40,6 +40,10 @@ struct TakeRecorderConfig {
     RawRecorderConfig raw;        ///< directory and rotation are set per take
     std::string filter;           ///< the daemon's filter, written into the sidecar
     std::string calibration_dir;  ///< "" = no calibration files to copy
+    /// A start is refused while the store's file system has less than this free for an
+    /// unprivileged writer (0 = no check): a take started on a nearly full disk would lose
+    /// its samples from its first second ([outputs] take_start_min_free_mb).
+    std::uint64_t min_free_bytes = std::uint64_t{64} << 20;
 };
 
 class TakeRecorder {
@@ -52,7 +56,8 @@ public:
 
     /// Any thread. name "" = "take-YYYYmmdd-HHMMSS" (UTC start; "-2", "-3"... if taken).
     /// Refused while a take runs, for an invalid or existing name, notes over
-    /// kMaxTakeNotesBytes, or a directory that cannot be written. result.take = the name.
+    /// kMaxTakeNotesBytes, less than config.min_free_bytes free on the store's file system,
+    /// or a directory that cannot be written. result.take = the name.
     ControlResult start(const std::string& name, const std::string& notes);
     /// Any thread. Refused when no take runs. result.take = the name.
     ControlResult stop();
@@ -64,7 +69,8 @@ public:
     void push(const SegmentSample& sample) noexcept;
 
     /// Component "take_record": takes_started, takes_stopped, takes_refused (start or stop
-    /// refused), samples_recorded, samples_lost (dropped by a full ring or lost to the disk;
+    /// refused), takes_refused_disk_full (starts of those refused for want of free space),
+    /// samples_recorded, samples_lost (dropped by a full ring or lost to the disk;
     /// added when a take stops).
     [[nodiscard]] const CounterGroup& counters() const { return group_; }
     void register_metrics(MetricsRegistry& registry) const { registry.add(group_); }
@@ -72,6 +78,8 @@ public:
 private:
     std::string default_name(std::int64_t now_us) const;
     std::vector<std::string> copy_calibrations(const std::string& dir) const;
+    /// "" when the store's file system has min_free_bytes free (or cannot be asked), else why not.
+    std::string short_of_space() const;
 
     TakeStore& store_;
     TakeRecorderConfig config_;
@@ -86,7 +94,7 @@ private:
     std::array<std::uint32_t, 64> subjects_{};  // push_mutex_: subjects seen in the take
     std::size_t subject_count_ = 0;             // push_mutex_
 
-    Counter started_, stopped_, refused_, recorded_, lost_;
+    Counter started_, stopped_, refused_, refused_disk_full_, recorded_, lost_;
     CounterGroup group_{"take_record"};
 };
 

@@ -188,6 +188,12 @@ TEST(ConfigOutputs, DefaultsAndValues) {
     EXPECT_DOUBLE_EQ(d->raw_rotate_mb, s.raw_rotate_mb);
     EXPECT_DOUBLE_EQ(d->raw_rotate_s, s.raw_rotate_s);
     EXPECT_EQ(d->raw_ring_capacity, s.raw_ring_capacity);
+    EXPECT_DOUBLE_EQ(d->take_start_min_free_mb, s.take_start_min_free_mb);
+    for (const char* bad : {"take_start_min_free_mb = -1\n", "take_start_min_free_mb = 0.001\n"})
+        EXPECT_FALSE(parse_config(std::string("[outputs]\n") + bad, "t.toml", &err)) << bad;
+    const auto off = parse_config("[outputs]\ntake_start_min_free_mb = 0\n", "t.toml", &err);
+    ASSERT_TRUE(off) << err;
+    EXPECT_DOUBLE_EQ(off->take_start_min_free_mb, 0.0);
 
     const auto c = parse_config(
         "[outputs]\nbvh_live = false\nbvh_listen = \"127.0.0.1:9002\"\nbvh_unit = \"m\"\n"

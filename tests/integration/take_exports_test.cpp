@@ -148,7 +148,7 @@ TEST_F(TakeExports, ExportsHeldBySlowReadersLeaveTheDiskToARunningTake) {
     // loaded machine: 3.4 MB of samples in one run), and must still have 1.2 MB to grow into.
     TmpfsMount disk(dir_.file("rec"), "16m");
     if (!disk.mounted()) GTEST_SKIP() << disk.error() << " (no tmpfs in this container)";
-    start(dir_.file("rec"), "record_flush_interval_s = 0.2\n");
+    start(dir_.file("rec"), "record_flush_interval_s = 0.2\ntake_start_min_free_mb = 0\n");
     record("source", 1'200'000);
     ASSERT_EQ(stop_take().value("ok", false), true);
     record("live", 1);
@@ -187,7 +187,7 @@ TEST_F(TakeExports, ATakeThatLostSamplesSaysSoInItsStopReplySidecarAndListing) {
     if (::geteuid() != 0) GTEST_SKIP() << "needs root to mount a tmpfs (CI runs as root)";
     TmpfsMount disk(dir_.file("rec"), "1m");
     if (!disk.mounted()) GTEST_SKIP() << disk.error() << " (no tmpfs in this container)";
-    start(dir_.file("rec"), "record_flush_interval_s = 0.2\n");
+    start(dir_.file("rec"), "record_flush_interval_s = 0.2\ntake_start_min_free_mb = 0\n");
     record("cut", 50'000);
     // Fill the disk but 8 KiB: the recorder's batches (~25 kB every 0.2 s) no longer fit,
     // the new sidecar (~1 kB, one page) still does.
@@ -213,6 +213,52 @@ TEST_F(TakeExports, ATakeThatLostSamplesSaysSoInItsStopReplySidecarAndListing) {
     const auto sidecar = nlohmann::json::parse(read_file(dir_.file("rec") + "/takes/cut/take.json"), nullptr, false);
     EXPECT_EQ(sidecar.value("samples_lost", std::uint64_t{0}), take.value("samples_lost", std::uint64_t{0}));
     EXPECT_EQ(sidecar.value("loss", std::string()), take.value("loss", std::string()));
+}
+
+// A take started on a nearly full disk was started all the same and lost its samples once the
+// last megabytes were gone (and said so only when stopped). Now the start is refused with the reason and counted while
+// record_dir has less than take_start_min_free_mb free; the takes already recorded are untouched, and a start succeeds
+// again once there is room.
+TEST_F(TakeExports, ATakeStartOnANearlyFullDiskIsRefusedAndLeavesRecordedTakesIntact) {
+    if (::geteuid() != 0) GTEST_SKIP() << "needs root to mount a tmpfs (CI runs as root)";
+    TmpfsMount disk(dir_.file("rec"), "8m");
+    if (!disk.mounted()) GTEST_SKIP() << disk.error() << " (no tmpfs in this container)";
+    start(dir_.file("rec"), "record_flush_interval_s = 0.2\ntake_start_min_free_mb = 4\n");
+    record("kept", 100'000);
+    ASSERT_EQ(stop_take().value("ok", false), true);
+    const fs::path kept = fs::path(dir_.file("rec")) / "takes" / "kept";
+    const std::uintmax_t kept_bytes = take_raw_bytes(kept);
+    const std::string kept_sidecar = read_file((kept / "take.json").string());
+    // Leave 2 MiB free: below the 4 MiB reserve, yet room for a take's first seconds, which
+    // would then start and lose its samples once the disk is full.
+    struct statvfs st {};
+    ASSERT_EQ(::statvfs(dir_.file("rec").c_str(), &st), 0);
+    const std::uint64_t avail = static_cast<std::uint64_t>(st.f_bavail) * st.f_frsize;
+    ASSERT_GT(avail, std::uint64_t{3} << 20);
+    const std::string filler = dir_.file("rec") + "/filler";
+    {
+        std::ofstream out(filler, std::ios::binary);
+        const std::string block(1 << 16, 'f');
+        for (std::uint64_t n = 0; n + block.size() <= avail - (std::uint64_t{2} << 20); n += block.size())
+            out.write(block.data(), static_cast<std::streamsize>(block.size()));
+    }
+    const auto refused = http_request(ports_.http_port, "/api/takes/start?name=late", verb::post, kWithToken);
+    EXPECT_EQ(refused.status, 409u) << refused.body;
+    EXPECT_NE(refused.body.find("not enough free space for a take"), std::string::npos) << refused.body;
+    EXPECT_NE(refused.body.find("take_start_min_free_mb"), std::string::npos) << refused.body;
+    EXPECT_FALSE(fs::exists(fs::path(dir_.file("rec")) / "takes" / "late")) << "nothing of the refused take is left";
+    EXPECT_EQ(metric("mocapd_take_record_takes_refused_disk_full_total"), 1u);
+    EXPECT_NE(daemon_->log().find("take start refused: not enough free space"), std::string::npos) << daemon_->log();
+    // The recorded take is as it was.
+    EXPECT_EQ(take_raw_bytes(kept), kept_bytes);
+    EXPECT_EQ(read_file((kept / "take.json").string()), kept_sidecar);
+    const auto take = listed("kept");
+    EXPECT_EQ(take.value("samples_lost", std::uint64_t{1}), 0u) << take.dump();
+    // Room again: the take starts and records.
+    fs::remove(filler);
+    record("late", 10'000);
+    EXPECT_EQ(stop_take().value("ok", false), true);
+    EXPECT_EQ(metric("mocapd_take_record_takes_refused_disk_full_total"), 1u);
 }
 
 }  // namespace

@@ -101,6 +101,30 @@ TEST(TakeRecorder, OneTakeAtATimeWithValidNamesAndBoundedNotes) {
     EXPECT_EQ(f.recorder.counters().value("takes_refused"), 6u);
 }
 
+TEST(TakeRecorder, AStartIsRefusedWhileTheDiskHasLessThanTheReserveFree) {
+    TempDir dir;
+    StepClock clock;
+    TakeStore store{dir.file("takes")};
+    TakeRecorderConfig c;
+    c.raw.flush_interval_s = 0.05;
+    c.raw.ring_capacity = 1024;
+    c.min_free_bytes = std::uint64_t{1} << 60;  // more than any disk of this machine has free
+    TakeRecorder short_of_space{store, c, clock};
+    const ControlResult refused = short_of_space.start("big", "");
+    EXPECT_FALSE(refused.ok);
+    EXPECT_NE(refused.error.find("not enough free space for a take"), std::string::npos) << refused.error;
+    EXPECT_NE(refused.error.find("take_start_min_free_mb"), std::string::npos) << refused.error;
+    EXPECT_FALSE(short_of_space.running());
+    EXPECT_TRUE(store.list().empty()) << "a refused start leaves nothing";
+    EXPECT_EQ(short_of_space.counters().value("takes_refused"), 1u);
+    EXPECT_EQ(short_of_space.counters().value("takes_refused_disk_full"), 1u);
+    c.min_free_bytes = 0;  // no check
+    TakeRecorder unchecked{store, c, clock};
+    ASSERT_TRUE(unchecked.start("big", "").ok);
+    ASSERT_TRUE(unchecked.stop().ok);
+    EXPECT_EQ(unchecked.counters().value("takes_refused_disk_full"), 0u);
+}
+
 TEST(TakeRecorder, DefaultNamesFollowTheStartTimeAndNeverCollide) {
     Fixture f;
     f.clock.now = 1'796'227'835'000'000;  // 2026-12-02 16:10:35 UTC
