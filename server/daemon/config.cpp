@@ -1,143 +1,21 @@
 #include "daemon/config.hpp"
 
-#include <arpa/inet.h>
-#include <net/if.h>
 #include <toml++/toml.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <cctype>
-#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <set>
 #include <sstream>
 
+#include "daemon/config_table_reader.hpp"
+
 namespace mocap::daemon {
 namespace {
-
-// Thrown only inside this file and caught by parse_config: carries the key path and
-// line of the offending value, so the user sees exactly where to look.
-struct ConfigError {
-    std::string key;
-    std::size_t line;
-    std::string message;
-};
-
-std::size_t line_of(const toml::node& n) {
-    return n.source().begin.line;
-}
-
-// A TOML number (integer or float) as a double. toml++'s value<double>() refuses an
-// integer that a double cannot hold exactly (above 2^53), so convert by hand: the range
-// checks that follow reject such values with a proper message.
-double number_of(const toml::node& n) {
-    if (const auto* i = n.as_integer()) return static_cast<double>(i->get());
-    return n.as_floating_point()->get();
-}
-
-// Reads one table: every key taken is remembered, and finish() rejects the rest.
-class TableReader {
-public:
-    TableReader(const toml::table& t, std::string path) : table_(t), path_(std::move(path)) {}
-
-    const toml::node* take(std::string_view key) {
-        taken_.insert(std::string(key));
-        return table_.get(key);
-    }
-
-    std::string key_path(std::string_view key) const {
-        return path_.empty() ? std::string(key) : path_ + "." + std::string(key);
-    }
-
-    [[noreturn]] void fail(std::string_view key, const toml::node* n, std::string msg) const {
-        throw ConfigError{key_path(key), n ? line_of(*n) : line_of(table_), std::move(msg)};
-    }
-
-    void read(std::string_view key, std::string& out) {
-        if (const auto* n = take(key)) {
-            if (!n->is_string()) fail(key, n, "expected a string");
-            out = n->value<std::string>().value();
-        }
-    }
-
-    void read(std::string_view key, double& out, double lo, double hi) {
-        if (const auto* n = take(key)) {
-            if (!n->is_number()) fail(key, n, "expected a number");
-            const double v = number_of(*n);
-            if (!std::isfinite(v) || v < lo || v > hi) {
-                std::ostringstream s;
-                s << "must be between " << lo << " and " << hi;
-                fail(key, n, s.str());
-            }
-            out = v;
-        }
-    }
-
-    // 0 switches the feature off; any other value must lie in lo..hi (a tiny period or size
-    // is never what an operator means: raw_rotate_s = 0.001 made hundreds of files a second).
-    void read_zero_or(std::string_view key, double& out, double lo, double hi) {
-        if (const auto* n = take(key)) {
-            if (!n->is_number()) fail(key, n, "expected a number");
-            const double v = number_of(*n);
-            if (!std::isfinite(v) || (v != 0.0 && (v < lo || v > hi))) {
-                std::ostringstream s;
-                s << "must be 0 (off) or between " << lo << " and " << hi;
-                fail(key, n, s.str());
-            }
-            out = v;
-        }
-    }
-
-    template <typename U>
-    void read(std::string_view key, U& out, std::int64_t lo, std::int64_t hi) {
-        if (const auto* n = take(key)) {
-            if (!n->is_integer()) fail(key, n, "expected an integer");
-            const std::int64_t v = n->value<std::int64_t>().value();
-            if (v < lo || v > hi) {
-                fail(key, n, "must be between " + std::to_string(lo) + " and " + std::to_string(hi));
-            }
-            out = static_cast<U>(v);
-        }
-    }
-
-    void read(std::string_view key, Endpoint& out) {
-        if (const auto* n = take(key)) {
-            if (!n->is_string()) fail(key, n, "expected a string \"host:port\"");
-            std::string err;
-            auto ep = parse_endpoint(n->value<std::string>().value(), &err);
-            if (!ep) fail(key, n, err);
-            out = *ep;
-        }
-    }
-
-    const toml::table* sub_table(std::string_view key) {
-        const auto* n = take(key);
-        if (!n) return nullptr;
-        if (!n->is_table()) fail(key, n, "expected a table");
-        return n->as_table();
-    }
-
-    const toml::array* array(std::string_view key) {
-        const auto* n = take(key);
-        if (!n) return nullptr;
-        if (!n->is_array()) fail(key, n, "expected an array");
-        return n->as_array();
-    }
-
-    void finish() const {
-        for (const auto& [k, v] : table_) {
-            if (!taken_.count(std::string(k.str()))) fail(k.str(), &v, "unknown key");
-        }
-    }
-
-private:
-    const toml::table& table_;
-    std::string path_;
-    std::set<std::string> taken_;
-};
 
 void read_log(TableReader& r, DaemonConfig& c) {
     r.read("level", c.log_level);
@@ -499,17 +377,6 @@ void read_vmc(TableReader& r, DaemonConfig& c) {
     }
 }
 
-// An IPv4 or IPv6 literal, as make_address accepts it (an IPv6 link-local address may carry
-// "%interface", which must name an interface of this host).
-bool is_address_literal(const std::string& host) {
-    std::array<unsigned char, sizeof(in6_addr)> buf{};
-    if (inet_pton(AF_INET, host.c_str(), buf.data()) == 1) return true;
-    const auto percent = host.find('%');
-    const std::string addr = host.substr(0, percent);
-    if (inet_pton(AF_INET6, addr.c_str(), buf.data()) != 1) return false;
-    return percent == std::string::npos || if_nametoindex(host.substr(percent + 1).c_str()) != 0;
-}
-
 // True when the text holds something other than blanks and comment lines: an empty config
 // file is far more likely a truncated or mistyped one than a request for every default
 // (which would bind every interface).
@@ -524,10 +391,6 @@ bool has_settings(std::string_view text) {
 
 }  // namespace
 
-std::string Endpoint::str() const {
-    return (host.find(':') != std::string::npos ? "[" + host + "]" : host) + ":" + std::to_string(port);
-}
-
 std::string cluster_host_id(const DaemonConfig& config) {
     if (!config.cluster_host_id.empty()) return config.cluster_host_id;
     std::array<char, 256> name{};
@@ -538,47 +401,6 @@ std::string cluster_host_id(const DaemonConfig& config) {
         if (!is_subject_token(std::string(1, ch))) ch = '_';
     }
     return id;
-}
-
-std::optional<Endpoint> parse_destination(std::string_view text, std::string* error) {
-    Endpoint ep;
-    std::string_view port_part;
-    if (!text.empty() && text.front() == '[') {
-        const auto close = text.find(']');
-        if (close == std::string_view::npos || close + 1 >= text.size() || text[close + 1] != ':') {
-            *error = "expected \"[v6-address]:port\"";
-            return std::nullopt;
-        }
-        ep.host = std::string(text.substr(1, close - 1));
-        port_part = text.substr(close + 2);
-    } else {
-        const auto colon = text.rfind(':');
-        if (colon == std::string_view::npos || colon == 0) {
-            *error = "expected \"host:port\"";
-            return std::nullopt;
-        }
-        ep.host = std::string(text.substr(0, colon));
-        port_part = text.substr(colon + 1);
-    }
-    unsigned port = 0;
-    const auto [end, ec] = std::from_chars(port_part.data(), port_part.data() + port_part.size(), port);
-    if (ec != std::errc{} || end != port_part.data() + port_part.size() || port == 0 || port > 65535) {
-        *error = "port must be 1..65535";
-        return std::nullopt;
-    }
-    ep.port = static_cast<std::uint16_t>(port);
-    return ep;
-}
-
-std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error) {
-    auto ep = parse_destination(text, error);
-    // The listeners bind with asio::ip::make_address, which takes address literals only: a
-    // host name would pass here and fail at start-up, so it is refused here.
-    if (ep && !is_address_literal(ep->host)) {
-        *error = "host \"" + ep->host + "\" must be an IPv4 or IPv6 address (names are not resolved)";
-        return std::nullopt;
-    }
-    return ep;
 }
 
 std::optional<DaemonConfig> parse_config(std::string_view toml_text, std::string_view source_name, std::string* error) {

@@ -15,16 +15,9 @@
 #include <utility>
 #include <vector>
 
-namespace mocap::daemon {
+#include "daemon/endpoint.hpp"
 
-/// "host:port" split and checked (port 1..65535; host an IPv4/IPv6 literal: the listeners do
-/// not resolve names).
-struct Endpoint {
-    std::string host;
-    std::uint16_t port = 0;
-    [[nodiscard]] std::string str() const;
-    bool operator==(const Endpoint&) const = default;
-};
+namespace mocap::daemon {
 
 struct SocketCanConfig {
     std::string interface;      ///< e.g. "can0", "vcan0"
@@ -179,10 +172,5 @@ std::optional<DaemonConfig> load_config_file(const std::string& path, std::strin
 /// [cluster].host_id, or when empty the host name up to its first '.' with any character a NATS
 /// subject token cannot hold ('*', '>', whitespace) replaced by '_'; "" if there is no host name.
 std::string cluster_host_id(const DaemonConfig& config);
-
-/// Parses "host:port" or "[v6]:port" (host an address literal).
-std::optional<Endpoint> parse_endpoint(std::string_view text, std::string* error);
-/// The same split for a destination whose host may be a name (not resolved here).
-std::optional<Endpoint> parse_destination(std::string_view text, std::string* error);
 
 }  // namespace mocap::daemon

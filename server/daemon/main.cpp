@@ -11,6 +11,7 @@
 #include "daemon/config_check.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/replay.hpp"
+#include "daemon/replay_args.hpp"
 #include "daemon/take_args.hpp"
 
 namespace {

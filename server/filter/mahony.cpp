@@ -1,6 +1,6 @@
 #include "filter/mahony.hpp"
 
-#include "filter/mocap_filter.hpp"
+#include "filter/marg.hpp"
 #include "math/nwu_frame.hpp"
 
 namespace mocap::filter {

@@ -159,23 +159,6 @@
 
 namespace mocap::filter {
 
-/// Closed-form attitude q_enu_sensor from one specific-force reading (a level sensor at
-/// rest reads +9.81 on its up axis) and, if use_mag, one magnetometer reading: gravity fixes
-/// the inclination exactly, the magnetometer's component perpendicular to it fixes the
-/// heading (TRIAD with the accelerometer as primary vector). Without the magnetometer (or
-/// when it is parallel to gravity) the heading is zero. accel must be non-zero.
-math::Quat attitude_from_accel_mag(const math::Vec3& accel_m_s2, const math::Vec3& mag_ut, bool use_mag);
-
-/// One sample's accelerometer and magnetometer with their usability: non-zero and finite,
-/// and for the magnetometer also present (no kImuNoMag flag). Shared by the filters here.
-struct MargReading {
-    math::Vec3 accel_m_s2 = math::Vec3::Zero();
-    math::Vec3 mag_ut = math::Vec3::Zero();
-    bool accel_ok = false;
-    bool mag_ok = false;
-};
-MargReading read_marg(const ImuSample& sample);
-
 struct MocapFilterParams {
     double tau_acc_s = 3.0;   ///< key "tau_acc_s": inclination correction time constant, s
     double tau_mag_s = 12.0;  ///< key "tau_mag_s": heading correction time constant, s

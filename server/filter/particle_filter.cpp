@@ -8,6 +8,7 @@
 
 #include <Eigen/Cholesky>
 
+#include "filter/marg.hpp"
 #include "math/markley_average.hpp"
 
 namespace mocap::filter {

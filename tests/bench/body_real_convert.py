@@ -48,7 +48,7 @@ normalised (they are given to 3 decimals). The file says pose = "n-pose" (the ta
 standing with the arms hanging, where a calibration would have been taken; only the hinge-axis
 refinement of `[fusion] axis = "estimate"` reads it) and heading = "align" with facing_heading_rad
 the pelvis's forward direction in the heading frame its 6-axis filter starts in (the shortest
-rotation from its first 0.5 s of specific force to the vertical, filter/mocap_filter.hpp,
+rotation from its first 0.5 s of specific force to the vertical, filter/marg.hpp,
 attitude_from_accel_mag), so the subject faces +x in the viewer at the start. The mapping of the
 forearms agrees with the data: walking with the palms at the thighs, their arm swing turns the
 forearm sensors about the ISB x axis (anterior only when supinated), and the opening pose reads
@@ -184,7 +184,7 @@ def q_isb_mocapd(segment):
 
 def tilt_to_vertical(up):
     """The shortest rotation taking the unit vector `up` (sensor frame) to earth z: q_earth_sensor
-    with zero heading (filter/mocap_filter.cpp, attitude_from_accel_mag without magnetometer)."""
+    with zero heading (filter/marg.cpp, attitude_from_accel_mag without magnetometer)."""
     x, y, z = up
     # axis up × z = (y, -x, 0), angle acos(z)
     if z < -1 + 1e-12:

@@ -156,16 +156,6 @@ TEST(Config, SegmentErrors) {
     EXPECT_EQ(err, "test.toml:3: skeleton.segment.node: must be between 1 and 63");
 }
 
-TEST(Config, EndpointParsing) {
-    std::string err;
-    auto v6 = parse_endpoint("[::1]:7001", &err);
-    ASSERT_TRUE(v6);
-    EXPECT_EQ(v6->host, "::1");
-    EXPECT_EQ(v6->str(), "[::1]:7001");
-    EXPECT_FALSE(parse_endpoint("1.2.3.4:", &err));
-    EXPECT_FALSE(parse_endpoint(":80", &err));
-}
-
 }  // namespace
 }  // namespace mocap::daemon
 

@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
 
-#include "daemon/replay.hpp"
+#include "daemon/replay_args.hpp"
 
 namespace mocap::daemon {
 namespace {

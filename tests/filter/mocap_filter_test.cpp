@@ -39,21 +39,6 @@ Csmo csmo_at_truth(const sim::Scenario& sc) {
     return Csmo(p);
 }
 
-TEST(MocapFilter, ClosedFormAttitudeFromAccelAndMag) {
-    const math::Quat truth = math::from_euler_zyx({0.3, -0.5, 2.5});
-    const ImuSample s = still(truth, 0.0).front().sample;
-    const math::Quat q = attitude_from_accel_mag(math::to_vec3(s.accel_m_s2), math::to_vec3(s.mag_ut), true);
-    EXPECT_LT(math::angle_rad(q * truth.conjugate()), 1e-9);
-    // Without the magnetometer: same inclination, reached by a rotation about a horizontal
-    // axis (no z component).
-    const math::Quat q6 = attitude_from_accel_mag(math::to_vec3(s.accel_m_s2), math::Vec3::Zero(), false);
-    EXPECT_LT(math::error_inclination_rad(q6 * truth.conjugate()), 1e-9);
-    EXPECT_LT(std::abs(q6.z()), 1e-12);
-    // Upside down.
-    const math::Quat flipped = attitude_from_accel_mag(math::Vec3(0, 0, -9.81), math::Vec3::Zero(), false);
-    EXPECT_LT(std::abs(math::rotate(flipped, math::Vec3(0, 0, -1)).z() - 1.0), 1e-12);
-}
-
 TEST(MocapFilter, FirstSampleGivesTheClosedFormAttitude) {
     const math::Quat truth = math::from_euler_zyx({-0.4, 0.2, -2.2});
     MocapFilter f;

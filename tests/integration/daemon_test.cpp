@@ -55,11 +55,7 @@ protected:
         ASSERT_TRUE(wait_for_port(sink_port_, 10s)) << daemon_->log();
     }
 
-    void TearDown() override {
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        const int rc = daemon_->stop(10s);
-        EXPECT_EQ(rc, 0) << "mocapd must drain and exit 0 on SIGTERM";
-    }
+    void TearDown() override { stop_daemon_at_teardown(daemon_.get()); }
 
     // Small: a client that stops reading drops frames within a fraction of a second.
     int client_queue_frames_ = 16;

@@ -30,12 +30,7 @@ constexpr const char* kToken = "disk-test-token-0123456789";
 
 class Disk : public ::testing::Test {
 protected:
-    void TearDown() override {
-        if (!daemon_) return;
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        const int rc = daemon_->stop(10s);
-        EXPECT_EQ(rc, 0) << "mocapd must drain and exit 0 on SIGTERM";
-    }
+    void TearDown() override { stop_daemon_at_teardown(daemon_.get()); }
 
     void start_daemon(const std::string& outputs_extra = "") {
         sink_port_ = free_port();

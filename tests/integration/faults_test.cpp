@@ -243,12 +243,7 @@ std::uint64_t sim_skipped(const Process& sim) {
 
 class Faults : public ::testing::Test {
 protected:
-    void TearDown() override {
-        if (!daemon_) return;
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        const int rc = daemon_->stop(10s);
-        EXPECT_EQ(rc, 0) << "mocapd must drain and exit 0 on SIGTERM";
-    }
+    void TearDown() override { stop_daemon_at_teardown(daemon_.get()); }
 
     std::string config_text(const std::string& log_level = "info") const {
         std::ostringstream cfg;

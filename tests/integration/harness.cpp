@@ -11,11 +11,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <gtest/gtest.h>
+
 #include <array>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <iostream>
 #include <mutex>
 #include <random>
 #include <set>
@@ -137,6 +140,13 @@ std::uint16_t free_port() {
         if (handed_out.insert(ntohs(a.sin_port)).second) return ntohs(a.sin_port);
     }
     throw std::runtime_error("no free port");
+}
+
+void stop_daemon_at_teardown(Process* daemon, Process* sim) {
+    if (sim != nullptr) sim->stop();
+    if (daemon == nullptr) return;
+    if (::testing::Test::HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon->log();
+    EXPECT_EQ(daemon->stop(std::chrono::seconds(10)), 0) << "mocapd must drain and exit 0 on SIGTERM";
 }
 
 bool wait_for_port(std::uint16_t port, std::chrono::milliseconds limit) {

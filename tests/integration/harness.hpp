@@ -5,6 +5,7 @@
 // released), so parallel test runs do not collide, and never one it already returned in this
 // process (the kernel may hand the same free port out twice in a row, and a daemon given one
 // port for two listeners refuses its config). TempDir: removed on destruction.
+// stop_daemon_at_teardown(): the TearDown of every fixture that runs mocapd.
 #pragma once
 
 #include <sys/types.h>
@@ -55,6 +56,11 @@ private:
 };
 
 std::uint16_t free_port();
+
+/// The TearDown of a fixture that ran mocapd: stops `sim` if there is one; then, if mocapd was
+/// started, prints its log when the test failed and requires (a test failure otherwise) that
+/// it drain and exit 0 on SIGTERM within 10 s.
+void stop_daemon_at_teardown(Process* daemon, Process* sim = nullptr);
 
 /// A mocapd on loopback with sinks, the pose service and the web endpoint (live BVH off),
 /// control by `token`, calibrations and recordings in `dir`; the ports are free_port()s.

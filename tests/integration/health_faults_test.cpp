@@ -104,12 +104,7 @@ private:
 
 class HealthFaults : public ::testing::Test {
 protected:
-    void TearDown() override {
-        if (sim_) sim_->stop();
-        if (!daemon_) return;
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        EXPECT_EQ(daemon_->stop(10s), 0) << "mocapd must drain and exit 0 on SIGTERM";
-    }
+    void TearDown() override { stop_daemon_at_teardown(daemon_.get(), sim_.get()); }
 
     TempDir dir_;
     WebDaemon ports_;

@@ -67,10 +67,7 @@ protected:
     void TearDown() override {
         for (int fd : held_)
             ::close(fd);
-        if (sim_) sim_->stop();
-        if (!daemon_) return;
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        EXPECT_EQ(daemon_->stop(10s), 0) << "mocapd must drain and exit 0 on SIGTERM";
+        stop_daemon_at_teardown(daemon_.get(), sim_.get());
     }
 
     /// Starts mocapd; `extra` adds lines to a section of the generated config ("ingest",

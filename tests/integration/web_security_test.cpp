@@ -48,12 +48,7 @@ std::string ws_upgrade(const std::string& host) {
 
 class WebSecurity : public ::testing::Test {
 protected:
-    void TearDown() override {
-        if (sim_) sim_->stop();
-        if (!daemon_) return;
-        if (HasFailure()) std::cerr << "--- mocapd log ---\n" << daemon_->log();
-        EXPECT_EQ(daemon_->stop(10s), 0) << "mocapd must drain and exit 0 on SIGTERM";
-    }
+    void TearDown() override { stop_daemon_at_teardown(daemon_.get(), sim_.get()); }
     /// mocapd with the web endpoint; `http` and `serve` add lines to those sections.
     void start_daemon(const std::string& http = "", const std::string& serve = "") {
         std::string cfg = ports_.config(dir_.path().string(), kToken) + http;
