@@ -39,6 +39,7 @@ from virtual_clock import Clock, ticks_per
 EXCP_EXCEPTION_EXIT = 8  # QEMU's internal exception number for a PC of 0xFFFFFFFx
 FRAME_REGS = (UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3, UC_ARM_REG_R12, UC_ARM_REG_LR)
 SLICE = 500  # instructions between looks at the exception state (7 us at 72 MHz)
+WAIT_SLICE = 16  # while an exception waits to be taken
 
 
 class CortexM:
@@ -124,7 +125,10 @@ class CortexM:
                 if upcoming is not None and upcoming > self.clock.ticks:
                     until = min(until, upcoming)
             n = -(-(until - self.clock.ticks) // self.ticks_per_cycle)
-            n = max(1, min(self.slice, n))
+            # A pending exception held back (an active handler of higher priority, PRIMASK, an
+            # IT block) is taken within WAIT_SLICE instructions of becoming possible, as the
+            # core takes it (tail-chaining) instead of at the end of a full slice.
+            n = max(1, min(WAIT_SLICE if self.scs.waiting() else self.slice, n))
             try:
                 uc.emu_start(pc | 1, 0xFFFFFFFF, count=n)
             except UcError as e:

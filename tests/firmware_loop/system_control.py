@@ -107,6 +107,10 @@ class SystemControl(Peripheral):
         best = min(candidates, key=lambda e: (self.exc_priority(e), e))
         return best if self.exc_priority(best) < self.execution_priority(primask) else None
 
+    def waiting(self):
+        """An enabled exception is pending but may not preempt yet (priority, PRIMASK)."""
+        return any(e < IRQ_BASE or (e - IRQ_BASE) in self.enabled for e in self.pending)
+
     def set_irq_pending(self, irq, level):
         if level:
             self.pending.add(IRQ_BASE + irq)
