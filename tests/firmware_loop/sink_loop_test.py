@@ -70,7 +70,8 @@ def net(tmp_path_factory):
     finally:
         rc = daemon.stop()
         print(f"\nvirtual {rig.clock.ticks / TICK_HZ:.2f} s; sink {rig.sink.cpu.clock.cycles} cycles; "
-              f"ESP8266: {rig.sink.esp.connects} connections, {rig.sink.esp.sent_bytes} bytes sent")
+              f"ESP8266: {rig.sink.esp.connects} connections, {rig.sink.esp.sent_bytes} bytes sent; commands "
+              f"{[(round(t / TICK_HZ, 3), line) for t, line in rig.sink.esp.log if not line.startswith('AT+CIPSEND')]}")
         assert rc in (0, None), "mocapd must drain and exit 0 on SIGTERM:\n" + daemon.log()
 
 
