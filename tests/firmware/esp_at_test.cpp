@@ -302,6 +302,29 @@ TEST_F(EspAtTest, SilentModuleTimesOut) {
     EXPECT_EQ(at->counters.timeouts, 1u);
 }
 
+// Found by the sink image in the emulator (tests/firmware_loop, docs/firmware.md defect 4):
+// a module that restarted by itself was dialled at the old rate forever.
+TEST_F(EspAtTest, ModuleThatRestartedByItselfIsResetAfterItFallsSilent) {
+    esp_at_connect(at.get(), 0);
+    ASSERT_EQ(settle(), SINK_UPLINK_UP);
+    // Brown-out or watchdog: back at 115200 baud, echo on, no connection; its "ready" is lost
+    // to framing errors at the sink's 921600.
+    modem.modem_baud = 115200;
+    modem.echo = true;
+    modem.connected = false;
+    modem.say("\r\nready\r\n");
+    const std::vector<uint8_t> packet(40, 0x11);
+    ASSERT_EQ(esp_at_write(at.get(), packet.data(), packet.size()), 0);
+    EXPECT_EQ(settle(1100), SINK_UPLINK_DOWN) << "no SEND OK: the command times out";
+    for (int attempt = 0; attempt < 3 && esp_at_state(at.get()) != SINK_UPLINK_UP; ++attempt) {
+        esp_at_connect(at.get(), 0);
+        settle(11000);
+    }
+    EXPECT_EQ(esp_at_state(at.get()), SINK_UPLINK_UP);
+    EXPECT_EQ(modem.port_baud, 921600u);
+    EXPECT_EQ(at->counters.resets, 3u) << "power-on, the reset lost at 921600, the one at 115200";
+}
+
 TEST_F(EspAtTest, SinkCoreStreamsDecodablePacketsOverTheModem) {
     struct bus {
         fake_modem* modem;

@@ -58,13 +58,21 @@ class SensorBusRig:
             self.host.send(tick, SYNC_ID, struct.pack("<I", n))
             self.syncs.append((tick, n))
             n += 1
+        return self.advance(end)
+
+    def cpus(self):
+        return [board.cpu for board in self.boards]
+
+    def advance(self, end, until=None):
+        """Steps every CPU and the bus to tick `end` (or until `until()` holds, checked per step)."""
         step = ticks_from_us(self.STEP_US)
-        while self.clock.ticks < end and self.fault() is None:
+        cpus = self.cpus()
+        while self.clock.ticks < end and self.fault() is None and not (until and until()):
             target = min(end, self.clock.ticks + step)
             if self.bus.next_event is not None and self.clock.ticks < self.bus.next_event < target:
                 target = self.bus.next_event  # a frame ends there: its receivers get it on time
-            for board in self.boards:
-                board.cpu.run_until(target)
+            for cpu in cpus:
+                cpu.run_until(target)
             self.clock.ticks = target
             self.bus.update()
         return self

@@ -17,7 +17,9 @@ IRQ_BASE = 16
 PRIO_MASK = 0xF0  # __NVIC_PRIO_BITS = 4
 
 CPUID_CORTEX_M3_R1P1 = 0x411FC231  # PM0056 §4.4.1: the STM32F10x core
+CPUID_CORTEX_M4_R0P1 = 0x410FC241  # PM0214 §4.3.1: the STM32F4 core
 CCR_RESET = 0x00000200  # STKALIGN
+FPCCR_RESET = 0xC0000000  # ASPEN, LSPEN (PM0214 §4.6.2)
 
 
 class SystemControl(Peripheral):
@@ -25,8 +27,9 @@ class SystemControl(Peripheral):
     base = 0xE000E000
     size = 0x1000
 
-    def __init__(self, clock, irq_count):
+    def __init__(self, clock, irq_count, cpuid=CPUID_CORTEX_M3_R1P1, fpu=False):
         self.clock = clock
+        self.cpuid, self.fpu = cpuid, fpu
         self.irq_count = irq_count
         self.hclk_hz = 8_000_000  # the core clock; the RCC model reports changes (set_hclk)
         self.reset()
@@ -46,6 +49,8 @@ class SystemControl(Peripheral):
         self.priority = {}  # exception number -> priority byte
         self.vtor = 0
         self.ccr = CCR_RESET
+        self.cpacr = 0
+        self.fpccr = FPCCR_RESET if self.fpu else 0
         self.reset_requested = False
 
     # --- SysTick (ARMv7-M B3.3): counts down from LOAD, wraps to LOAD, pends on 1 -> 0 ---
@@ -102,6 +107,10 @@ class SystemControl(Peripheral):
         best = min(candidates, key=lambda e: (self.exc_priority(e), e))
         return best if self.exc_priority(best) < self.execution_priority(primask) else None
 
+    def waiting(self):
+        """An enabled exception is pending but may not preempt yet (priority, PRIMASK)."""
+        return any(e < IRQ_BASE or (e - IRQ_BASE) in self.enabled for e in self.pending)
+
     def set_irq_pending(self, irq, level):
         if level:
             self.pending.add(IRQ_BASE + irq)
@@ -137,7 +146,11 @@ class SystemControl(Peripheral):
         if 0x400 <= offset < 0x400 + self.irq_count:
             return self._prio_word(IRQ_BASE + offset - 0x400)
         if offset == 0xD00:
-            return CPUID_CORTEX_M3_R1P1
+            return self.cpuid
+        if offset == 0xD88:
+            return self.cpacr
+        if offset == 0xF34 and self.fpu:
+            return self.fpccr
         if offset == 0xD04:
             value = self.active[-1] if self.active else 0
             if SYSTICK_EXC in self.pending:
@@ -151,7 +164,7 @@ class SystemControl(Peripheral):
             return self.ccr
         if offset in (0xD18, 0xD1C, 0xD20):
             return self._prio_word(4 + (offset - 0xD18))
-        if offset in (0xD10, 0xD24, 0xD28, 0xD2C, 0xD88):
+        if offset in (0xD10, 0xD24, 0xD28, 0xD2C):
             return 0
         raise RuntimeError(f"SCS read of unmodelled offset 0x{offset:03X}")
 
@@ -207,7 +220,12 @@ class SystemControl(Peripheral):
                 self.reset_requested = True
         elif offset == 0xD14:
             self.ccr = value & 0x31A
-        elif offset in (0xD10, 0xD24, 0xD88):
-            pass  # SCR, SHCSR, CPACR (no FPU on the M3: writes ignored)
+        elif offset == 0xD88:
+            # CPACR: CP10/CP11 exist only with an FPU (the M3 ignores the write, reads 0).
+            self.cpacr = value & 0x00F00000 if self.fpu else 0
+        elif offset == 0xF34 and self.fpu:
+            self.fpccr = value & 0xC0000000
+        elif offset in (0xD10, 0xD24):
+            pass  # SCR, SHCSR
         else:
             raise RuntimeError(f"SCS write of unmodelled offset 0x{offset:03X}")

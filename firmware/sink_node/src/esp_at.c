@@ -366,6 +366,10 @@ static void pump(esp_at* at) {
     pump_out(at);
     if (at->step != STEP_IDLE && now_us(at) > at->deadline_us) {
         ++at->counters.timeouts;
+        /* A module that stops answering has hung or restarted by itself (brown-out, its
+         * watchdog): then it is at 115200 baud with no Wi-Fi and hears nothing at our rate.
+         * Only the reset script brings either back, so the next connect runs it. */
+        at->wifi_ready = 0;
         fail(at);
     }
 }
