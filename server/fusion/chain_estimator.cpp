@@ -140,6 +140,10 @@ ChainEstimator::ChainEstimator(std::size_t segment_count, std::span<const JointD
 
 void ChainEstimator::forget_delta(Joint& j) {
     j.filter.reset();
+    forget_tracking(j);
+}
+
+void ChainEstimator::forget_tracking(Joint& j) {
     j.search = TrigQuad{};
     j.last_joint_us = j.last_mag_us = j.refused_since_us = j.still_since_us = -1;
     j.past = {};
@@ -156,9 +160,7 @@ void ChainEstimator::restart_delta(Joint& j, const SegmentInput& p, const Segmen
     // the filters keep across their restart: it stays.
     const auto pi = static_cast<std::size_t>(j.def.parent), ci = static_cast<std::size_t>(j.def.child);
     const Quat m = p.q6 * last_out_[pi].conjugate() * last_out_[ci] * c.q6.conjugate();
-    const HeadingFilter kept = j.filter;
-    forget_delta(j);
-    j.filter = kept;
+    forget_tracking(j);
     j.filter.restart(math::wrap_pi(2.0 * std::atan2(m.z(), m.w())), params_.restart_sigma_deg * kDeg);
 }
 
@@ -293,7 +295,7 @@ bool ChainEstimator::constrain(Joint& j, std::int64_t t_us, double dt_s, const S
             taken = true;
             return;
         }
-        const double ratio = learn_noise(j, stream, m.residual_rad, m.var_rad2, dt_s);
+        const double ratio = learn_noise(j, stream, m.residual_rad, m.var_rad2);
         if (f.update(f.delta_rad() + m.residual_rad, m.var_rad2 * ratio * scale, params_.gate_sigma)) {
             j.refused_since_us = -1;
             taken = true;
@@ -420,7 +422,7 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
     // independent difference per mag_correlation_s.
     const double scale = dt_s > 0.0 ? std::max(1.0, params_.mag_correlation_s / dt_s) : 1.0;
     const double sm = params_.sigma_mag_deg * kDeg;
-    const double ratio = learn_noise(j, kMag, math::wrap_pi(z - f.delta_rad()), sm * sm, dt_s);
+    const double ratio = learn_noise(j, kMag, math::wrap_pi(z - f.delta_rad()), sm * sm);
     if (f.update(z, sm * sm * ratio * scale, params_.gate_sigma)) {
         j.last_mag_us = t_us;
         ++j.stats.mag_updates;
@@ -430,19 +432,21 @@ void ChainEstimator::update_joint(Joint& j, std::int64_t t_us, double dt_s, cons
 }
 
 // What a stream's errors really are: its innovations against the estimate, relative to the
-// variance its model gives, averaged over noise_tau_s of sample time. A joint that is only
-// nearly a hinge (an axis that wanders), a field that varies from place to place, an axis
-// slightly off: each shows as a larger ratio, and that stream then counts for less against
-// the others of the same joint; a stream better than its model (an exact hinge, a clean
-// field) counts for more. Bounded to [min_noise_ratio, 100]: a stream that agrees with the
-// estimate because it made it never becomes infinitely sure.
-double ChainEstimator::learn_noise(Joint& j, Stream stream, double innovation_rad, double model_var,
-                                   double dt_s) const {
+// variance the filter expects of them (the stream's model variance plus δ's own), averaged
+// over noise_tau_s of sample time. A joint that is only nearly a hinge (an axis that wanders),
+// a field that varies from place to place, an axis slightly off: each shows as a larger ratio,
+// and that stream then counts for less against the others of the same joint; a stream better
+// than its model (an exact hinge, a clean field) counts for more. Bounded to
+// [min_noise_ratio, 100]: a stream that agrees with the estimate because it made it never
+// becomes infinitely sure. δ's own variance belongs in the denominator: while δ is uncertain
+// (at the start, frames drifting apart faster than the rate has been learned) large
+// innovations are δ's error, not the stream's, and counting them as the stream's would weigh
+// the stream down just when δ needs it (docs/fusion.md, "Learning each stream's noise").
+double ChainEstimator::learn_noise(Joint& j, Stream stream, double innovation_rad, double model_var) const {
     double& r = j.noise_ratio[stream];
-    const double x = std::min(innovation_rad * innovation_rad / model_var, 100.0);
-    (void)dt_s;
-    const double k = step_.noise_gain;
-    r += k * (x - r);
+    const double p = j.filter.sigma_rad() * j.filter.sigma_rad();
+    const double x = std::min(innovation_rad * innovation_rad / (model_var + p), 100.0);
+    r += step_.noise_gain * (x - r);
     return std::max(params_.min_noise_ratio, r);
 }
 

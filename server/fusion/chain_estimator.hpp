@@ -236,6 +236,9 @@ private:
     };
     /// Forgets δ and what was measured of it in the segments' old 6D frames.
     static void forget_delta(Joint& j);
+    /// What forget_delta clears but the heading filter: the search, the streams' recency, the
+    /// previous steps.
+    static void forget_tracking(Joint& j);
     /// One of the joint's segments has a new 6D frame: δ again from the relative orientation
     /// the joint had at the last step (a joint turns little about the vertical in a short gap).
     void restart_delta(Joint& j, const SegmentInput& p, const SegmentInput& c);
@@ -248,7 +251,7 @@ private:
     /// The joint centre's specific force of the previous step as a vector pair; false when
     /// the centre is unknown or the step had no neighbours.
     bool centre_pair(Joint& j, std::int64_t t_us, const SegmentInput& p, const SegmentInput& c, Vec3& a, Vec3& b);
-    double learn_noise(Joint& j, Stream stream, double innovation_rad, double model_var, double dt_s) const;
+    double learn_noise(Joint& j, Stream stream, double innovation_rad, double model_var) const;
     [[nodiscard]] bool fields_agree(const SegmentInput& p, const SegmentInput& c) const;
     [[nodiscard]] HeadingSource source_of(const Joint& j, std::int64_t t_us) const;
 
