@@ -218,7 +218,15 @@ void ChainEstimator::learn_axes(Joint& j, std::int64_t t_us, const SegmentInput&
     solved_this_step_ = solved_this_step_ || solved;
     if (!solved || !j.axis->ready()) return;
     const Vec3& ap = j.axis->axis_parent();
-    const Vec3& ac = j.axis->axis_child();
+    Vec3 ac = j.axis->axis_child();
+    // Early in the motion the estimator's own sign rule can pick the wrong sign (a simulated
+    // knee's first axes, 1 s into a walk after a 2 s T-pose: δ 188° off, the knee 50° off in
+    // flexion for 2 s); a δ the fields or the old axes know well decides it.
+    if (j.filter.initialised() && j.filter.sigma_rad() < params_.axis_sign_sigma_deg * kDeg &&
+        pair_contradicts(math::rotate(p.q6, ap), math::rotate(c.q6, ac), j.filter.delta_rad(),
+                         params_.min_axis_horizontal)) {
+        ac = -ac;
+    }
     // A change below ~1° is the estimate's own noise: keep the axes (and δ) as they are.
     constexpr double kSame = 0.9998;
     if (j.def.axes_known && ap.dot(j.def.axis_parent) > kSame && ac.dot(j.def.axis_child) > kSame) return;

@@ -115,6 +115,8 @@ struct ChainParams {
                                              ///< a gap): δ starts where the joint's last relative orientation
                                              ///< puts it, with this uncertainty, °
     HingeAxisParams axis{};                  ///< axes learned from the motion
+    double axis_sign_sigma_deg = 10.0;       ///< a δ known this well decides a learned hinge axis's sign
+                                             ///< where the motion has not yet (pair_contradicts), °
     JointPositionParams centre{};            ///< joint centres learned from the motion
     double sigma_acc_m_s2 = 0.3;             ///< error of the joint centre's specific force, m/s² ...
     double sigma_acc_rel = 0.05;             ///< ... plus this fraction of its horizontal size

@@ -101,6 +101,11 @@ HeadingMeasurement pair_measurement(const Vec3& a, const Vec3& b, double delta_r
     return m;
 }
 
+bool pair_contradicts(const Vec3& a, const Vec3& b, double delta_rad, double min_horizontal) {
+    const HeadingMeasurement m = pair_measurement(a, b, delta_rad, 1.0, min_horizontal);
+    return m.ok && std::abs(m.residual_rad) > 0.5 * std::numbers::pi;
+}
+
 HeadingMeasurement scalar_measurement(const TrigLinear& g, double delta_rad, double sigma_g, double min_slope) {
     HeadingMeasurement m;
     const double d = g.slope(delta_rad);

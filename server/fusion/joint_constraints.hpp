@@ -78,6 +78,12 @@ Vec3 rotate_z(double delta_rad, const Vec3& v);
 HeadingMeasurement pair_measurement(const Vec3& a, const Vec3& b, double delta_rad, double sigma,
                                     double min_horizontal);
 
+/// A hinge's axes learned from the motion carry a sign the motion may not yet show
+/// (hinge_axis_estimator.hpp): with the child's axis flipped the axis pair says δ + 180°. A δ
+/// already known can tell: true when a (the parent's axis in P) and b (the child's in C) put δ
+/// more than a right angle from delta_rad, both horizontal parts at least min_horizontal long.
+bool pair_contradicts(const Vec3& a, const Vec3& b, double delta_rad, double min_horizontal);
+
 /// Scalar constraint g(δ) = 0 with noise sigma_g (in g's units), linearised at delta_rad.
 /// min_slope: the smallest |g'| that counts (below it the sample is not informative).
 HeadingMeasurement scalar_measurement(const TrigLinear& g, double delta_rad, double sigma_g, double min_slope);
