@@ -24,14 +24,15 @@
 namespace mocap::fusion {
 
 struct HeadingFilterParams {
-    double sigma_delta_deg_sqrt_s = 0.1;    ///< random walk of δ, °/√s (sets how fast δ follows the constraints)
-    double sigma_rate_deg_s_sqrt_s = 0.05;  ///< random walk of the drift rate, (°/s)/√s
-    double rate_sigma_init_deg_s = 2.0;     ///< initial (and largest) drift-rate uncertainty, °/s: after a
-                                            ///< short still period two filters' unlearned vertical gyro
-                                            ///< biases differ by up to ~3.5 °/s (a simulated body after a
-                                            ///< 2 s T-pose: 2.6 °/s pelvis–thigh, 3.5 °/s shank–foot)
-    double rate_max_deg_s = 4.0;            ///< the drift rate is clipped to ± this, °/s
-    double sigma_max_deg = 60.0;            ///< δ's uncertainty never grows beyond this, °
+    double sigma_delta_deg_sqrt_s = 0.1;   ///< random walk of δ, °/√s (sets how fast δ follows the constraints)
+    double sigma_rate_deg_s_sqrt_s = 0.2;  ///< random walk of the drift rate, (°/s)/√s: the filters' biases,
+                                           ///< and so the rate, move by ~1.5 °/s in the first minute of a walk
+    double rate_sigma_init_deg_s = 2.0;    ///< initial (and largest) drift-rate uncertainty, °/s: after a
+                                           ///< short still period two filters' unlearned vertical gyro
+                                           ///< biases differ by up to ~3.5 °/s (a simulated body after a
+                                           ///< 2 s T-pose: 2.6 °/s pelvis–thigh, 3.5 °/s shank–foot)
+    double rate_max_deg_s = 4.0;           ///< the drift rate is clipped to ± this, °/s
+    double sigma_max_deg = 60.0;           ///< δ's uncertainty never grows beyond this, °
 };
 
 class HeadingFilter {
