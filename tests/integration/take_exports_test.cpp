@@ -195,7 +195,9 @@ TEST_F(TakeExports, ATakeLargerThanTheExportBudgetIsServedWhenItsExportFits) {
     auto args = ports_.walk_sim(MOCAP_SIM_BIN, 300);
     args[std::find(args.begin(), args.end(), "--subjects") - args.begin() + 1] = "2";
     sim_ = std::make_unique<Process>(args, dir_.file("sim2.log"));
-    record("big", 3'200'000);
+    // Measured: BVH 0.153x the raw file, CSV 0.188x. At 3.8 MB the BVH and a 256 KiB chunk
+    // fit in 1 MiB with 19 % to spare, the BVH and the CSV together exceed it by 23 %.
+    record("big", 3'800'000);
     ASSERT_EQ(stop_take().value("ok", false), true);
     const std::uint64_t raw = listed("big").value("raw_bytes", std::uint64_t{0});
     constexpr std::uint64_t kBudget = std::uint64_t{1} << 20;
