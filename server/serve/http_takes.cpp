@@ -5,9 +5,9 @@
 // no request reaches outside the store's root. Reading needs no token (the pose stream
 // needs none either); every change goes through the control rules. A raw download opens
 // the file on the serve thread (one open(), refused unless a regular file) and streams it;
-// BVH and CSV are charged to the export budget as they grow (take_export_budget.hpp), wait for the export
-// queue, and the session reads no further request meanwhile but watches for its peer to
-// leave, which cancels the export.
+// BVH and CSV are charged to the export budget as they grow (take_export_budget.hpp), wait
+// for the export queue, and the session reads no further request meanwhile but watches for
+// its peer to leave, which cancels the export.
 #include <fcntl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
