@@ -78,7 +78,13 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
     std::int64_t first_received_us = 0;
     std::int64_t now_us = 0;
     const auto wall_start = std::chrono::steady_clock::now();
+    std::string stopped;  // progress() said stop: why
     const auto play = [&](const SegmentSample& s) {
+        if (!stopped.empty()) return;
+        if (options.progress && result->samples % kReplayProgressSamples == 0 && !options.progress(&stopped)) {
+            if (stopped.empty()) stopped = "stopped";
+            return;
+        }
         ++result->samples;
         if (first_t_us == std::numeric_limits<std::int64_t>::min()) {
             first_t_us = s.imu.t_us;
@@ -130,6 +136,10 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
                 *error = "cancelled";
                 return false;
             }
+            if (!stopped.empty()) {
+                *error = stopped;
+                return false;
+            }
             const int r = reader.next(s, error);
             if (r < 0) {
                 *error = path + ": " + *error;
@@ -151,6 +161,10 @@ bool run_replay(const DaemonConfig& config, const ReplayOptions& options, Replay
         spdlog::info("replay: offline re-solve of {} of {} samples", result->samples_smoothed, held.size());
         for (const SegmentSample& h : held)
             play(h);
+    }
+    if (!stopped.empty()) {
+        *error = stopped;
+        return false;
     }
     result->samples_reordered = order.reordered();
     result->samples_too_late = order.too_late();

@@ -46,6 +46,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <string_view>
@@ -80,7 +81,13 @@ struct ReplayOptions {
     /// Non-null: checked per sample; once true the replay stops and returns false (a take
     /// export the daemon abandons, daemon/take_export.hpp).
     const std::atomic<bool>* cancel = nullptr;
+    /// Non-empty: called every kReplayProgressSamples samples played; false (with *error)
+    /// stops the replay, which returns false with that error (a take export whose output
+    /// outgrew its memory budget, daemon/take_export.hpp).
+    std::function<bool(std::string* error)> progress;
 };
+
+inline constexpr std::uint64_t kReplayProgressSamples = 256;
 
 struct ReplayResult {
     std::uint64_t samples = 0;               ///< selected and replayed

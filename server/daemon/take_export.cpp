@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <malloc.h>
 #include <sys/mman.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -107,6 +108,20 @@ serve::TakeExportResult export_take(const DaemonConfig& config, const serve::Tak
     const int out = ::memfd_create(bvh ? "mocap-export.bvh" : "mocap-export.csv", MFD_CLOEXEC);
     if (out < 0) return fail(R::kFailed, "export of '" + request.name + "': memfd_create: " + errno_text(errno));
     ReplayOptions options;
+    // The output's growth is charged as it is written (request.reserve: the web endpoint's
+    // export budget), so an export is refused for what it really holds, not for its take's
+    // size. The BVH writer flushes every record_flush_interval_s: a tenth of a second at most
+    // here, so that what the budget sees lags what the export holds by little.
+    std::string over;  // reserve() refused: why
+    if (request.reserve) {
+        c.record_flush_interval_s = std::min(c.record_flush_interval_s, 0.1);
+        options.progress = [&](std::string* why) {
+            struct stat st {};
+            if (::fstat(out, &st) != 0 || request.reserve(static_cast<std::uint64_t>(st.st_size), &over)) return true;
+            *why = over;
+            return false;
+        };
+    }
     options.files = entry->raw_files;
     options.calibration_dir = work;
     options.bvh_subject = request.subject;
@@ -118,6 +133,7 @@ serve::TakeExportResult export_take(const DaemonConfig& config, const serve::Tak
     std::string error;
     if (!run_replay(c, options, &result, &error)) {
         ::close(out);
+        if (!over.empty()) return fail(R::kTooLarge, over);
         if (cancel.load()) return fail(R::kCancelled, "export cancelled");
         // A file the replay cannot open was deleted since find().
         if (!fs::exists(entry->raw_files.front())) return fail(R::kNotFound, "take '" + request.name + "' is gone");

@@ -4,9 +4,11 @@
 //
 // The export is written into a memfd (memfd_create: memory, never record_dir's disk, which a
 // running take needs), returned open and positioned at its start; it is freed when the
-// download closes it. The take's calibration files are copied into a hidden directory of
-// the take store (<root>/.export-<n>, removed when the export ends, or at the next export
-// after a crash), so a re-solve never writes into the take.
+// download closes it. While it is written, a request with `reserve` is told the memfd's size
+// every kReplayProgressSamples samples, and an export it refuses stops there with kTooLarge
+// and its reason (the web endpoint's export budget). The take's calibration files are copied
+// into a hidden directory of the take store (<root>/.export-<n>, removed when the export
+// ends, or at the next export after a crash), so a re-solve never writes into the take.
 // Refused before anything runs: a BVH of a subject the take does not hold (kNotFound, as is
 // a BVH that ends up without a frame of the requested subject), and an offline re-solve whose
 // memory estimate (offline_export_estimate_bytes) exceeds [outputs] offline_export_max_mb

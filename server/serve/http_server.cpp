@@ -119,6 +119,8 @@ void HttpServer::register_metrics(MetricsRegistry& registry) const {
                        [this] { return static_cast<double>(client_count()); });
     registry.add_gauge("http_ws_clients", "Viewer WebSocket connections open now",
                        [this] { return static_cast<double>(ws_clients_.load()); });
+    registry.add_gauge("http_take_export_bytes", "Bytes take exports hold in memory now (the export budget)",
+                       [this] { return static_cast<double>(export_budget_.held()); });
     registry.add_gauge("subjects_active", "Subjects that delivered a frame in the last 2 s",
                        [this] { return static_cast<double>(active_subjects(2'000'000)); });
 }

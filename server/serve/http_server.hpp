@@ -192,8 +192,9 @@ public:
     [[nodiscard]] std::size_t lane_client_count(std::size_t lane) const { return sessions_.at(lane)->open(); }
     [[nodiscard]] std::size_t ws_client_count() const { return ws_clients_.load(); }
     [[nodiscard]] const HttpServerCounters& counters() const { return counters_; }
-    /// Set-up: counter group "http" and gauges "http_clients", "http_ws_clients" and
-    /// "subjects_active" (frames in the last 2 s).
+    /// Set-up: counter group "http" and gauges "http_clients", "http_ws_clients",
+    /// "http_take_export_bytes" (what the export budget holds) and "subjects_active" (frames
+    /// in the last 2 s).
     void register_metrics(MetricsRegistry& registry) const;
     /// Subjects whose last frame is at most `window_us` old (wall clock); any thread.
     [[nodiscard]] std::size_t active_subjects(std::int64_t window_us) const;

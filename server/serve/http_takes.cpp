@@ -5,9 +5,9 @@
 // no request reaches outside the store's root. Reading needs no token (the pose stream
 // needs none either); every change goes through the control rules. A raw download opens
 // the file on the serve thread (one open(), refused unless a regular file) and streams it;
-// BVH and CSV are charged to the export budget (take_export_budget.hpp), wait for the export
-// queue, and the session reads no further request meanwhile but watches for its peer to
-// leave, which cancels the export.
+// BVH and CSV are charged to the export budget as they grow (take_export_budget.hpp), wait
+// for the export queue, and the session reads no further request meanwhile but watches for
+// its peer to leave, which cancels the export.
 #include <fcntl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -28,6 +28,9 @@ namespace http = beast::http;
 namespace {
 
 constexpr std::string_view kPrefix = "/api/takes";
+/// What a BVH/CSV export is charged when asked for, and the step its charge grows by as the
+/// export is written (take_export_budget.hpp).
+constexpr std::uint64_t kExportChunkBytes = std::uint64_t{256} << 10;
 /// Most takes one GET /api/takes answers (and its default): ~1 KiB each.
 constexpr std::uint32_t kMaxListLimit = 500;
 
@@ -185,19 +188,27 @@ void HttpServer::HttpSession::download(const Request& request, const std::string
     if (!exporter) return send_text(request, http::status::not_implemented, "no exporter in this server\n");
     const auto entry = server_.handlers_.takes->find(name);
     if (!entry) return send_text(request, http::status::not_found, "no take '" + name + "'\n");
-    // Charged before it is queued, at half the raw file's size (a BVH or CSV export measured at
-    // a third of it or less, docs/reliability.md "Export memory"); the real size settles it.
+    // Charged one chunk before it is queued (an address whose exports hold its share is
+    // refused before any work), then its memfd's growth as it is written, in chunks, and its
+    // real size at the end: a take is refused for what its export really holds, never for its
+    // raw file's size (docs/security.md "Takes and exports").
     beast::error_code peer_ec;
     const auto peer = stream_.socket().remote_endpoint(peer_ec);
     const std::string address = peer_ec ? std::string("?") : peer.address().to_string();
     std::string why;
-    auto charge = server_.export_budget_.try_charge(address, entry->raw_bytes / 2, &why);
+    auto charge = server_.export_budget_.try_charge(address, kExportChunkBytes, &why);
     if (!charge) {
         server_.counters_.take_exports_over_budget.add();
         return send_text(request, http::status::insufficient_storage, why + "\n");
     }
-    TakeExportRequest job{name, format == "bvh" ? TakeFormat::kBvh : TakeFormat::kCsv, *filter, *subject,
-                          offline == "1"};
+    TakeExportRequest job{name,
+                          format == "bvh" ? TakeFormat::kBvh : TakeFormat::kCsv,
+                          *filter,
+                          *subject,
+                          offline == "1",
+                          [&budget = server_.export_budget_, charge](std::uint64_t held, std::string* reason) {
+                              return budget.grow(*charge, held, kExportChunkBytes, reason);
+                          }};
     const std::string file_name = name + (format == "bvh" ? ".bvh" : ".csv");
     const auto executor = stream_.get_executor();
     auto cancel = std::make_shared<std::atomic<bool>>(false);
@@ -213,6 +224,7 @@ void HttpServer::HttpSession::download(const Request& request, const std::string
             std::string over;
             if (result->status == TakeExportResult::kOk &&
                 (::fstat(result->fd, &st) != 0 ||
+                 !budget.grow(*charge, static_cast<std::uint64_t>(st.st_size), 0, &over) ||
                  !budget.resize(*charge, static_cast<std::uint64_t>(st.st_size), &over))) {
                 ::close(result->fd);
                 *result =

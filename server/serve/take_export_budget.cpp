@@ -9,6 +9,12 @@ std::string mib(std::uint64_t bytes) {
     return std::to_string((bytes + (std::uint64_t{1} << 20) - 1) >> 20) + " MiB";
 }
 
+/// To a tenth of a MiB, rounded up: what an export that grows is refused at.
+std::string mib_tenths(std::uint64_t bytes) {
+    const std::uint64_t tenths = (bytes * 10 + (std::uint64_t{1} << 20) - 1) >> 20;
+    return std::to_string(tenths / 10) + "." + std::to_string(tenths % 10) + " MiB";
+}
+
 }  // namespace
 
 TakeExportBudget::Charge::~Charge() {
@@ -45,6 +51,38 @@ std::shared_ptr<TakeExportBudget::Charge> TakeExportBudget::try_charge(const std
     books_->by_address[address] += bytes;
     charge->bytes_ = bytes;
     return charge;
+}
+
+bool TakeExportBudget::grow(Charge& charge, std::uint64_t held, std::uint64_t chunk, std::string* why) {
+    std::lock_guard lock(books_->mutex);
+    if (held <= charge.bytes_) return true;
+    const std::uint64_t rounded = chunk == 0 ? held : (held + chunk - 1) / chunk * chunk;
+    std::uint64_t& mine = books_->by_address[charge.address_];  // >= charge.bytes_
+    const std::uint64_t others_total = books_->total - charge.bytes_;
+    const std::uint64_t others_mine = mine - charge.bytes_;
+    const auto fits_as = [&](std::uint64_t bytes) {
+        return others_total + bytes <= total_limit_ && others_mine + bytes <= address_limit_;
+    };
+    const std::uint64_t to = fits_as(rounded) ? rounded : held;
+    if (!fits_as(to)) {
+        if (mine == 0) books_->by_address.erase(charge.address_);
+        if (others_total + held > total_limit_) {
+            *why = "insufficient storage: this export has grown to " + mib_tenths(held) +
+                   " while the other take exports waiting for their readers hold " + mib_tenths(others_total) +
+                   " of the " + mib_tenths(total_limit_) + " all may hold; retry when downloads finish";
+        } else {
+            *why = "insufficient storage: this export has grown to " + mib_tenths(held) + " while other exports for " +
+                   charge.address_ + " hold " + mib_tenths(others_mine) + " of the " + mib_tenths(address_limit_) +
+                   " one address may hold; " +
+                   (others_mine > 0 ? "finish those downloads first"
+                                    : "export the take on the host instead (mocapd --replay)");
+        }
+        return false;
+    }
+    books_->total = others_total + to;
+    mine = others_mine + to;
+    charge.bytes_ = to;
+    return true;
 }
 
 bool TakeExportBudget::resize(Charge& charge, std::uint64_t bytes, std::string* why) {

@@ -2,11 +2,13 @@
 // for their reader) may hold, in total and per peer address (docs/reliability.md, "Export
 // memory").
 //
-// An export is charged twice: an estimate when it is asked for (before it is queued, so a
-// client cannot queue work the budget could never hold), then its real size once written.
-// A request whose charge does not fit is refused (HTTP 507) with the reason try_charge gives.
-// A Charge gives its bytes back when it is destroyed: when the download has been sent, or
-// its connection closed. Exports live in memory rather than on record_dir's disk so that
+// An export is charged as it grows: one chunk when it is asked for (before it is queued, so a
+// client whose address already holds its share cannot queue work), then, while the export
+// is written, whatever its memfd holds (grow(), in chunks), and its real size once written.
+// A request or a growth that does not fit is refused (HTTP 507) with the reason the budget
+// gives. So a take is refused for what its export really holds, never for its raw file's
+// size. A Charge gives its bytes back when it is destroyed: when the download has been sent,
+// or its connection closed. Exports live in memory rather than on record_dir's disk so that
 // slow downloads can never take the disk a running take records to.
 //
 // Threads: any; one mutex, held for a map lookup. A Charge may outlive the budget.
@@ -50,6 +52,11 @@ public:
 
     /// A charge of `bytes` for `address`; nullptr + *why when it would exceed a limit.
     std::shared_ptr<Charge> try_charge(const std::string& address, std::uint64_t bytes, std::string* why);
+    /// Makes `charge` cover `held` bytes (what its export holds so far): nothing when it does
+    /// already, else it grows to `held` rounded up to a multiple of `chunk`, or to `held`
+    /// exactly when only that fits. False + *why, the charge unchanged, when even `held`
+    /// does not fit.
+    bool grow(Charge& charge, std::uint64_t held, std::uint64_t chunk, std::string* why);
     /// Sets `charge` to `bytes` (the export's real size). False + *why, the charge unchanged,
     /// when growing it would exceed a limit.
     bool resize(Charge& charge, std::uint64_t bytes, std::string* why);

@@ -38,10 +38,15 @@ struct TakeExportRequest {
     std::string filter;         ///< "" = the daemon's configured filter
     std::uint32_t subject = 0;  ///< BVH: 0 = the [outputs].bvh_subject rule
     bool offline = false;       ///< the non-causal re-solve (mocapd --replay --offline)
+    /// Non-empty: the exporter calls it while it writes, with the bytes its output holds so
+    /// far; false (with *why) stops the export, which answers kTooLarge with that reason (the
+    /// web endpoint charges the growth to its export budget, take_export_budget.hpp).
+    std::function<bool(std::uint64_t held, std::string* why)> reserve;
 };
 
 struct TakeExportResult {
-    /// kTooLarge: refused before it ran, past a memory limit (HTTP 507, with the reason).
+    /// kTooLarge: past a memory limit, refused before it ran or stopped as it grew (HTTP 507,
+    /// with the reason).
     enum Status { kOk, kNotFound, kBadRequest, kFailed, kCancelled, kTooLarge } status = kFailed;
     std::string error;
     int fd = -1;  ///< kOk: an open file without a name (a memfd) holding the export; the receiver closes it

@@ -36,14 +36,15 @@ struct HttpReply {
 
 inline HttpReply http_request(std::uint16_t port, const std::string& target,
                               boost::beast::http::verb method = boost::beast::http::verb::get,
-                              const std::map<std::string, std::string>& headers = {}) {
+                              const std::map<std::string, std::string>& headers = {},
+                              std::chrono::milliseconds limit = std::chrono::seconds(10)) {
     namespace http = boost::beast::http;
     HttpReply out;
     try {
         asio::io_context io;
         boost::beast::tcp_stream stream(io);
         stream.connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-        socket_deadline(stream.socket(), std::chrono::seconds(10));
+        socket_deadline(stream.socket(), limit);
         http::request<http::string_body> req{method, target, 11};
         req.set(http::field::host, "127.0.0.1");
         for (const auto& [k, v] : headers)

@@ -78,6 +78,8 @@ struct Server {
     int entered = 0;    // mutex: exports that started
     int cancelled = 0;  // mutex: exports that saw their flag
     std::size_t export_bytes = 64;
+    bool in_steps = false;         // write 64 KiB at a time, telling request.reserve as the daemon's does
+    std::size_t written_last = 0;  // mutex: what the last export had written when it ended
     std::unique_ptr<HttpServer> server;
 
     explicit Server(HttpServerConfig c = {}) {
@@ -90,7 +92,7 @@ struct Server {
         c.port = 0;
         HttpHandlers h;
         h.takes = store;
-        h.export_take = [this](const TakeExportRequest&, const std::atomic<bool>& cancel) {
+        h.export_take = [this](const TakeExportRequest& request, const std::atomic<bool>& cancel) {
             std::unique_lock lock(mutex);
             ++entered;
             cv.notify_all();
@@ -102,8 +104,21 @@ struct Server {
                 return TakeExportResult{TakeExportResult::kCancelled, "cancelled", -1};
             }
             const int fd = ::memfd_create("test-export", MFD_CLOEXEC);
-            const std::string text(export_bytes, 'x');
-            EXPECT_EQ(::pwrite(fd, text.data(), text.size(), 0), static_cast<ssize_t>(text.size()));
+            const std::size_t step = in_steps ? std::size_t{64} << 10 : export_bytes;
+            std::size_t done = 0;
+            while (done < export_bytes) {
+                const std::string text(std::min(step, export_bytes - done), 'x');
+                EXPECT_EQ(::pwrite(fd, text.data(), text.size(), static_cast<off_t>(done)),
+                          static_cast<ssize_t>(text.size()));
+                done += text.size();
+                std::string why;
+                if (in_steps && request.reserve && !request.reserve(done, &why)) {
+                    ::close(fd);
+                    written_last = done;
+                    return TakeExportResult{TakeExportResult::kTooLarge, why, -1};
+                }
+            }
+            written_last = done;
             return TakeExportResult{TakeExportResult::kOk, {}, fd};
         };
         server = std::make_unique<HttpServer>(c, HttpDescription{}, h);
@@ -276,6 +291,45 @@ TEST(TakeSecurity, HeldExportsAreBoundedPerAddressAndInTotalWith507) {
         const auto r = http_request(port, target);
         return r.status == 200u && r.body.size() == s.export_bytes;
     }));
+}
+
+// An export was charged half its take's raw file up front, so a big take was refused however
+// small its export. Now it is charged what it holds as it is written: one bigger than what
+// its address may hold is stopped as soon as it outgrows it (507, counted), one that fits is
+// served whole, and what the budget holds is back to zero after either.
+TEST(TakeSecurity, AnExportIsChargedAsItGrowsAndStoppedWith507OnceItOutgrowsTheBudget) {
+    HttpServerConfig c;
+    c.export_memory_bytes = 8u << 20;
+    c.export_memory_per_address_bytes = 3u << 20;
+    Server s(c);
+    s.in_steps = true;
+    s.export_bytes = 5u << 20;
+    s.release();
+    const std::uint16_t port = s.server->port();
+    const std::string target = "/api/takes/walk/download?format=csv";
+    const auto held = [&] {
+        const std::string text = http_request(port, "/metrics").body;
+        const std::string key = "\nmocapd_http_take_export_bytes ";
+        const std::size_t at = text.find(key);
+        return at == std::string::npos ? ~std::uint64_t{0} : std::stoull(text.substr(at + key.size()));
+    };
+    const auto refused = http_request(port, target);
+    EXPECT_EQ(refused.status, 507u) << refused.body;
+    EXPECT_NE(refused.body.find("this export has grown to 3.1 MiB"), std::string::npos) << refused.body;
+    EXPECT_NE(refused.body.find("export the take on the host"), std::string::npos) << refused.body;
+    EXPECT_EQ(s.server->counters().take_exports_over_budget.value(), 1u);
+    {
+        std::lock_guard lock(s.mutex);
+        EXPECT_EQ(s.written_last, (3u << 20) + (64u << 10)) << "stopped at the first step past the budget";
+    }
+    ASSERT_TRUE(wait_until([&] { return held() == 0u; })) << held();
+    // Just the budget: served whole.
+    s.export_bytes = 3u << 20;
+    const auto served = http_request(port, target);
+    EXPECT_EQ(served.status, 200u) << served.body.substr(0, 200);
+    EXPECT_EQ(served.body, std::string(s.export_bytes, 'x'));
+    ASSERT_TRUE(wait_until([&] { return held() == 0u; })) << held();
+    EXPECT_EQ(s.server->counters().take_exports_over_budget.value(), 1u);
 }
 
 }  // namespace
