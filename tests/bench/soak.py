@@ -561,7 +561,7 @@ def main():
     ap.add_argument("--hostile-scale", type=int, default=2, help="multiplies the hostile connections")
     ap.add_argument("--export-hold-s", type=float, default=30.0, help="how long a slow reader holds a download")
     ap.add_argument("--source-take-mb", type=float, default=1.5,
-                    help="size of the take the exports download (below export_memory_per_address_mb = 2)")
+                    help="raw size of the take the exports download, MB (each export is charged what it writes)")
     ap.add_argument("--max-p99-ms", type=float, default=50.0, help="honest clients' p99 latency bound (real run)")
     ap.add_argument("--nats-server", default="", help="path of nats-server (default: from PATH, /usr/sbin)")
     ap.add_argument("--no-cluster", action="store_true", help="no nats-server: no calibration attacks")
