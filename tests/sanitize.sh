@@ -62,7 +62,7 @@ phase() {  # phase NAME COMMAND... — runs, times and reports one step
 # unit, so Asio, Beast, protobuf, gtest and Eigen are parsed and instantiated once per batch
 # instead of once per file (docs/reliability.md, test command time). Only here: the Release
 # build's compile_commands.json, which static analysis reads, keeps one entry per real file.
-# A target whose sources cannot share a unit (the generated protobuf code) sets UNITY_BUILD OFF.
+# The sources that cannot share a unit are listed in cmake/unity_exceptions.cmake.
 configure() {  # configure DIR SANITIZERS [CMAKE ARGS...]
     local dir="$1" sanitizers="$2"; shift 2
     cmake -S "$root" -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMOCAP_SANITIZE="$sanitizers" \
