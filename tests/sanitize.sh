@@ -16,7 +16,8 @@
 #   all   both (default).
 #
 # Environment: MOCAP_SANITIZE_BUILD_ROOT (default: the repository root) holds build-asan/ and
-# build-tsan/; MOCAP_SANITIZE_JOBS (default 2) is the build and ctest parallelism.
+# build-tsan/; MOCAP_SANITIZE_JOBS (default 2) is the build and ctest parallelism;
+# MOCAP_SANITIZE_UNITY=OFF compiles every source on its own (default ON, see configure).
 # Prints the time each phase took; exits non-zero if a build or a test failed.
 set -euo pipefail
 
@@ -57,11 +58,17 @@ phase() {  # phase NAME COMMAND... — runs, times and reports one step
 # -O1: compiling is most of a sanitizer phase and running the tests a small part, and -O1
 # (what the ASan and TSan documentation suggest) compiles much faster than -O2
 # (docs/reliability.md, test command time).
+# Unity builds: each target's sources are compiled as batches of up to 8 in one translation
+# unit, so Asio, Beast, protobuf, gtest and Eigen are parsed and instantiated once per batch
+# instead of once per file (docs/reliability.md, test command time). Only here: the Release
+# build's compile_commands.json, which static analysis reads, keeps one entry per real file.
+# The sources that cannot share a unit are listed in cmake/unity_exceptions.cmake.
 configure() {  # configure DIR SANITIZERS [CMAKE ARGS...]
     local dir="$1" sanitizers="$2"; shift 2
     cmake -S "$root" -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMOCAP_SANITIZE="$sanitizers" \
         -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-        -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" "$@" >/dev/null
+        -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
+        -DCMAKE_UNITY_BUILD="${MOCAP_SANITIZE_UNITY:-ON}" -DCMAKE_UNITY_BUILD_BATCH_SIZE=8 "$@" >/dev/null
 }
 
 # Suite names of the given test executables as one ctest regex: ^(A|B)\.
