@@ -16,7 +16,7 @@
 #   3. the raw recording replayed twice with the same config gives byte-identical BVH and
 #      CSV; replayed with another filter it still gives a valid file;
 #   4. round trip: the replayed BVH against the clip's segment orientations (sim truth),
-#      RMS within 8 deg over the segments other than the right hand (the clip's RightWrist
+#      RMS within 8 deg (12 deg when the sender skipped SYNCs) over the segments other than the right hand (the clip's RightWrist
 #      jumps ~60 deg in one 1/120 s frame, beyond the simulated gyro range);
 #   5. a daemon killed with SIGKILL while recording leaves a raw file that replays and a
 #      BVH file that loads after mocap-bvh-repair.
@@ -168,11 +168,17 @@ check_bvh "$DIR/replay_madgwick.bvh"
 # 50-57 Hz of 100, docs/outputs.md). Below 50 Hz the frames get too few to judge.
 SYNC_RATE=$(awk -F, '$3 == "pelvis" && $2 == 1 { if (!n) t0 = $1; t1 = $1; n++ }
   END { if (n > 1) printf "%.1f", (n - 1) / ((t1 - t0) / 1e6); else print 0 }' "$DIR/truth.csv")
+# A sender that skipped SYNCs (a loaded machine) costs the filters a few degrees on this 7 s
+# clip (measured 6.6-8.7 deg at 82-93 Hz against 3.9-4.2 deg at 100 Hz, docs/outputs.md):
+# 8 deg is the bound at full rate, 12 deg below 98 Hz. A BVH that is not the pose (axis
+# order, a mounting, a frame) is tens of degrees off either way.
+RT_MAX=8
+awk -v r="$SYNC_RATE" 'BEGIN { exit !(r < 98) }' && RT_MAX=12
 RT=$("$ROUNDTRIP" --truth-poses "$DIR/truth.csv" --bvh "$DIR/replay1.bvh" --angles "$DIR/replay1.csv" \
-  --skip-s 3 --exclude right_hand --max-rms-deg 8) && RT_OK=1 || RT_OK=0
-echo "round trip (mocap filter, SYNCs at $SYNC_RATE Hz of 100): $RT"
+  --skip-s 3 --exclude right_hand --max-rms-deg $RT_MAX) && RT_OK=1 || RT_OK=0
+echo "round trip (mocap filter, SYNCs at $SYNC_RATE Hz of 100, bound $RT_MAX deg): $RT"
 if awk -v r="$SYNC_RATE" 'BEGIN { exit !(r >= 50) }'; then
-  [[ $RT_OK == 1 ]] || fail "round trip error above 8 deg"
+  [[ $RT_OK == 1 ]] || fail "round trip error above $RT_MAX deg"
 else
   echo "round trip NOT JUDGED: the simulator sent SYNCs at $SYNC_RATE Hz instead of 100 (machine overloaded)"
 fi
