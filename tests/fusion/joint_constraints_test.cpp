@@ -10,15 +10,15 @@
 namespace mocap::fusion {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr double kRadPerDeg = std::numbers::pi / 180.0;  // not kDeg: shares a unity batch with chain_estimator_test.cpp
 
 TEST(PairMeasurement, MeasuresTheHeadingThatTurnsTheChildsVectorOntoTheParents) {
     const Vec3 b = Vec3(0.6, -0.3, 0.5).normalized();
-    const double delta = 40.0 * kDeg;
+    const double delta = 40.0 * kRadPerDeg;
     const Vec3 a = rotate_z(delta, b);
-    const HeadingMeasurement m = pair_measurement(a, b, 25.0 * kDeg, 0.03, 0.2);
+    const HeadingMeasurement m = pair_measurement(a, b, 25.0 * kRadPerDeg, 0.03, 0.2);
     ASSERT_TRUE(m.ok);
-    EXPECT_NEAR(m.residual_rad / kDeg, 15.0, 1e-9);
+    EXPECT_NEAR(m.residual_rad / kRadPerDeg, 15.0, 1e-9);
     EXPECT_GT(m.var_rad2, 0.0);
     // A nearly vertical vector has no heading to compare.
     EXPECT_FALSE(pair_measurement(Vec3(0.05, 0.0, 1.0), Vec3(0.0, 0.05, 1.0), 0.0, 0.03, 0.2).ok);
@@ -29,12 +29,12 @@ TEST(PairMeasurement, MeasuresTheHeadingThatTurnsTheChildsVectorOntoTheParents) 
 // angle (an axis that is only off) does not count as flipped.
 TEST(PairContradicts, ShowsAFlippedChildAxisAgainstAKnownHeading) {
     const Vec3 axis_c = Vec3(0.9, 0.3, 0.1).normalized();
-    const double delta = -70.0 * kDeg;
+    const double delta = -70.0 * kRadPerDeg;
     const Vec3 axis_p = rotate_z(delta, axis_c);
     EXPECT_FALSE(pair_contradicts(axis_p, axis_c, delta, 0.2));
     EXPECT_TRUE(pair_contradicts(axis_p, -axis_c, delta, 0.2));
-    EXPECT_TRUE(pair_contradicts(-axis_p, axis_c, delta + 10.0 * kDeg, 0.2));
-    EXPECT_FALSE(pair_contradicts(axis_p, axis_c, delta + 80.0 * kDeg, 0.2));
+    EXPECT_TRUE(pair_contradicts(-axis_p, axis_c, delta + 10.0 * kRadPerDeg, 0.2));
+    EXPECT_FALSE(pair_contradicts(axis_p, axis_c, delta + 80.0 * kRadPerDeg, 0.2));
     EXPECT_FALSE(pair_contradicts(Vec3(0.05, 0.0, 1.0), -Vec3(0.05, 0.0, 1.0), 0.0, 0.2));
 }
 
